@@ -1,0 +1,106 @@
+"""One parameter file for every default of the model (DESIGN section 2 and the sensor settings).
+
+`defaults.toml` beside this module holds every number with its unit and source. A user points a run at
+their own TOML file, which is laid over the defaults: it may set any subset of keys, but an unknown key
+is an error (a typo must never silently fall back to a default). Each section has a validator that
+rejects values out of range with a message naming the key.
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+DEFAULTS_PATH = Path(__file__).with_name("defaults.toml")
+
+
+class ParameterError(ValueError):
+    """A parameter file or override is invalid; the message names the key and the rule."""
+
+
+#: section name -> validator(section_dict, section_name); sections register themselves here.
+VALIDATORS: dict[str, Callable[[dict[str, Any], str], None]] = {}
+
+
+def register_validator(section: str):
+    """Decorator: register the validator of one top-level section of the parameter file."""
+
+    def wrap(func: Callable[[dict[str, Any], str], None]):
+        VALIDATORS[section] = func
+        return func
+
+    return wrap
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with open(path, "rb") as handle:
+            return tomllib.load(handle)
+    except FileNotFoundError:
+        raise ParameterError(f"parameter file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"parameter file {path} is not valid TOML: {exc}") from None
+
+
+def _overlay(base: dict[str, Any], override: dict[str, Any], where: str) -> None:
+    for key, value in override.items():
+        dotted = f"{where}.{key}" if where else key
+        if key not in base:
+            raise ParameterError(f"unknown parameter '{dotted}'")
+        if isinstance(base[key], dict):
+            if not isinstance(value, dict):
+                raise ParameterError(f"parameter '{dotted}' must be a table")
+            _overlay(base[key], value, dotted)
+        else:
+            base[key] = value
+
+
+def load_params(path: str | Path | None = None) -> dict[str, Any]:
+    """Defaults, overlaid with the user's file when given, validated section by section."""
+    params = _read_toml(DEFAULTS_PATH)
+    if path is not None:
+        _overlay(params, _read_toml(Path(path)), "")
+    validate(params)
+    return params
+
+
+def validate(params: dict[str, Any]) -> None:
+    # Importing the domain modules registers their validators.
+    _import_validator_modules()
+    for section, validator in VALIDATORS.items():
+        if section in params:
+            validator(params[section], section)
+
+
+def _import_validator_modules() -> None:
+    import importlib
+
+    for module in ("pedsafe_sumo.demand.params", "pedsafe_sumo.perception.params"):
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise
+
+
+def with_overrides(params: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """A validated copy of `params` with dotted-key overrides ({'traffic.headway_rate_per_s': 0.2})."""
+    out = copy.deepcopy(params)
+    for dotted, value in overrides.items():
+        nested: dict[str, Any] = {}
+        cursor = nested
+        parts = dotted.split(".")
+        for part in parts[:-1]:
+            cursor = cursor.setdefault(part, {})
+        cursor[parts[-1]] = value
+        _overlay(out, nested, "")
+    validate(out)
+    return out
