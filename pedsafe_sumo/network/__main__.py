@@ -34,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
                 site.clip_osm,
                 clip=from_source,
                 patches_dir=site.network_dir / "patches",
+                rsu_corner=site.rsu_corner,
+                rsu_watch_arm=site.rsu_watch_arm,
             )
         except BuildError as exc:
             parser.exit(2, f"error: {exc}\n")

@@ -49,6 +49,9 @@ RSU_FOV_DEG = 90.0
 #: How far behind the corner of the junction (away from its centre) the pole stands, so it is on the
 #: pavement and not in the crosswalk.
 RSU_SETBACK_M = 2.0
+#: Where along the watched approach the camera's optical axis meets the ground (m from the junction
+#: centre): the scenarios are staged between the crosswalk (~20 m) and ~50 m up the approach.
+RSU_AIM_DISTANCE_M = 30.0
 
 GENERATED_ON = re.compile(r"<!-- generated on .*? by Eclipse SUMO")
 
@@ -96,29 +99,60 @@ def find_main_junction(net: sumolib.net.Net, center_xy: tuple[float, float]) -> 
     return min(tls_nodes, key=lambda n: math.dist(n.getCoord(), center_xy))
 
 
-def place_roadside_unit(net: sumolib.net.Net, junction) -> dict:
-    """Pole on the north-east corner of the junction, looking at its centre.
+def _arm_axis(junction, arm: str) -> tuple[float, float]:
+    """Unit vector from the junction centre along one arm (N/E/S/W sector of its roads' far ends)."""
+    jx, jy = junction.getCoord()
+    sums = [0.0, 0.0]
+    for edge, far_end in [(e, e.getShape()[0]) for e in junction.getIncoming()] + [
+        (e, e.getShape()[-1]) for e in junction.getOutgoing()
+    ]:
+        if edge.getFunction():
+            continue
+        dx, dy = far_end[0] - jx, far_end[1] - jy
+        bearing = math.degrees(math.atan2(dx, dy)) % 360.0
+        if "NESW"[int(((bearing + 45.0) % 360.0) // 90.0)] == arm:
+            norm = math.hypot(dx, dy) or 1.0
+            sums[0] += dx / norm
+            sums[1] += dy / norm
+    norm = math.hypot(*sums)
+    if norm == 0.0:
+        raise BuildError(f"the main junction has no arm towards {arm}")
+    return sums[0] / norm, sums[1] / norm
 
-    The corner is the walking area of the junction that lies furthest towards north-east; the pole
-    stands RSU_SETBACK_M behind it. Angles follow SUMO's POI convention: yaw in degrees clockwise
-    from north; pitch in degrees below the horizon, aimed at the junction centre.
+
+def place_roadside_unit(
+    net: sumolib.net.Net,
+    junction,
+    corner: str = "NE",
+    watch_arm: str = "N",
+    aim_distance_m: float = RSU_AIM_DISTANCE_M,
+) -> dict:
+    """Pole on one corner of the junction, its camera watching one approach and its crosswalk.
+
+    The corner is the walking area of the junction that lies furthest towards `corner`; the pole
+    stands RSU_SETBACK_M behind it. The camera aims at the point `aim_distance_m` out along
+    `watch_arm` from the junction centre, so that arm's crosswalk and the first ~50 m of its
+    approach are in view (beyond ~54 m a 1.7 m pedestrian is under 20 px at f = 640 px).
+    Angles follow SUMO's POI convention: yaw in degrees clockwise from north; pitch in degrees
+    below the horizon.
     """
     jx, jy = junction.getCoord()
+    toward = {"NE": (1, 1), "NW": (-1, 1), "SE": (1, -1), "SW": (-1, -1)}[corner]
     corners = []
     for edge in net.getEdges(withInternal=True):
         if edge.getFunction() == "walkingarea" and edge.getID().startswith(f":{junction.getID()}_w"):
             shape = edge.getLane(0).getShape()
-            cx = sum(p[0] for p in shape) / len(shape)
-            cy = sum(p[1] for p in shape) / len(shape)
-            corners.append((cx, cy))
+            corners.append((sum(p[0] for p in shape) / len(shape), sum(p[1] for p in shape) / len(shape)))
     if not corners:
         corners = [tuple(p) for p in junction.getShape()]
-    cx, cy = max(corners, key=lambda p: (p[0] - jx) + (p[1] - jy))
+    cx, cy = max(corners, key=lambda p: toward[0] * (p[0] - jx) + toward[1] * (p[1] - jy))
     dx, dy = cx - jx, cy - jy
     dist = math.hypot(dx, dy) or 1.0
     px, py = cx + RSU_SETBACK_M * dx / dist, cy + RSU_SETBACK_M * dy / dist
-    ground_dist = math.hypot(jx - px, jy - py)
-    yaw_deg = math.degrees(math.atan2(jx - px, jy - py)) % 360.0
+    ax, ay = _arm_axis(junction, watch_arm)
+    aim_x, aim_y = jx + aim_distance_m * ax, jy + aim_distance_m * ay
+    ground_dist = math.hypot(aim_x - px, aim_y - py)
+    yaw_deg = math.degrees(math.atan2(aim_x - px, aim_y - py)) % 360.0
     pitch_deg = math.degrees(math.atan2(RSU_HEIGHT_M, ground_dist))
     return {
         "x": round(px, 2),
@@ -127,13 +161,15 @@ def place_roadside_unit(net: sumolib.net.Net, junction) -> dict:
         "yaw_deg": round(yaw_deg, 2),
         "pitch_deg": round(pitch_deg, 2),
         "fov_deg": RSU_FOV_DEG,
+        "corner": corner,
+        "watched_arm": watch_arm,
     }
 
 
 def _write_rsu(path: Path, rsu: dict) -> None:
     params = "\n".join(
         f'        <param key="{key}" value="{rsu[key]}"/>'
-        for key in ("height_m", "yaw_deg", "pitch_deg", "fov_deg")
+        for key in ("height_m", "yaw_deg", "pitch_deg", "fov_deg", "corner", "watched_arm")
     )
     path.write_text(
         '<?xml version="1.0" encoding="UTF-8"?>\n'
@@ -204,6 +240,8 @@ def build_site(
     clip_out: Path,
     clip: bool = True,
     patches_dir: Path | None = None,
+    rsu_corner: str = "NE",
+    rsu_watch_arm: str = "N",
 ) -> BuildReport:
     """Build networks/<name>/ from an OSM file; see the module docstring."""
     started = time.perf_counter()
@@ -295,7 +333,7 @@ def build_site(
         net = sumolib.net.readNet(str(stage / net_file), withInternal=True)
         center_xy = net.convertLonLat2XY(center_lon, center_lat)
         junction = find_main_junction(net, center_xy)
-        rsu = place_roadside_unit(net, junction)
+        rsu = place_roadside_unit(net, junction, rsu_corner, rsu_watch_arm)
         _write_rsu(stage / f"{name}.rsu.add.xml", rsu)
         _write_view(stage / f"{name}.view.xml", junction.getCoord())
         _write_sumocfg(stage / f"{name}.sumocfg", name)
@@ -366,6 +404,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--name", help="name of the built site (default: --site)")
     parser.add_argument("--out-dir", type=Path, help="where the network goes (default: networks/NAME)")
     parser.add_argument("--osm-out", type=Path, help="where the clipped OSM goes (default: osm/NAME.osm)")
+    parser.add_argument("--rsu-corner", choices=["NE", "NW", "SE", "SW"], help="corner of the camera pole")
+    parser.add_argument("--rsu-watch", choices=list("NESW"), help="arm the roadside camera watches")
     parser.add_argument(
         "--no-clip",
         action="store_true",
@@ -394,9 +434,11 @@ def main(argv: list[str] | None = None) -> int:
             args.osm_out or OSM_DIR / f"{name}.osm",
             clip=not args.no_clip,
             patches_dir=out_dir / "patches",
+            rsu_corner=args.rsu_corner or site.rsu_corner,
+            rsu_watch_arm=args.rsu_watch or site.rsu_watch_arm,
         )
     except BuildError as exc:
-        parser.exit(1, f"build_network: error: {exc}\n")
+        parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {name} in {report.seconds:.1f} s: main junction {report.main_junction}")
     for path in report.written:
         print(f"  wrote     {path}")

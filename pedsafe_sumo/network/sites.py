@@ -22,6 +22,9 @@ class Site:
     center_lon: float
     radius_m: float
     source_osm: Path
+    #: Corner of the main junction where the roadside camera pole stands, and the arm it watches.
+    rsu_corner: str = "NE"
+    rsu_watch_arm: str = "N"
 
     @property
     def clip_osm(self) -> Path:

@@ -186,3 +186,53 @@ def test_street_names_and_attribution_are_kept():
     assert re.search(r'name="学清路"', text)
     assert re.search(r'name="石板房南路"', text)
     assert "OpenStreetMap contributors" in text and "ODbL" in text
+
+
+def _rsu_pose():
+    poi = ET.parse(SITE.file("rsu.add.xml")).getroot().find("poi")
+    params = {p.get("key"): p.get("value") for p in poi.iter("param")}
+    return float(poi.get("x")), float(poi.get("y")), params
+
+
+def test_roadside_camera_pole_stands_at_a_corner_off_the_carriageway(net, main_junction):
+    x, y, params = _rsu_pose()
+    assert float(params["height_m"]) == pytest.approx(6.0, abs=1.0)
+    # Near the junction (a corner), but on no lane that vehicles use.
+    assert math.dist((x, y), main_junction.getCoord()) < 40.0
+    for lane, dist in [(lane, d) for lane, d in net.getNeighboringLanes(x, y, r=5.0)]:
+        if lane.allows("passenger"):
+            assert dist > lane.getWidth() / 2 + 0.5, f"pole stands on lane {lane.getID()}"
+
+
+def test_roadside_camera_sees_the_watched_crosswalk_and_approach(net, main_junction):
+    """Horizontal field of view (90 deg about the yaw, SUMO angle: clockwise from north) contains the
+    crosswalks of the watched arm and the approach centreline 20-45 m from the junction; the pitch
+    (degrees below the horizon) aims at the ground between them: atan(6 / d) for d in 15..45 m."""
+    x, y, params = _rsu_pose()
+    yaw_deg, pitch_deg, fov_deg = (float(params[k]) for k in ("yaw_deg", "pitch_deg", "fov_deg"))
+    arm = params["watched_arm"]
+
+    def in_fov(px, py):
+        bearing = math.degrees(math.atan2(px - x, py - y)) % 360.0
+        return abs((bearing - yaw_deg + 180.0) % 360.0 - 180.0) <= fov_deg / 2
+
+    arms = _arms(main_junction)
+    watched = {e.getID() for e in arms[arm]["in"] + arms[arm]["out"]}
+    crosswalks = [
+        e
+        for e in net.getEdges(withInternal=True)
+        if e.getFunction() == "crossing"
+        and e.getID().startswith(f":{main_junction.getID()}_c")
+        and {c.getID() for c in e._crossingEdges} & watched
+    ]
+    assert crosswalks
+    for crossing in crosswalks:
+        shape = crossing.getLane(0).getShape()
+        mid = ((shape[0][0] + shape[-1][0]) / 2, (shape[0][1] + shape[-1][1]) / 2)
+        assert in_fov(*mid), f"crosswalk {crossing.getID()} outside the roadside camera's view"
+    approach = max(arms[arm]["in"], key=lambda e: e.getLaneNumber())
+    lane = approach.getLane(approach.getLaneNumber() - 1)
+    for offset_m in (20.0, 30.0, 45.0):
+        px, py = sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), lane.getLength() - offset_m)
+        assert in_fov(px, py), f"approach {offset_m} m from the stop line outside the view"
+    assert math.degrees(math.atan(6.0 / 45.0)) <= pitch_deg <= math.degrees(math.atan(6.0 / 15.0))
