@@ -17,8 +17,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pedsafe_sumo.network.build import sumo_binary  # noqa: E402
 from pedsafe_sumo.network.sites import UnknownSiteError, get_site  # noqa: E402
+from pedsafe_sumo.sumo_binaries import sumo_binary  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -30,6 +30,7 @@ import sumolib
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.network.attribution import add_attribution_comment
 from pedsafe_sumo.network.clip import ClipError, clip_osm, read_osm
+from pedsafe_sumo.sumo_binaries import sumo_binary
 
 HERE = Path(__file__).resolve().parent
 NETCONVERT_OPTIONS = HERE / "netconvert.netccfg"
@@ -69,12 +70,6 @@ class BuildReport:
     unchanged: list[Path]
     main_junction: str
     seconds: float
-
-
-def sumo_binary(name: str) -> str:
-    """Path of a SUMO tool from the eclipse-sumo wheel (never a system SUMO of another version)."""
-    path = Path(sumo.SUMO_HOME) / "bin" / name
-    return str(path) if path.exists() else name
 
 
 def _run(cmd: list[str], cwd: Path, step: str) -> str:
