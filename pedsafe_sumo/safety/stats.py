@@ -132,8 +132,8 @@ def paired_mcnemar(episodes: pd.DataFrame, outcome: str = "collision") -> pd.Dat
             if side.index.has_duplicates:
                 raise ValueError(f"scenario {scenario}: episode numbers repeat under condition {condition}")
             sides[condition] = side
-        pairs = sides["sv"][["status", outcome]].join(
-            sides["v2i"][["status", outcome]], how="inner", lsuffix="_sv", rsuffix="_v2i"
+        pairs = sides["sv"][["status", outcome]].merge(
+            sides["v2i"][["status", outcome]], left_index=True, right_index=True, suffixes=("_sv", "_v2i")
         )
         pairs = pairs[(pairs["status_sv"] != ERROR_STATUS) & (pairs["status_v2i"] != ERROR_STATUS)]
         both, sv_only, v2i_only, neither = paired_counts(pairs[f"{outcome}_sv"], pairs[f"{outcome}_v2i"])
