@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from safety_logs import make_log
 
 from pedsafe_sumo.safety import INDEX_COLUMNS, episode_indexes
 
@@ -79,3 +80,44 @@ def test_values_have_parquet_friendly_types(near_miss_log):
     assert isinstance(row["detected_by"], str)
     others = set(INDEX_COLUMNS) - {"collision", "conflict", "detected_by"}
     assert all(isinstance(row[c], float) and not isinstance(row[c], np.floating) for c in others)
+
+
+def test_indexes_agree_with_each_other_on_random_encounters():
+    # 200 straight-line encounters aimed at each other: both reach a common point at random times 1-4 s,
+    # the pedestrian's path shifted by up to 5 m, random headings and speeds (ego 0-15 m/s, pedestrian
+    # 0.3-2.5 m/s). A mix of collisions, near misses and harmless passings.
+    rng = np.random.default_rng(2024)
+    t = np.arange(60) * 0.1
+    counts = {"collision": 0, "conflict_only": 0, "neither": 0}
+    for _ in range(200):
+        yaw, ped_heading = rng.uniform(-np.pi, np.pi, 2)
+        speed, ped_speed = rng.uniform(0.0, 15.0), rng.uniform(0.3, 2.5)
+        t_ego, t_ped = rng.uniform(1.0, 4.0, 2)
+        shift = rng.uniform(-5.0, 5.0)
+        ego_x0, ego_y0 = -speed * t_ego * np.cos(yaw), -speed * t_ego * np.sin(yaw)
+        ped_x0 = -ped_speed * t_ped * np.cos(ped_heading) - shift * np.sin(ped_heading)
+        ped_y0 = -ped_speed * t_ped * np.sin(ped_heading) + shift * np.cos(ped_heading)
+        log = make_log(
+            t,
+            ego_x_m=ego_x0 + speed * np.cos(yaw) * t,
+            ego_y_m=ego_y0 + speed * np.sin(yaw) * t,
+            ego_yaw_rad=yaw,
+            ego_speed_mps=speed,
+            ped_x_m=ped_x0 + ped_speed * np.cos(ped_heading) * t,
+            ped_y_m=ped_y0 + ped_speed * np.sin(ped_heading) * t,
+            ped_vx_mps=ped_speed * np.cos(ped_heading),
+            ped_vy_mps=ped_speed * np.sin(ped_heading),
+        )
+        row = episode_indexes(log, ped_age_years=rng.uniform(13, 90))
+        # the reported step decides the flag
+        assert row["conflict"] == (row["conflict_probability"] >= 0.425)
+        # TTC reaches 0 exactly when the footprint and circle touch
+        assert (row["min_ttc_s"] == 0.0) == row["collision"]
+        if row["collision"]:
+            assert row["pet_s"] == 0.0 and 0.0 < row["injury_probability"] < 1.0
+            counts["collision"] += 1
+        else:
+            assert row["injury_probability"] == 0.0 and math.isnan(row["impact_speed_mps"])
+            assert math.isnan(row["pet_s"]) or row["pet_s"] > 0.0
+            counts["conflict_only" if row["conflict"] else "neither"] += 1
+    assert min(counts.values()) >= 5, counts  # conflicts without contact are the rarest
