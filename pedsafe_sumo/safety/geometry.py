@@ -97,29 +97,34 @@ def rectangle_circle_contact_time_s(
 
 
 def first_polyline_crossing(
-    ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray
+    ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray, block: int = 256
 ) -> tuple[float, float] | None:
     """The first point where polyline A crosses polyline B (first along A, then along B), or None.
 
     Segments of zero length and parallel segments never cross. Endpoints count (a crossing exactly at a
-    vertex is found).
+    vertex is found). A's segments are tested against all of B's in blocks of `block`, so memory stays
+    bounded for long logs.
     """
     ax, ay, bx, by = (np.asarray(v, dtype=float) for v in (ax_m, ay_m, bx_m, by_m))
     if len(ax) < 2 or len(bx) < 2:
         return None
     # Segment i of A: a_i + s (a_{i+1} - a_i); segment j of B: b_j + u (b_{j+1} - b_j); s, u in [0, 1].
-    a0x, a0y, adx, ady = ax[:-1, None], ay[:-1, None], np.diff(ax)[:, None], np.diff(ay)[:, None]
     b0x, b0y, bdx, bdy = bx[None, :-1], by[None, :-1], np.diff(bx)[None, :], np.diff(by)[None, :]
-    denom = adx * bdy - ady * bdx
-    wx, wy = b0x - a0x, b0y - a0y
-    scale = np.hypot(adx, ady) * np.hypot(bdx, bdy)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (wx * bdy - wy * bdx) / denom
-        u = (wx * ady - wy * adx) / denom
+    b_len = np.hypot(bdx, bdy)
     eps = 1e-12
-    hit = (np.abs(denom) > 1e-12 * scale) & (scale > 0) & (s >= -eps) & (s <= 1 + eps)
-    hit &= (u >= -eps) & (u <= 1 + eps)
-    if not hit.any():
-        return None
-    i, j = np.argwhere(hit)[0]
-    return float(a0x[i, 0] + s[i, j] * adx[i, 0]), float(a0y[i, 0] + s[i, j] * ady[i, 0])
+    for start in range(0, len(ax) - 1, block):
+        stop = min(start + block + 1, len(ax))
+        a0x, a0y = ax[start : stop - 1, None], ay[start : stop - 1, None]
+        adx, ady = np.diff(ax[start:stop])[:, None], np.diff(ay[start:stop])[:, None]
+        denom = adx * bdy - ady * bdx
+        wx, wy = b0x - a0x, b0y - a0y
+        scale = np.hypot(adx, ady) * b_len
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (wx * bdy - wy * bdx) / denom
+            u = (wx * ady - wy * adx) / denom
+        hit = (np.abs(denom) > eps * scale) & (scale > 0) & (s >= -eps) & (s <= 1 + eps)
+        hit &= (u >= -eps) & (u <= 1 + eps)
+        if hit.any():
+            i, j = np.argwhere(hit)[0]
+            return float(a0x[i, 0] + s[i, j] * adx[i, 0]), float(a0y[i, 0] + s[i, j] * ady[i, 0])
+    return None

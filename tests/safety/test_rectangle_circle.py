@@ -82,3 +82,10 @@ def test_polylines_cross_where_hand_geometry_says():
     # parallel lines, and a path of one point, never cross
     assert first_polyline_crossing([-5.0, 5.0], [0.0, 0.0], [-5.0, 5.0], [1.0, 1.0]) is None
     assert first_polyline_crossing([-5.0, 5.0], [0.0, 0.0], [1.0], [0.0]) is None
+
+
+def test_polyline_crossing_found_across_blocks():
+    # A: 1001 points along y = 0 from x = 0 to 1000; B crosses it at x = 700.5, in A's third block of 256
+    ax = np.arange(1001.0)
+    got = first_polyline_crossing(ax, np.zeros_like(ax), [700.5, 700.5], [-1.0, 1.0], block=256)
+    assert got == pytest.approx((700.5, 0.0))
