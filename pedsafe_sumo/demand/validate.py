@@ -18,8 +18,8 @@
 When the site cannot carry the demand (more than BACKLOG_MAX_SHARE of the vehicles still waiting to be
 inserted at the end: queues back up to where vehicles enter), speeds measured on the approaches are queue
 speeds and say nothing about the speed model. The command then lowers the headway rate step by step
-(RATE_STEP_FACTOR) until the site carries it, and reports every run. Exit status 1 when the mid-block speed's KS distance exceeds
-MIDBLOCK_SPEED_KS_MAX in a run the site carries; 2 on bad input.
+(RATE_STEP_FACTOR) until the site carries it, and reports every run. Exit status 1 when the mid-block
+speed's KS distance exceeds MIDBLOCK_SPEED_KS_MAX in a run the site carries; 2 on bad input.
 """
 
 from __future__ import annotations
@@ -337,7 +337,7 @@ def validate(args) -> list[Run]:
     ):
         if run.figures:
             continue
-        title = f"{args.site}, {name} demand: {run.headway_rate_per_s:.4g} veh/s per entering lane, seed {args.seed}"
+        title = f"{args.site}, {name} demand: {run.headway_rate_per_s:.4g} veh/s per lane, seed {args.seed}"
         run.figures = plot_ecdfs(run.comparisons, args.docs / "figures", f"demand_{args.site}_{name}", title)
     return runs
 
