@@ -35,7 +35,9 @@ def main(argv: list[str] | None = None) -> int:
         f"wrote {files.n_vehicles} vehicles on {files.n_entering_lanes} entering lanes "
         f"({files.n_routes} routes) "
         f"to {files.vehicles_file} and {files.n_persons} pedestrians to {files.pedestrians_file} "
-        f"(site {args.site}, seed {args.seed}, {args.duration:g} s, {time.perf_counter() - start:.1f} s)"
+        f"(site {args.site}, seed {args.seed}, {args.duration:g} s; movements "
+        + ", ".join(f"{m} {100 * share:.0f}%" for m, share in files.movement_shares.items())
+        + f"; {time.perf_counter() - start:.1f} s)"
     )
     return 0
 

@@ -65,15 +65,17 @@ class FitResult:
     ks_pvalue: float
 
 
-def fit_exponential(headways_s: np.ndarray, key: str = "headway_rate_per_s") -> FitResult:
-    """MLE of the exponential rate (1/s) with its exact 95% interval and the KS test."""
+def fit_exponential(
+    headways_s: np.ndarray, key: str = "headway_rate_per_s", confidence: float = CONFIDENCE
+) -> FitResult:
+    """MLE of the exponential rate (1/s) with its exact interval (95% by default) and the KS test."""
     h = np.asarray(headways_s, dtype=float)
     n = h.size
     if n < 2:
         raise FitError(f"need at least 2 headways to fit, got {n}")
     total_s = float(h.sum())
     rate = n / total_s
-    alpha = 1.0 - CONFIDENCE
+    alpha = 1.0 - confidence
     # 2 * rate * sum(h) ~ chi2(2n) exactly for exponential data.
     low = stats.chi2.ppf(alpha / 2, 2 * n) / (2 * total_s)
     high = stats.chi2.ppf(1 - alpha / 2, 2 * n) / (2 * total_s)
@@ -83,8 +85,10 @@ def fit_exponential(headways_s: np.ndarray, key: str = "headway_rate_per_s") -> 
     )
 
 
-def fit_lognormal(values: np.ndarray, mu_key: str, sigma_key: str, variable: str) -> FitResult:
-    """MLE of ln-mean and ln-sd with 95% intervals and the KS test; values must be > 0."""
+def fit_lognormal(
+    values: np.ndarray, mu_key: str, sigma_key: str, variable: str, confidence: float = CONFIDENCE
+) -> FitResult:
+    """MLE of ln-mean and ln-sd with intervals (95% by default) and the KS test; values must be > 0."""
     x = np.asarray(values, dtype=float)
     n = x.size
     if n < 3:
@@ -95,7 +99,7 @@ def fit_lognormal(values: np.ndarray, mu_key: str, sigma_key: str, variable: str
     if sigma_mle == 0.0:
         raise FitError(f"all observations of {variable} are equal; a lognormal cannot be fitted")
     s2 = float(logs.var(ddof=1))
-    alpha = 1.0 - CONFIDENCE
+    alpha = 1.0 - confidence
     half = stats.t.ppf(1 - alpha / 2, n - 1) * math.sqrt(s2 / n)
     sigma_low = math.sqrt((n - 1) * s2 / stats.chi2.ppf(1 - alpha / 2, n - 1))
     sigma_high = math.sqrt((n - 1) * s2 / stats.chi2.ppf(alpha / 2, n - 1))

@@ -23,6 +23,7 @@ class DemandFiles:
     n_persons: int
     n_entering_lanes: int
     n_routes: int
+    movement_shares: dict[str, float]  # realised share of vehicles per movement
 
 
 def vehicle_route_path(out_dir: Path, site: str) -> Path:
@@ -80,6 +81,8 @@ def generate_demand(
     n_routes = len(
         {r.edges for lane in the_site.entering_lanes for rs in lane.routes_by_movement.values() for r in rs}
     )
+    counts = {m: sum(v.movement == m for v in vehicles) for m in ("left", "straight", "right")}
+    shares = {m: c / max(1, len(vehicles)) for m, c in counts.items()}
     return DemandFiles(
-        veh_path, ped_path, len(vehicles), len(persons), len(the_site.entering_lanes), n_routes
+        veh_path, ped_path, len(vehicles), len(persons), len(the_site.entering_lanes), n_routes, shares
     )

@@ -82,12 +82,13 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
     _positive(section, "speed_factor_female", where)
     _positive(section, "speed_factor_male", where)
     _shares_sum_to_one(section, [f"risk_share_{r}" for r in RISK_TYPES], where)
-    _non_negative(section, "reaction_trigger_ttc_s", where)
+    _non_negative(section, "awareness_ttc_s", where)
     _non_negative(section, "reaction_time_s", where)
-    if _positive(section, "hasten_speed_factor", where) < 1.0:
-        raise ParameterError(f"parameter '{where}.hasten_speed_factor' must be >= 1 (hasten means faster)")
+    if _positive(section, "hasten_factor", where) < 1.0:
+        raise ParameterError(f"parameter '{where}.hasten_factor' must be >= 1 (hasten means faster)")
     _positive(section, "hasten_max_speed_mps", where)
-    _non_negative(section, "yield_step_back_m", where)
+    _positive(section, "step_back_speed_mps", where)
+    _non_negative(section, "corridor_half_width_m", where)
 
     groups = section.get("age_groups")
     if not isinstance(groups, dict) or not groups:

@@ -9,7 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-ODBL_ATTRIBUTION = "Network data (c) OpenStreetMap contributors, ODbL 1.0"
+ODBL_ATTRIBUTION = (
+    "Network data (c) OpenStreetMap contributors, ODbL 1.0, https://www.openstreetmap.org/copyright"
+)
 
 
 def attrs(**values: object) -> str:

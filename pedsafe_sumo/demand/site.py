@@ -5,9 +5,8 @@ from the network's topology, so the same code serves the OpenStreetMap site and 
 
 - A *fringe node* has exactly one neighbouring node over vehicle or pedestrian edges (a dead end where the
   clipped network stops); entering edges start at one, exiting edges end at one.
-- A *movement* (left / straight / right / u-turn) of a route is SUMO's connection direction where the route
-  crosses the signalised junction; a route that crosses no traffic light is classified by the turn between its
-  entering and exiting edges' headings (node coordinates, independent of how OSM split the roads).
+- A *movement* (left / straight / right / u-turn) of a route is the turn it makes where it crosses the
+  signalised junction, from the headings of the edges arriving at and leaving the junction.
 """
 
 from __future__ import annotations
@@ -17,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import sumolib
+from sumolib.geomhelper import positionAtShapeOffset
 
 from pedsafe_sumo import NETWORKS_DIR
 
@@ -103,15 +103,32 @@ def _is_fringe(node) -> bool:
     return node.getType() == "dead_end" or len(_neighbours(node)) <= 1
 
 
-def _heading_deg(edge) -> float:
-    (x0, y0), (x1, y1) = edge.getFromNode().getCoord(), edge.getToNode().getCoord()
+#: Length (m) of the stretch of an edge next to the junction whose direction is the edge's heading there:
+#: long enough to ignore the small kinks netconvert puts at junction borders.
+HEADING_BASE_M = 20.0
+
+
+def _heading_deg(shape: list[tuple[float, float]], at_end: bool) -> float:
+    """Heading (degrees, counter-clockwise from +x) of a polyline over HEADING_BASE_M at its end or start."""
+    length = sum(math.dist(a, b) for a, b in zip(shape, shape[1:], strict=False))
+    base = min(HEADING_BASE_M, length)
+    if at_end:
+        (x0, y0), (x1, y1) = positionAtShapeOffset(shape, length - base), shape[-1]
+    else:
+        (x0, y0), (x1, y1) = shape[0], positionAtShapeOffset(shape, base)
     return math.degrees(math.atan2(y1 - y0, x1 - x0))
 
 
-def classify_movement(entry_edge, exit_edge) -> str:
-    """'left', 'straight', 'right' or 'uturn' from the heading change between two edges (driving on the right
-    or left alike: left means counter-clockwise)."""
-    turn = (_heading_deg(exit_edge) - _heading_deg(entry_edge) + 180.0) % 360.0 - 180.0
+def turn_movement(in_edge, out_edge) -> str:
+    """'left', 'straight', 'right' or 'uturn' from the turn between the heading of `in_edge` where it ends
+    and the heading of `out_edge` where it starts (left = counter-clockwise; +-45 degree sectors for
+    straight; beyond 135 degrees a u-turn).
+
+    Geometry rather than SUMO's connection direction: at a large joined junction (a dual carriageway with a
+    wide median) netconvert labels some u-turns 'l' and continuations onto a parallel carriageway 'R'.
+    """
+    turn = _heading_deg(out_edge.getShape(), at_end=False) - _heading_deg(in_edge.getShape(), at_end=True)
+    turn = (turn + 180.0) % 360.0 - 180.0
     if abs(turn) <= STRAIGHT_MAX_DEG:
         return "straight"
     if abs(turn) >= UTURN_MIN_DEG:
@@ -119,19 +136,13 @@ def classify_movement(entry_edge, exit_edge) -> str:
     return "left" if turn > 0 else "right"
 
 
-_DIRECTION_MOVEMENT = {"s": "straight", "l": "left", "L": "left", "r": "right", "R": "right", "t": "uturn"}
-
-
-def route_movement(net, path) -> str:
-    """The movement of a route at the first signalised junction it crosses, from SUMO's own connection
-    direction there; a route crossing no traffic light is classified by its overall heading change."""
+def route_movement(path) -> str:
+    """The movement of a route where it crosses the first signalised junction on it; a route crossing no
+    traffic light is classified by the turn from its first to its last edge."""
     for here, there in zip(path, path[1:], strict=False):
         if here.getToNode().getType().startswith("traffic_light"):
-            for conn in here.getConnections(there):
-                movement = _DIRECTION_MOVEMENT.get(conn.getDirection())
-                if movement is not None:
-                    return movement
-    return classify_movement(path[0], path[-1])
+            return turn_movement(here, there)
+    return turn_movement(path[0], path[-1])
 
 
 def _vehicle_edges(net):
@@ -161,7 +172,7 @@ def find_entering_lanes(net) -> list[EnteringLane]:
             path, _cost = net.getShortestPath(entry, exit_edge, vClass=VEHICLE_CLASS)
             if path is None:
                 continue
-            movement = route_movement(net, path)
+            movement = route_movement(path)
             if movement == "uturn":
                 continue  # u-turns are not part of the observed demand
             routes.append(Route(tuple(e.getID() for e in path), movement))

@@ -43,6 +43,7 @@ from pedsafe_sumo.demand.routes_xml import attrs
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
+from pedsafe_sumo.sumo_binaries import sumo_binary
 
 #: Acceptance bound of the issue: mid-block approach speeds vs the non-intersection fit.
 MIDBLOCK_SPEED_KS_MAX = 0.10
@@ -128,19 +129,13 @@ def _sumocfg_settings(site: Site) -> tuple[float, str, list[str]]:
     return step_length_s, ped_model, additionals
 
 
-def sumo_binary() -> str:
-    import sumolib
-
-    return sumolib.checkBinary("sumo")
-
-
 def run_sumo(
     site: Site, route_files: list[Path], detector_file: Path, end_s: float, log_file: Path
 ) -> subprocess.CompletedProcess:
     """Run the sumo binary headless over the site with the demand and the detectors."""
     step_length_s, ped_model, additionals = _sumocfg_settings(site)
     cmd = [
-        sumo_binary(),
+        sumo_binary("sumo"),
         "--net-file", str(site.files.net_file),
         "--route-files", ",".join(str(p) for p in route_files),
         "--additional-files", ",".join([*additionals, str(detector_file)]),
