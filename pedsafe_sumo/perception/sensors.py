@@ -316,7 +316,15 @@ def plan_lidar(spec: LidarSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     n_ch = np.maximum(c1 - c0 + 1, 0)
     count = n_az * n_ch
     keep = count > 0
-    cand, k0, c0, n_ch, count, d_far, h = cand[keep], k0[keep], c0[keep], n_ch[keep], count[keep], d_far[keep], h[keep]
+    cand, k0, c0, n_ch, count, d_far, h = (
+        cand[keep],
+        k0[keep],
+        c0[keep],
+        n_ch[keep],
+        count[keep],
+        d_far[keep],
+        h[keep],
+    )
     extra["candidates"] = cand
     if cand.size == 0:
         return _empty_plan(extra)
@@ -367,7 +375,9 @@ def finish_lidar(spec: LidarSpec, plan: RayPlan, hits: RayHits, world: WorldSnap
             q = plan.origin[other] + plan.direction[other] * hits.t_m[other][:, None]
             qg = gidx[other]
             qp = own[other]
-            radial = np.maximum(np.hypot(q[:, 0] - peds.x_m[qp], q[:, 1] - peds.y_m[qp]) - peds.radius_m[qp], 0)
+            radial = np.maximum(
+                np.hypot(q[:, 0] - peds.x_m[qp], q[:, 1] - peds.y_m[qp]) - peds.radius_m[qp], 0
+            )
             vertical = np.maximum(np.maximum(-q[:, 2], q[:, 2] - peds.height_m[qp]), 0.0)
             near = np.hypot(radial, vertical) <= tol
             if np.any(near):

@@ -60,7 +60,7 @@ def _rgb(values, n: int) -> np.ndarray:
 class VehicleBoxes:
     """N vehicles as oriented boxes standing on the ground.
 
-    ``x_m, y_m``: box centre (not SUMO's front bumper: see ``geometry.front_bumper_to_centre``),
+    ``x_m, y_m``: box centre (not SUMO's front bumper: see ``geometry.sumo_front_to_centre``),
     ``yaw_rad``: heading counter-clockwise from east, ``length_m`` along the heading, ``width_m``,
     ``height_m`` (box spans z = 0 .. height_m), ``rgb``: body colour (N, 3) 0-255.
     """
@@ -405,7 +405,12 @@ def load_static_occluders(path: str | Path, occluders: dict) -> StaticOccluders:
             z0, z1, default_rgb = 0.0, height, o["building_rgb"]
             kind_name = "building"
         elif _matches(kind, o["canopy_type_prefixes"]):
-            z0, z1, default_rgb, kind_name = o["canopy_base_m"], o["canopy_top_m"], o["tree_crown_rgb"], "canopy"
+            z0, z1, default_rgb, kind_name = (
+                o["canopy_base_m"],
+                o["canopy_top_m"],
+                o["tree_crown_rgb"],
+                "canopy",
+            )
         elif _matches(kind, o["hedge_type_prefixes"]):
             z0, z1, default_rgb, kind_name = 0.0, o["hedge_height_m"], o["tree_crown_rgb"], "hedge"
         else:
@@ -426,7 +431,10 @@ def load_static_occluders(path: str | Path, occluders: dict) -> StaticOccluders:
 
 
 def load_roadside_units(
-    path: str | Path, default_height_m: float, default_pitch_down_deg: float, poi_type: str = "roadside_camera"
+    path: str | Path,
+    default_height_m: float,
+    default_pitch_down_deg: float,
+    poi_type: str = "roadside_camera",
 ) -> list[RoadsideUnit]:
     """Roadside cameras from an additional file's ``<poi type="roadside_camera">`` elements.
 
