@@ -103,9 +103,10 @@ def describe(result: EpisodeResult, algorithm: str) -> list[str]:
         f"at t={closest.time_s:.2f} s"
     )
     if outcome["collision"]:
+        impact_mps = outcome["impact_speed_mps"]
         lines.append(
-            f"  COLLISION at {outcome['impact_speed_mps']:.2f} m/s "
-            f"({outcome['impact_speed_mps'] * 3.6:.1f} km/h); injury probability {outcome['injury_probability']:.3f}"
+            f"  COLLISION at {impact_mps:.2f} m/s ({impact_mps * 3.6:.1f} km/h); "
+            f"injury probability {outcome['injury_probability']:.3f}"
         )
         seen = "also recorded" if outcome["sumo_collision"] else "not recorded"
         lines.append(
