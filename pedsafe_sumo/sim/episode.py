@@ -169,8 +169,8 @@ class EpisodeRunner:
             typeID=type_id,
             depart="0",
             departLane=str(lane_index),
-            departPos=f"{vehicle.front_pos_m:.3f}",
-            departSpeed=f"{vehicle.speed_mps:.3f}",
+            departPos=repr(float(vehicle.front_pos_m)),
+            departSpeed=repr(float(vehicle.speed_mps)),
         )
 
     def _populate(self, api, setup: EpisodeSetup) -> None:
@@ -298,7 +298,6 @@ class EpisodeRunner:
                 )
                 snapshot = WorldSnapshot(time_s, vehicles, pedestrians, self.static)
                 t1 = clock()
-                timings["sumo_s"] += t1 - t0 if not rows else 0.0
                 timings["snapshot_s"] += t1 - t0
 
                 detections = perceive(
