@@ -112,6 +112,10 @@ class ScenarioSpec:
     time_limit_s: float = 30.0
     #: Class of the black occluder at the head of the queue (crossing), from VEHICLE_CLASSES.
     occluder_class: str = "suv"
+    #: Background traffic from the demand model on every other entering lane (1 = on, 0 = off), with
+    #: vehicles that would have entered up to `background_warmup_s` before the start already on the road.
+    background_traffic: float = 1
+    background_warmup_s: float = 60.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -139,6 +143,8 @@ class ScenarioSpec:
                 "0 < ego_speed_min_mps <= ego_speed_max_mps",
             ),
             (self.time_limit_s > 0, "time_limit_s > 0"),
+            (self.background_traffic in (0, 1), "background_traffic is 0 or 1"),
+            (self.background_warmup_s >= 0, "background_warmup_s >= 0"),
         ]
         for ok, rule in checks:
             if not ok:
@@ -224,6 +230,21 @@ class VehicleSetup:
 
 
 @dataclass(frozen=True)
+class BackgroundVehicle:
+    """A vehicle of the background traffic: enters at `depart_s` (>= 0) at `depart_pos_m` of its route's
+    first edge, at its desired speed, and is then driven by SUMO."""
+
+    vehicle_id: str
+    route: tuple[str, ...]
+    lane_index: int  # SUMO lane index on the first edge
+    depart_s: float
+    depart_pos_m: float
+    desired_speed_mps: float
+    speed_factor: float  # desired speed / speed limit of the entering lane
+    colour_rgb: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
 class EpisodeSetup:
     """One concrete initial world; identical under SV and V2I for the same seed."""
 
@@ -236,6 +257,7 @@ class EpisodeSetup:
     conflict_xy: tuple[float, float]
     conflict_offset_s: float
     time_limit_s: float
+    background: tuple[BackgroundVehicle, ...] = ()
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):

@@ -17,6 +17,7 @@ under SV and V2I, and a perception stream; SUMO gets the seed too.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -28,6 +29,8 @@ import pandas as pd
 from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker
 from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
+from pedsafe_sumo.demand.site import load_site as load_demand_site
+from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -43,7 +46,15 @@ from pedsafe_sumo.perception import (
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.scenarios.geometry import load_approach
-from pedsafe_sumo.scenarios.registry import EpisodeSetup, ScenarioSpec, VehicleSetup, draw_episode
+from pedsafe_sumo.scenarios.registry import (
+    CAR_COLOURS_RGB,
+    VEHICLE_CLASSES,
+    BackgroundVehicle,
+    EpisodeSetup,
+    ScenarioSpec,
+    VehicleSetup,
+    draw_episode,
+)
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
 
@@ -94,14 +105,26 @@ class EpisodeRunner:
             site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
         )
         self.sensors = SensorSuite.from_params(perception, units)
+        # Background traffic enters on every entering lane except the scenario's own approach.
+        demand_site = load_demand_site(site.name, net_file=site.file("net.xml"))
+        self.background_lanes = [
+            lane for lane in demand_site.entering_lanes if lane.edge_id != self.approach.edge_id
+        ]
+        self._edge_lengths = {lane.edge_id: lane.length_m for lane in demand_site.entering_lanes}
+        self._route_edges = {rid: edges for edges, rid in route_ids(self.background_lanes).items()}
 
     def close(self) -> None:
         self.session.close()
 
     # ------------------------------------------------------------------ setup
     def draw_setup(self, spec: ScenarioSpec, seed: int) -> EpisodeSetup:
-        """The initial world of episode `seed`: a function of the seed alone (same under SV and V2I)."""
-        world_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
+        """The initial world of episode `seed`: a function of the seed alone (same under SV and V2I).
+
+        The seed is split into three streams: the scenario's world, the perception noise (see run) and
+        the background traffic, so that changing one never shifts the draws of another.
+        """
+        world_seq, _, traffic_seq = np.random.SeedSequence(seed).spawn(3)
+        world_rng = np.random.default_rng(world_seq)
         person = sample_pedestrians(world_rng, self.params["pedestrians"], 1)[0]
         _, speed_nonintersection, speed_intersection = traffic_distributions(self.params["traffic"])
         fit = speed_intersection if spec.ego_speed_fit == "intersection" else speed_nonintersection
@@ -112,7 +135,47 @@ class EpisodeRunner:
             "risk": person.risk,
             "walking_speed_mps": person.speed_mps,
         }
-        return draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng)
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng)
+        if spec.background_traffic:
+            setup = dataclasses.replace(setup, background=self._background(spec, traffic_seq))
+        return setup
+
+    def _background(
+        self, spec: ScenarioSpec, seed_seq: np.random.SeedSequence
+    ) -> tuple[BackgroundVehicle, ...]:
+        """Demand-model vehicles for [-warm-up, time limit]; the early ones already down their first edge."""
+        warmup_s = spec.background_warmup_s
+        demand_seq, colour_seq = seed_seq.spawn(2)
+        drawn = generate_vehicles(
+            self.background_lanes, self.params["traffic"], warmup_s + spec.time_limit_s, demand_seq
+        )
+        colour_rng = np.random.default_rng(colour_seq)
+        vehicles = []
+        for vehicle in drawn:
+            depart_s = vehicle.depart_s - warmup_s
+            pos_m = 0.0
+            if depart_s < 0:
+                # Would have entered -depart_s ago: it is now that far down its first edge at free speed
+                # (or has left it, and then it no longer matters to the scene).
+                pos_m = vehicle.desired_speed_mps * -depart_s
+                if pos_m > self._edge_lengths[vehicle.lane.edge_id] - 10.0:
+                    continue
+                depart_s = 0.0
+            route = self._route_edges[vehicle.route_id]
+            colour = CAR_COLOURS_RGB[int(colour_rng.integers(len(CAR_COLOURS_RGB)))]
+            vehicles.append(
+                BackgroundVehicle(
+                    vehicle.vehicle_id,
+                    route,
+                    vehicle.lane.index,
+                    round(depart_s, 2),
+                    round(pos_m, 2),
+                    vehicle.desired_speed_mps,
+                    vehicle.desired_speed_mps / vehicle.lane.speed_limit_mps,
+                    colour,
+                )
+            )
+        return tuple(vehicles)
 
     def _sumo_args(self, seed: int) -> list[str]:
         args = [
@@ -175,11 +238,35 @@ class EpisodeRunner:
 
     def _populate(self, api, setup: EpisodeSetup) -> None:
         approach = self.approach
+        self._routes_added: set[str] = set()
         api.route.add("ego_route", list(setup.ego_route))
         api.route.add("kerb_route", [approach.edge_id])
         self._add_vehicle(api, setup.ego, "ego_route", parked=False)
         for vehicle in setup.parked:
             self._add_vehicle(api, vehicle, "kerb_route", parked=True)
+        if setup.background:
+            api.vehicletype.copy("DEFAULT_VEHTYPE", "background")
+            size = VEHICLE_CLASSES["car"]
+            api.vehicletype.setLength("background", size.length_m)
+            api.vehicletype.setWidth("background", size.width_m)
+            api.vehicletype.setHeight("background", size.height_m)
+            api.vehicletype.setImperfection("background", 0.0)
+            api.vehicletype.setMaxSpeed("background", 55.56)
+        for vehicle in setup.background:
+            route_id = "bg_" + "|".join(vehicle.route)
+            if route_id not in self._routes_added:
+                api.route.add(route_id, list(vehicle.route))
+                self._routes_added.add(route_id)
+            api.vehicle.add(
+                vehicle.vehicle_id,
+                route_id,
+                typeID="background",
+                depart=repr(vehicle.depart_s),
+                departLane=str(vehicle.lane_index),
+                departPos=repr(vehicle.depart_pos_m),
+                departSpeed=repr(vehicle.desired_speed_mps),
+            )
+            api.vehicle.setColor(vehicle.vehicle_id, (*vehicle.colour_rgb, 255))
         ped = setup.pedestrian
         api.vehicletype.copy("DEFAULT_PEDTYPE", "ped_type")
         api.vehicletype.setWidth("ped_type", 2 * ped.radius_m)
@@ -225,6 +312,20 @@ class EpisodeRunner:
         for vehicle in setup.parked:
             api.vehicle.setLaneChangeMode(vehicle.vehicle_id, 0)
         api.vehicle.setLaneChangeMode(EGO_ID, 0)
+        background = {v.vehicle_id: v for v in setup.background}
+        car = VEHICLE_CLASSES["car"]
+
+        def register_departed() -> None:
+            """Background vehicles inserted in the last step: their speed factor, subscription, size."""
+            for vid in api.simulation.getDepartedIDList():
+                vehicle = background.get(vid)
+                if vehicle is None:
+                    continue
+                api.vehicle.setSpeedFactor(vid, vehicle.speed_factor)
+                api.vehicle.subscribe(vid, [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED])
+                dims[vid] = (car.length_m, car.width_m, car.height_m, vehicle.colour_rgb)
+
+        register_departed()
 
         ped = setup.pedestrian
         walker = PedestrianWalker(ped.path_xy, self._behaviour(ped), start_delay_s=ped.start_delay_s)
@@ -256,43 +357,40 @@ class EpisodeRunner:
             while True:
                 t0 = clock()
                 time_s = api.simulation.getTime()
+                if background:
+                    register_departed()
                 results = api.vehicle.getAllSubscriptionResults()
                 if EGO_ID not in results:
                     end_reason = "ego_left_network"
                     break
-                ids, centre_x, centre_y, yaw, lengths, widths, heights, colours = (
-                    [],
-                    [],
-                    [],
-                    [],
-                    [],
-                    [],
-                    [],
-                    [],
-                )
-                for vid, values in results.items():
-                    if vid not in dims:
-                        continue
-                    length, width, height, rgb = dims[vid]
-                    fx, fy = values[tc.VAR_POSITION]
-                    heading = sumo_angle_to_yaw_rad(values[tc.VAR_ANGLE])
-                    cx, cy = sumo_front_to_centre(fx, fy, heading, length)
-                    ids.append(vid)
-                    centre_x.append(cx)
-                    centre_y.append(cy)
-                    yaw.append(heading)
-                    lengths.append(length)
-                    widths.append(width)
-                    heights.append(height)
-                    colours.append(rgb)
+                # Vectorised: SUMO's front-bumper positions and angles to footprint centres and yaw.
+                ids = [vid for vid in results if vid in dims]
+                front_xy = np.array([results[vid][tc.VAR_POSITION] for vid in ids])
+                yaw = sumo_angle_to_yaw_rad([results[vid][tc.VAR_ANGLE] for vid in ids])
+                sizes = [dims[vid] for vid in ids]
+                lengths = np.array([d[0] for d in sizes])
+                centre_x, centre_y = sumo_front_to_centre(front_xy[:, 0], front_xy[:, 1], yaw, lengths)
                 ego_index = ids.index(EGO_ID)
-                ego_x, ego_y, ego_yaw = centre_x[ego_index], centre_y[ego_index], yaw[ego_index]
+                ego_x, ego_y, ego_yaw = (
+                    float(centre_x[ego_index]),
+                    float(centre_y[ego_index]),
+                    float(yaw[ego_index]),
+                )
                 ego_speed = float(results[EGO_ID][tc.VAR_SPEED])
-                ego_length, ego_width = lengths[ego_index], widths[ego_index]
+                ego_length, ego_width = float(lengths[ego_index]), sizes[ego_index][1]
                 if not sumo_collision:
                     sumo_record = self._sumo_collision(api, time_s)
                     sumo_collision = bool(sumo_record)
-                vehicles = VehicleBoxes.build(ids, centre_x, centre_y, yaw, lengths, widths, heights, colours)
+                vehicles = VehicleBoxes.build(
+                    ids,
+                    centre_x,
+                    centre_y,
+                    yaw,
+                    lengths,
+                    [d[1] for d in sizes],
+                    [d[2] for d in sizes],
+                    [d[3] for d in sizes],
+                )
                 pedestrians = Pedestrians.build(
                     [PED_ID], [pose.x_m], [pose.y_m], [ped.radius_m], ped_heights, ped_rgb
                 )
