@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError, ScenarioSpec, get_scenario
@@ -147,6 +148,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
     parser.add_argument("--log", type=Path, help="write the per-step log as CSV (one file per condition)")
+    parser.add_argument(
+        "--case-dir", type=Path, help="write each episode as a case (Parquet log + JSON world)"
+    )
     parser.add_argument("--gui", action="store_true", help="run in sumo-gui instead of headless libsumo")
     args = parser.parse_args(argv)
 
@@ -174,6 +178,8 @@ def main(argv: list[str] | None = None) -> int:
                 )
                 result.log.to_csv(path, index=False)
                 print(f"  per-step log: {path}")
+            if args.case_dir:
+                print(f"  case: {write_case(args.case_dir, result)}")
     except SimulatorError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
