@@ -209,6 +209,9 @@ class EpisodeRunner:
                 str(self.site.file("view.xml")),
                 "--start",
                 "true",
+                # Close the window when the episode's TraCI connection closes.
+                "--quit-on-end",
+                "true",
             ]
         return args
 
