@@ -16,13 +16,13 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import Any
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
-from pedsafe_sumo.params import ParameterError, load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError, ScenarioSpec, get_scenario
+from pedsafe_sumo.params import ParameterError
+from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.settings import UsageError, configure
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeResult, EpisodeRunner
 
@@ -31,45 +31,6 @@ SENSOR_NAMES = {
     "onboard_lidar": "onboard LiDAR",
     "roadside": "roadside camera",
 }
-
-
-class UsageError(ValueError):
-    """Bad command-line input; main() prints it as one line and exits with 2."""
-
-
-def parse_set(pairs: list[str]) -> tuple[dict[str, str], dict[str, Any]]:
-    """Split --set key=value pairs into scenario fields and dotted parameter-file keys."""
-    scenario: dict[str, str] = {}
-    params: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise UsageError(f"--set needs key=value, got '{pair}'")
-        if "." in key:
-            params[key] = _parse_value(value)
-        else:
-            scenario[key] = value
-    return scenario, params
-
-
-def _parse_value(text: str) -> Any:
-    lowered = text.strip().lower()
-    if lowered in ("true", "false"):
-        return lowered == "true"
-    try:
-        number = float(text)
-    except ValueError:
-        return text
-    return int(number) if number.is_integer() and "." not in text and "e" not in lowered else number
-
-
-def configure(args) -> tuple[ScenarioSpec, dict[str, Any]]:
-    scenario_overrides, param_overrides = parse_set(args.set or [])
-    params = load_params(args.params)
-    if param_overrides:
-        params = with_overrides(params, param_overrides)
-    spec = get_scenario(args.scenario).with_overrides(scenario_overrides)
-    return spec, params
 
 
 def describe(result: EpisodeResult, algorithm: str) -> list[str]:
@@ -159,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
         if any(c not in CONDITIONS for c in conditions):
             raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
         site = get_site(args.site)
-        spec, params = configure(args)
+        specs, params = configure([args.scenario], args.params, args.set)
+        spec = specs[args.scenario]
         agent_class = load_agent_class(args.algorithm)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)
