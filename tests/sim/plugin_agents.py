@@ -31,3 +31,16 @@ class StopsAtOnce(Agent):
 
     def close(self):
         pass
+
+
+class FailsOnOddSeeds(Agent):
+    """Raises inside run_step on odd seeds: the batch must record an error and go on."""
+
+    def setup(self, config):
+        self.seed = config["seed"]
+        self.speed_mps = config["initial_speed_mps"]
+
+    def run_step(self, observation, time_s):
+        if self.seed % 2 and time_s > 0.5:
+            raise RuntimeError(f"planner crashed on seed {self.seed}")
+        return Command(self.speed_mps)
