@@ -66,10 +66,11 @@ class Detector:
 
 
 def main_junction(site: Site):
-    """The signalised junction of the study: the traffic-light node with the most incoming vehicle lanes."""
+    """The signalised junction of the study: the traffic-light node with the most incoming vehicle lanes
+    (None on a network without traffic lights)."""
     tls = [n for n in site.net.getNodes() if n.getType().startswith("traffic_light")]
     if not tls:
-        raise SiteError(f"network {site.files.net_file} has no signalised junction")
+        return None  # e.g. an open road: no junction loops
 
     def incoming_lanes(node) -> int:
         return sum(1 for e in node.getIncoming() for lane in e.getLanes() if lane.allows(VEHICLE_CLASS))
@@ -86,7 +87,7 @@ def place_detectors(site: Site) -> list[Detector]:
         detectors.append(Detector(f"half_{lane.lane_id}", lane.lane_id, lane.length_m / 2.0, "midlane"))
     junction = main_junction(site)
     seen = set()
-    for edge in sorted(junction.getIncoming(), key=lambda e: e.getID()):
+    for edge in sorted(junction.getIncoming() if junction else [], key=lambda e: e.getID()):
         for lane in edge.getLanes():
             if not lane.allows(VEHICLE_CLASS):
                 continue
