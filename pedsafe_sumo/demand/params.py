@@ -64,7 +64,6 @@ def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
     for fit in ("nonintersection", "intersection"):
         _number(section, f"speed_{fit}_log_mu", where)
         _positive(section, f"speed_{fit}_log_sigma", where)
-    _non_negative(section, "speed_correlation_time_s", where)
     _shares_sum_to_one(section, [f"turn_share_{m}" for m in TURN_MOVEMENTS], where)
     sigma = _number(section, "driver_imperfection_sigma", where)
     if not 0.0 <= sigma <= 1.0:

@@ -15,7 +15,6 @@ How the speeds reach SUMO (the mechanism the validation measures):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,29 +42,6 @@ class Vehicle:
     @property
     def speed_factor(self) -> float:
         return self.desired_speed_mps / self.lane.speed_limit_mps
-
-
-def platoon_correlated_speeds(
-    rng: np.random.Generator, speeds: Lognormal, headways_s: np.ndarray, correlation_time_s: float
-) -> np.ndarray:
-    """Desired speeds (m/s) of the successive vehicles of one lane, each exactly lognormal.
-
-    The Gaussian scores follow z_k = rho_k z_(k-1) + sqrt(1 - rho_k^2) e_k with rho_k = exp(-h_k / T), h_k the
-    headway to the vehicle ahead and T = `correlation_time_s`: since z_(k-1) ~ N(0, 1) and e_k ~ N(0, 1) are
-    independent, z_k ~ N(0, 1) for any rho_k, so every vehicle's speed is exactly the fitted lognormal and
-    the headways stay exactly exponential; only vehicles close together get similar speeds (platoons).
-    T = 0 draws every speed independently.
-    """
-    n = headways_s.size
-    eps = rng.standard_normal(n)
-    if correlation_time_s <= 0 or n == 0:
-        return np.exp(speeds.log_mu + speeds.log_sigma * eps)
-    rho = np.exp(-np.asarray(headways_s, dtype=float) / correlation_time_s)
-    z = np.empty(n)
-    z[0] = eps[0]  # the first vehicle has no leader on the lane
-    for k in range(1, n):
-        z[k] = rho[k] * z[k - 1] + math.sqrt(1.0 - rho[k] ** 2) * eps[k]
-    return np.exp(speeds.log_mu + speeds.log_sigma * z)
 
 
 def movement_probabilities(lane: EnteringLane, traffic: dict[str, Any]) -> dict[str, float]:
@@ -109,9 +85,7 @@ def generate_vehicles(
         movements = list(probs)
         chosen = rng.choice(len(movements), size=n, p=np.array([probs[m] for m in movements]))
         route_pick = rng.random(n)
-        desired_mps = platoon_correlated_speeds(
-            rng, speeds, np.diff(departs_s, prepend=0.0), traffic["speed_correlation_time_s"]
-        )
+        desired_mps = speeds.sample(rng, n)
         for k in range(n):
             options: list[Route] = lane.routes_by_movement[movements[chosen[k]]]
             route = options[min(int(route_pick[k] * len(options)), len(options) - 1)]

@@ -35,7 +35,6 @@ def test_defaults_carry_the_paper_numbers_and_errata():
         ({"traffic.speed_intersection_log_sigma": -1.0}, "speed_intersection_log_sigma' must be > 0"),
         ({"traffic.speed_intersection_log_mu": "fast"}, "speed_intersection_log_mu' must be a finite number"),
         ({"traffic.turn_share_left": 0.5}, "must sum to 1"),
-        ({"traffic.speed_correlation_time_s": -3.0}, "speed_correlation_time_s' must be >= 0"),
         ({"traffic.turn_share_right": -0.2, "traffic.turn_share_straight": 1.0}, "must lie in \\[0, 1\\]"),
         ({"pedestrians.risk_share_yield": 0.5}, "risk_share_unaware.*must sum to 1"),
         ({"pedestrians.gender_female_share": 1.5}, "gender_female_share' is a share"),

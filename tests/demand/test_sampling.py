@@ -83,25 +83,3 @@ def test_same_generator_state_same_draws():
     b = Lognormal(1.8304, 0.4857).sample(np.random.default_rng(7), 10)
     c = Lognormal(1.8304, 0.4857).sample(np.random.default_rng(8), 10)
     assert np.array_equal(a, b) and not np.array_equal(a, c)
-
-
-def test_platoon_correlated_speeds_keep_the_lognormal_and_correlate_close_vehicles():
-    from pedsafe_sumo.demand.vehicles import platoon_correlated_speeds
-
-    dist = Lognormal(1.8304, 0.4857)
-    rng = np.random.default_rng(SEED)
-    # 400 independent lanes of 50 vehicles: the first vehicle of each lane is independent of the others, and
-    # every later one must still be exactly lognormal (marginal KS over the k-th vehicles of all lanes).
-    headways = rng.exponential(1 / 0.1742, size=(400, 50))
-    speeds = np.array([platoon_correlated_speeds(rng, dist, h, 30.0) for h in headways])
-    for k in (0, 10, 49):
-        assert stats.kstest(speeds[:, k], dist.cdf).pvalue > 0.01
-    z = (np.log(speeds) - dist.log_mu) / dist.log_sigma
-    close = headways[:, 1:] < 2.0
-    far = headways[:, 1:] > 40.0
-    corr_close = np.corrcoef(z[:, :-1][close], z[:, 1:][close])[0, 1]
-    corr_far = np.corrcoef(z[:, :-1][far], z[:, 1:][far])[0, 1]
-    assert corr_close > 0.9  # exp(-h/30) > 0.93 for h < 2 s
-    assert corr_far < 0.35  # exp(-40/30) = 0.26
-    independent = platoon_correlated_speeds(rng, dist, headways[0], 0.0)
-    assert independent.shape == (50,)
