@@ -26,13 +26,14 @@ KNOWN_SENSORS = ("onboard_camera", "onboard_lidar", "v2i")
 
 @dataclass(frozen=True)
 class PerceivedPedestrian:
-    """A pedestrian as the AD stack perceives it (world frame: SUMO x east, y north, metres)."""
+    """A pedestrian position as the sensors report it this step (world frame: SUMO x east, y north, m).
+
+    Sensors report positions, not velocities: estimating motion (tracking) is the AD stack's job.
+    """
 
     ped_id: str
     x_m: float
     y_m: float
-    vx_mps: float
-    vy_mps: float
     source: str  # "onboard_camera", "onboard_lidar" or "v2i"
 
 

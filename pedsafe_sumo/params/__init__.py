@@ -87,8 +87,8 @@ def _import_validator_modules() -> None:
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as exc:
-            # A domain package not written yet registers nothing; any other missing module is a real error.
-            if exc.name is None or not module.startswith(exc.name):
+            # Tolerate a domain module (or its package) not written yet, never an error inside it.
+            if exc.name is None or not (module == exc.name or module.startswith(exc.name + ".")):
                 raise
 
 

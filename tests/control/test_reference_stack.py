@@ -14,18 +14,36 @@ from pedsafe_sumo.control.agent import (
     PerceivedPedestrian,
     load_agent_class,
 )
-from pedsafe_sumo.control.reference import ReferenceStack, predict_threat
+from pedsafe_sumo.control.reference import ReferenceStack, TrackedPedestrian, Tracker, predict_threat
 
 EGO = EgoState(x_m=0.0, y_m=0.0, yaw_rad=0.0, speed_mps=10.0, length_m=4.5, width_m=1.8)
 
 
 def ped(x, y, vx=0.0, vy=0.0):
-    return PerceivedPedestrian("p", x, y, vx, vy, "onboard_camera")
+    return TrackedPedestrian("p", x, y, vx, vy)
+
+
+def seen(x, y):
+    return PerceivedPedestrian("p", x, y, "onboard_camera")
 
 
 def obs(*peds, speed=10.0):
     ego = EgoState(EGO.x_m, EGO.y_m, EGO.yaw_rad, speed, EGO.length_m, EGO.width_m)
     return Observation(ego, tuple(peds), step_length_s=0.05)
+
+
+def test_tracker_recovers_a_constant_velocity_from_noisy_positions():
+    # Walking +y at 1.5 m/s with +-0.2 m alternating noise; the least-squares slope over 0.5 s (11
+    # samples) is 1.5 plus the slope of the noise pattern, small against the 0.2 / 0.05 = 4 m/s a
+    # one-step difference would show.
+    tracker = Tracker(window_s=0.5)
+    for k in range(11):
+        noise = 0.2 if k % 2 else -0.2
+        (track,) = tracker.update([seen(30.0, -6.0 + 1.5 * 0.05 * k + noise)], 0.05 * k)
+    assert track.vy_mps == pytest.approx(1.5, abs=0.6) and track.vx_mps == pytest.approx(0.0)
+    # One sighting only: no motion estimate yet.
+    (first,) = Tracker(0.5).update([seen(1.0, 2.0)], 0.0)
+    assert (first.vx_mps, first.vy_mps) == (0.0, 0.0)
 
 
 def test_pedestrian_standing_in_the_path_is_a_threat_at_its_gap():
@@ -58,7 +76,7 @@ def test_brakes_only_after_the_reaction_time_then_with_the_stopping_deceleration
     stack.setup(
         {"initial_speed_mps": 10.0, "reaction_time_s": 0.4, "max_decel_mps2": 6.0, "stop_margin_m": 2.0}
     )
-    p = ped(30, 0)
+    p = seen(30, 0)
     # t = 0.0 .. 0.35: threat perceived, reaction time running: speed held at 10 m/s.
     for k in range(8):
         command = stack.run_step(obs(p), 0.05 * k)
@@ -72,7 +90,7 @@ def test_brakes_only_after_the_reaction_time_then_with_the_stopping_deceleration
 def test_braking_is_capped_at_the_maximum_deceleration_and_resumes_once_clear():
     stack = ReferenceStack()
     stack.setup({"initial_speed_mps": 12.0, "reaction_time_s": 0.0, "max_decel_mps2": 6.0})
-    p = ped(6, 0)  # gap 3.75 m, room 1.75 m: needs 144 / 3.5 = 41 m/s2 -> capped at 6
+    p = seen(6, 0)  # gap 3.75 m, room 1.75 m: needs 144 / 3.5 = 41 m/s2 -> capped at 6
     command = stack.run_step(obs(p, speed=12.0), 0.0)
     assert command.info["decel_mps2"] == 6.0
     assert command.target_speed_mps == pytest.approx(12.0 - 6.0 * 0.05)

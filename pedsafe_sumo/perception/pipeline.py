@@ -1,0 +1,305 @@
+"""One perception frame: onboard camera, onboard LiDAR, roadside camera(s) and the V2I link.
+
+``perceive`` is what the episode loop calls every simulation step::
+
+    suite = SensorSuite.from_params(params["perception"], roadside_units)
+    link = V2ILink(suite.v2i)                      # one per episode
+    det = perceive(snapshot, ego, suite, rng, snapshot.time_s, link)
+    det.sv.ids, det.v2i.ids                        # single-vehicle vs cooperative perception
+
+All sensors are evaluated in every condition so that the draws from ``rng`` (per-frame misses,
+packet loss, noise) are the same under SV and V2I for the same seed; the condition only chooses
+which union the AD stack reads. Draw order per frame: onboard camera misses, LiDAR misses,
+roadside misses (each ``rng.random(M)``, only when its miss probability is > 0), then per
+roadside unit one loss draw and, unless lost, two noise draws per detected pedestrian.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .raycast import cast_rays
+from .sensors import (
+    CameraResult,
+    CameraSpec,
+    LidarResult,
+    LidarSpec,
+    RayPlan,
+    SensorPose,
+    finish_camera,
+    finish_lidar,
+    plan_camera,
+    plan_lidar,
+)
+from .v2i import V2ILink, V2ISpec, message_to_vehicle
+from .world import EgoPose, RoadsideUnit, WorldSnapshot
+
+
+@dataclass(frozen=True)
+class Mount:
+    """Where a sensor sits on the ego: ``forward_m`` ahead of the box centre, ``left_m`` to the left,
+    ``height_m`` above ground, optical axis yawed ``yaw_offset_rad`` (CCW) from the heading and
+    tilted ``pitch_down_rad`` down."""
+
+    forward_m: float
+    left_m: float
+    height_m: float
+    yaw_offset_rad: float = 0.0
+    pitch_down_rad: float = 0.0
+
+    def pose(self, ego: EgoPose) -> SensorPose:
+        c, s = math.cos(ego.yaw_rad), math.sin(ego.yaw_rad)
+        pos = np.array(
+            [
+                ego.x_m + c * self.forward_m - s * self.left_m,
+                ego.y_m + s * self.forward_m + c * self.left_m,
+                self.height_m,
+            ]
+        )
+        return SensorPose(pos, ego.yaw_rad + self.yaw_offset_rad, self.pitch_down_rad)
+
+    @classmethod
+    def from_params(cls, p: dict) -> Mount:
+        return cls(
+            float(p["forward_offset_m"]),
+            float(p["left_offset_m"]),
+            float(p["height_m"]),
+            math.radians(float(p.get("yaw_offset_deg", 0.0))),
+            math.radians(float(p.get("pitch_down_deg", 0.0))),
+        )
+
+
+@dataclass(frozen=True)
+class SensorSuite:
+    """Every sensor of one condition-independent setup, built from ``params["perception"]``."""
+
+    camera: CameraSpec
+    camera_mount: Mount
+    lidar: LidarSpec
+    lidar_mount: Mount
+    roadside: CameraSpec
+    roadside_units: tuple
+    v2i: V2ISpec
+    ground_rgb: tuple
+    sky_rgb: tuple
+
+    @classmethod
+    def from_params(cls, perception: dict, roadside_units=()) -> SensorSuite:
+        return cls(
+            camera=CameraSpec.from_params(perception["camera"]),
+            camera_mount=Mount.from_params(perception["camera"]),
+            lidar=LidarSpec.from_params(perception["lidar"]),
+            lidar_mount=Mount.from_params(perception["lidar"]),
+            roadside=CameraSpec.from_params(perception["roadside_camera"]),
+            roadside_units=tuple(roadside_units),
+            v2i=V2ISpec.from_params(perception["v2i"]),
+            ground_rgb=tuple(float(v) for v in perception["scene"]["ground_rgb"]),
+            sky_rgb=tuple(float(v) for v in perception["scene"]["sky_rgb"]),
+        )
+
+    def roadside_pose(self, unit: RoadsideUnit) -> SensorPose:
+        return SensorPose(np.array([unit.x_m, unit.y_m, unit.height_m]), unit.yaw_rad, unit.pitch_down_rad)
+
+
+@dataclass(frozen=True)
+class SensorDetections:
+    """Pedestrians one source reports: ``ids``, world ground positions ``xy_m`` (K, 2) and their
+    distance ``distance_m`` (K,) from the ego box centre at this frame."""
+
+    ids: tuple
+    xy_m: np.ndarray
+    distance_m: np.ndarray
+
+    @classmethod
+    def empty(cls) -> SensorDetections:
+        return cls((), np.zeros((0, 2)), np.zeros(0))
+
+    def __contains__(self, ped_id) -> bool:
+        return ped_id in self.ids
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+@dataclass(frozen=True)
+class Detections:
+    """Everything perceived in one frame.
+
+    ``camera``, ``lidar``: onboard; ``roadside``: what the roadside cameras saw this frame (at the
+    pole, before the link); ``v2i_received``: roadside detections delivered to the ego this frame
+    (stale by the latency, noisy); ``sv`` = camera OR lidar; ``v2i`` = sv OR v2i_received (onboard
+    positions preferred). ``ego_camera_px``: pixels (eq. 6) of the received detections in the onboard
+    camera, NaN when behind it. ``diagnostics``: per-sensor rule inputs for every pedestrian.
+    """
+
+    time_s: float
+    camera: SensorDetections
+    lidar: SensorDetections
+    roadside: SensorDetections
+    v2i_received: SensorDetections
+    sv: SensorDetections
+    v2i: SensorDetections
+    ego_camera_px: np.ndarray
+    diagnostics: dict = field(default_factory=dict, repr=False)
+
+
+def _select(world: WorldSnapshot, ego: EgoPose, mask: np.ndarray) -> SensorDetections:
+    idx = np.nonzero(mask)[0]
+    peds = world.pedestrians
+    xy = np.stack([peds.x_m[idx], peds.y_m[idx]], axis=1)
+    dist = np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)
+    return SensorDetections(tuple(peds.ids[i] for i in idx), xy, dist)
+
+
+def _miss(detected: np.ndarray, probability: float, rng: np.random.Generator) -> np.ndarray:
+    if probability <= 0.0 or detected.size == 0:
+        return detected
+    return detected & (rng.random(detected.shape[0]) >= probability)
+
+
+def _union(first: SensorDetections, second: SensorDetections) -> SensorDetections:
+    extra = [i for i, pid in enumerate(second.ids) if pid not in first.ids]
+    if not extra:
+        return first
+    return SensorDetections(
+        first.ids + tuple(second.ids[i] for i in extra),
+        np.vstack([first.xy_m, second.xy_m[extra]]),
+        np.concatenate([first.distance_m, second.distance_m[extra]]),
+    )
+
+
+def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle: int):
+    """Cast the rays of all plans in one pass; return each plan's slice of hits."""
+    from .raycast import RayHits
+
+    live = [p for p in plans if p.group_count.size]
+    if not live:
+        return [None] * len(plans)
+    counts = np.concatenate([p.group_count for p in live])
+    starts = np.cumsum(counts) - counts
+    hits = cast_rays(
+        world,
+        np.concatenate([p.origin for p in live]),
+        np.concatenate([p.direction for p in live]),
+        np.concatenate([p.t_max for p in live]),
+        starts,
+        counts,
+        np.concatenate([p.skip_ped for p in live]),
+        skip_vehicle,
+    )
+    out, pos = [], 0
+    for p in plans:
+        if not p.group_count.size:
+            out.append(None)
+            continue
+        n = p.origin.shape[0]
+        sl = slice(pos, pos + n)
+        out.append(RayHits(hits.t_m[sl], hits.kind[sl], hits.index[sl]))
+        pos += n
+    return out
+
+
+def perceive(
+    snapshot: WorldSnapshot,
+    ego: EgoPose,
+    sensors: SensorSuite,
+    rng: np.random.Generator,
+    time_s: float | None = None,
+    link: V2ILink | None = None,
+) -> Detections:
+    """Run every sensor on one snapshot (see module docstring). ``link`` carries the roadside
+    detections to the ego; without one, ``v2i_received`` is empty and ``v2i`` equals ``sv``."""
+    time_s = snapshot.time_s if time_s is None else float(time_s)
+    peds = snapshot.pedestrians
+    skip_vehicle = -1
+    if ego.vehicle_id is not None and ego.vehicle_id in snapshot.vehicles.ids:
+        skip_vehicle = snapshot.vehicles.ids.index(ego.vehicle_id)
+
+    cam_pose = sensors.camera_mount.pose(ego)
+    lidar_pose = sensors.lidar_mount.pose(ego)
+    rsu_poses = [sensors.roadside_pose(u) for u in sensors.roadside_units]
+    plans = [plan_camera(sensors.camera, cam_pose, peds), plan_lidar(sensors.lidar, lidar_pose, peds)]
+    plans += [plan_camera(sensors.roadside, pose, peds) for pose in rsu_poses]
+    hit_list = _cast_all(snapshot, plans, skip_vehicle)
+
+    def cam_result(spec, plan, hits) -> CameraResult:
+        if hits is None:
+            return finish_camera(spec, plan, _NO_HITS, snapshot, sensors.ground_rgb, sensors.sky_rgb)
+        return finish_camera(spec, plan, hits, snapshot, sensors.ground_rgb, sensors.sky_rgb)
+
+    cam = cam_result(sensors.camera, plans[0], hit_list[0])
+    lid: LidarResult = finish_lidar(sensors.lidar, plans[1], hit_list[1] or _NO_HITS, snapshot)
+    rsu_results = [cam_result(sensors.roadside, p, h) for p, h in zip(plans[2:], hit_list[2:], strict=True)]
+
+    cam_det = _miss(cam.detected, sensors.camera.miss_probability, rng)
+    lid_det = _miss(lid.detected, sensors.lidar.miss_probability, rng)
+    rsu_dets = [_miss(r.detected, sensors.roadside.miss_probability, rng) for r in rsu_results]
+    rsu_any = np.zeros(len(peds), dtype=bool)
+    for d in rsu_dets:
+        rsu_any |= d
+
+    camera = _select(snapshot, ego, cam_det)
+    lidar = _select(snapshot, ego, lid_det)
+    roadside = _select(snapshot, ego, rsu_any)
+    sv = _union(camera, lidar)
+
+    received = SensorDetections.empty()
+    pixels = np.zeros((0, 2))
+    if link is not None:
+        for unit, pose, det in zip(sensors.roadside_units, rsu_poses, rsu_dets, strict=True):
+            idx = np.nonzero(det)[0]
+            xy = np.stack([peds.x_m[idx], peds.y_m[idx]], axis=1)
+            link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, rng)
+        ids, xys, pxs = [], [], []
+        for msg in link.receive(time_s):
+            if not msg.ped_ids:
+                continue
+            _, px, _, world_pts = message_to_vehicle(msg, cam_pose.world_to_sensor, sensors.camera.intrinsics)
+            for k, pid in enumerate(msg.ped_ids):
+                if pid in ids:  # a later message (or another pole) supersedes an earlier one
+                    j = ids.index(pid)
+                    xys[j], pxs[j] = world_pts[k, :2], px[k]
+                else:
+                    ids.append(pid)
+                    xys.append(world_pts[k, :2])
+                    pxs.append(px[k])
+        if ids:
+            xy = np.asarray(xys)
+            received = SensorDetections(tuple(ids), xy, np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m))
+            pixels = np.asarray(pxs)
+    return Detections(
+        time_s=time_s,
+        camera=camera,
+        lidar=lidar,
+        roadside=roadside,
+        v2i_received=received,
+        sv=sv,
+        v2i=_union(sv, received),
+        ego_camera_px=pixels,
+        diagnostics={"camera": cam, "lidar": lid, "roadside": rsu_results},
+    )
+
+
+class PerceptionSystem:
+    """Per-episode convenience: a sensor suite plus its own V2I link."""
+
+    def __init__(self, sensors: SensorSuite):
+        self.sensors = sensors
+        self.link = V2ILink(sensors.v2i)
+
+    def perceive(
+        self, snapshot: WorldSnapshot, ego: EgoPose, rng: np.random.Generator, time_s: float | None = None
+    ) -> Detections:
+        return perceive(snapshot, ego, self.sensors, rng, time_s, self.link)
+
+
+def _no_hits():
+    from .raycast import RayHits
+
+    return RayHits(np.zeros(0), np.zeros(0, dtype=np.int8), np.zeros(0, dtype=np.int64))
+
+
+_NO_HITS = _no_hits()
