@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -110,15 +111,15 @@ def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
 
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
-    if run.run_info is not None:
-        say(run_header(run))
-    if run.run_info_problem:
-        say(f"note: {run.run_info_problem}")
     try:
         table = table_one_of_run(run.episodes)
         paired = paired_of_run(run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
+    if run.run_info is not None:
+        say(run_header(run))
+    if run.run_info_problem:
+        say(f"note: {run.run_info_problem}")
     say("")
     say(TABLE_ONE_TITLE)
     say(text_table(*table_one_rows(table)))
@@ -132,6 +133,23 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     return written
 
 
+class _StdoutLines:
+    """print() that stops printing, not reporting, when stdout goes away (`... | head`)."""
+
+    def __init__(self) -> None:
+        self.closed = False
+
+    def __call__(self, line: str) -> None:
+        if self.closed:
+            return
+        try:
+            print(line, flush=True)
+        except BrokenPipeError:
+            self.closed = True
+            # Further writes, and the interpreter's last flush, go nowhere instead of failing.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m pedsafe_sumo.report", description=__doc__.splitlines()[0]
@@ -141,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     try:
-        report(load_run(args.run_dir))
+        report(load_run(args.run_dir), say=_StdoutLines())
     except ReportError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

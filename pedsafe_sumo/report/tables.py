@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
@@ -36,6 +37,11 @@ def table_one_of_run(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.Dat
     return table.iloc[key.argsort(kind="stable")].reset_index(drop=True)
 
 
+def _flags(column: pd.Series) -> np.ndarray:
+    """A boolean column as a numpy bool array; missing values (an errored episode's) read as False."""
+    return column.astype("boolean").fillna(False).to_numpy(dtype=bool)
+
+
 def paired_of_run(episodes: pd.DataFrame) -> pd.DataFrame:
     """Per scenario and outcome, the exact McNemar test of SV against V2I on pairs of the same episode.
 
@@ -45,7 +51,7 @@ def paired_of_run(episodes: pd.DataFrame) -> pd.DataFrame:
     """
     frame = episodes.copy()
     frame["table_conflict"] = conflict_without_collision(
-        frame["conflict"].to_numpy(dtype=bool), frame["collision"].to_numpy(dtype=bool)
+        _flags(frame["conflict"]), _flags(frame["collision"])
     )
     parts = []
     for outcome in PAIRED_OUTCOMES:
@@ -155,14 +161,19 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 
 
 TABLE_ONE_TITLE = (
-    "Table I: per scenario and condition, collision rate, mean injury probability P_I and conflict rate "
-    "(conflict without collision); 95% intervals: Wilson for rates, Student t for the mean P_I; "
-    "n = episodes counted, errors = episodes with status 'error', left out"
+    "Table I: collision rate, mean injury probability P_I, conflict rate (conflict without collision)\n"
+    "95% intervals: Wilson for the rates, Student t for the mean P_I; n = episodes counted, "
+    "errors = episodes with status 'error' (left out)"
 )
 PAIRED_TITLE = (
-    "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs, "
-    "b = event under SV only, c = event under V2I only; SV / V2I = event rate over the pairs"
+    "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"
+    "b = event under SV only, c = event under V2I only; SV, V2I = event rate over the pairs"
 )
+
+
+def _md_title(title: str) -> str:
+    first, _, rest = title.partition("\n")
+    return f"**{first}**\n\n{rest}" if rest else f"**{first}**"
 
 
 def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path) -> list[Path]:
@@ -170,7 +181,11 @@ def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path) -> 
     directory.mkdir(parents=True, exist_ok=True)
     paths = [directory / name for name in TABLE_FILES]
     table.to_csv(paths[0], index=False)
-    paths[1].write_text(f"{TABLE_ONE_TITLE}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8")
+    paths[1].write_text(
+        f"{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8"
+    )
     paired.to_csv(paths[2], index=False)
-    paths[3].write_text(f"{PAIRED_TITLE}\n\n{markdown_table(*paired_rows(paired))}\n", encoding="utf-8")
+    paths[3].write_text(
+        f"{_md_title(PAIRED_TITLE)}\n\n{markdown_table(*paired_rows(paired))}\n", encoding="utf-8"
+    )
     return paths

@@ -8,7 +8,7 @@ crossing, episodes 0-9:
   V2I no collision; conflicts {5} (1 of 10)
   paired collisions: both 0, b 3, c 0 -> p = 2 / 2^3 = 0.25
   paired conflicts:  both 0, b 2, c 1 -> p = min(1, 2 (1 + 3) / 8) = 1
-jaywalking, episodes 0-10 (V2I episode 10 has status "error"):
+jaywalking, episodes 0-10 (V2I episode 10 has status "error" and missing values for its indexes):
   SV  collisions {0..5} (6 of 11)
   V2I collision {0} (1 of 10, 1 error)
   paired collisions (episode 10 dropped): both 1, b 5, c 0 -> p = 2 / 2^5 = 0.0625
@@ -152,6 +152,10 @@ def standard_episodes() -> pd.DataFrame:
                 error="SimulatorError: lost" if episode == 10 else "",
             )
         )
+    # An errored episode has no outcome: its indexes are missing values (nullable booleans on disk).
+    errored = rows[-1]
+    errored.update(collision=None, conflict=None, injury_probability=math.nan, sumo_collision=None)
+    errored.update(first_detection_distance_m=math.nan, first_detection_time_s=math.nan, detected_by="")
     return pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
 
 

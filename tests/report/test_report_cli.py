@@ -132,8 +132,10 @@ def test_repeated_episode_numbers_are_bad_input(tmp_path, capsys):
     episodes = standard_episodes()
     run = write_run(tmp_path / "run", pd.concat([episodes, episodes.iloc[:1]]))
     assert main([str(run)]) == 2
-    err = capsys.readouterr().err.splitlines()
+    captured = capsys.readouterr()
+    err = captured.err.splitlines()
     assert len(err) == 1 and "episode numbers repeat" in err[0]
+    assert captured.out == "" and not (run / "tables").exists() and not (run / "figures").exists()
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

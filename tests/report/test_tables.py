@@ -126,3 +126,11 @@ def test_tables_written_as_csv_and_markdown(tmp_path):
     )
     assert "| crossing | SV | 10 | 0 | 0.3000 [0.1078, 0.6032] |" in paths[1].read_text()
     assert "| jaywalking | collision | 10 | 1 | 5 | 0 | 4 |" in paths[3].read_text()
+
+
+def test_nullable_boolean_columns_give_the_same_tables():
+    episodes = standard_episodes()
+    nullable = episodes.astype({"collision": "boolean", "conflict": "boolean", "sumo_collision": "boolean"})
+    assert nullable["collision"].isna().sum() == 1  # the errored episode
+    pd.testing.assert_frame_equal(table_one_of_run(nullable), table_one_of_run(episodes))
+    pd.testing.assert_frame_equal(paired_of_run(nullable), paired_of_run(episodes))
