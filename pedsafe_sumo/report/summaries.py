@@ -177,11 +177,12 @@ def choose_case_pair(run: RunDirectory, preferred_scenario: str = CASE_SCENARIO)
     )
     if pairs.empty:
         return None
+    kept = {p.name for p in run.cases_dir.glob("*.parquet")} if run.cases_dir.is_dir() else set()
     candidates = []
     for r in pairs.itertuples(index=False):
         if int(r.seed_sv) != int(r.seed_v2i):
             continue  # not the same initial world: not a pair
-        if not all(run.case_path(r.scenario, c, r.seed_sv).is_file() for c in ("sv", "v2i")):
+        if not all(run.case_path(r.scenario, c, r.seed_sv).name in kept for c in ("sv", "v2i")):
             continue
         candidates.append(
             CasePair(

@@ -16,11 +16,9 @@ from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.stats import paired_mcnemar, table_one
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
-#: Outcomes of the paired test: column of the episodes -> what it means.
-PAIRED_OUTCOMES = {
-    "collision": "collision",
-    "table_conflict": "conflict without collision (Table I's conflict)",
-}
+#: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
+#: conflict (a conflict in an episode without a collision), derived by `paired_of_run`.
+PAIRED_OUTCOMES = {"collision": "collision", "table_conflict": "conflict"}
 TABLE_FILES = ("table1.csv", "table1.md", "paired.csv", "paired.md")
 
 
@@ -54,9 +52,9 @@ def paired_of_run(episodes: pd.DataFrame) -> pd.DataFrame:
         _flags(frame["conflict"]), _flags(frame["collision"])
     )
     parts = []
-    for outcome in PAIRED_OUTCOMES:
-        test = paired_mcnemar(frame, outcome=outcome)
-        test.insert(1, "outcome", "conflict" if outcome == "table_conflict" else outcome)
+    for column, name in PAIRED_OUTCOMES.items():
+        test = paired_mcnemar(frame, outcome=column)
+        test.insert(1, "outcome", name)
         parts.append(test)
     paired = pd.concat(parts, ignore_index=True).rename(columns={"sv_only": "b", "v2i_only": "c"})
     n = paired["n_pairs"].where(paired["n_pairs"] > 0)
