@@ -16,6 +16,7 @@ roadside unit one loss draw and, unless lost, two noise draws per detected pedes
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -102,6 +103,10 @@ class SensorSuite:
 
     def roadside_pose(self, unit: RoadsideUnit) -> SensorPose:
         return SensorPose(np.array([unit.x_m, unit.y_m, unit.height_m]), unit.yaw_rad, unit.pitch_down_rad)
+
+    @functools.cached_property
+    def roadside_poses(self) -> tuple:
+        return tuple(self.roadside_pose(u) for u in self.roadside_units)
 
 
 @dataclass(frozen=True)
@@ -220,7 +225,7 @@ def perceive(
 
     cam_pose = sensors.camera_mount.pose(ego)
     lidar_pose = sensors.lidar_mount.pose(ego)
-    rsu_poses = [sensors.roadside_pose(u) for u in sensors.roadside_units]
+    rsu_poses = sensors.roadside_poses
     plans = [plan_camera(sensors.camera, cam_pose, peds), plan_lidar(sensors.lidar, lidar_pose, peds)]
     plans += [plan_camera(sensors.roadside, pose, peds) for pose in rsu_poses]
     hit_list = _cast_all(snapshot, plans, skip_vehicle)

@@ -12,7 +12,7 @@ Camera rule (per pedestrian): sample points on the side of the cylinder facing t
 image and nothing lies between it and the optical centre. Detected when the visible share is at
 least ``min_visible_fraction``, the projected height (axis top to bottom, pixels) at least
 ``min_height_px``, and the median over visible samples of the CIE76 delta E (OpenCV sRGB -> CIELAB)
-between clothing and the first surface behind the sample (the ray continued past the pedestrian up
+between clothing and the first surface behind the sample (i.e. at least half of the visible samples) (the ray continued past the pedestrian up
 to ``background_max_distance_m``: a vehicle, pedestrian, wall, tree, else the ground colour, else
 the sky colour) is at least ``delta_e_threshold``.
 
@@ -29,6 +29,7 @@ pedestrians stays a pedestrian cluster).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -57,7 +58,7 @@ class CameraSpec:
     height_fractions: tuple
     miss_probability: float
 
-    @property
+    @functools.cached_property
     def intrinsics(self) -> np.ndarray:
         return intrinsic_matrix(self.width_px, self.height_px, self.hfov_deg)
 
@@ -88,7 +89,7 @@ class LidarSpec:
     cluster_tolerance_m: float
     miss_probability: float
 
-    @property
+    @functools.cached_property
     def elevations_rad(self) -> np.ndarray:
         return np.deg2rad(np.linspace(self.elevation_min_deg, self.elevation_max_deg, self.channels))
 
@@ -114,7 +115,7 @@ class SensorPose:
     yaw_rad: float
     pitch_down_rad: float = 0.0
 
-    @property
+    @functools.cached_property
     def world_to_sensor(self) -> np.ndarray:
         """4x4 world-to-camera transform (OpenCV camera axes), the paper's R_I / R_V."""
         return world_to_camera_transform(self.position_m, self.yaw_rad, self.pitch_down_rad)
@@ -239,12 +240,16 @@ def surface_rgb(world: WorldSnapshot, hits: RayHits, ground_rgb, sky_rgb) -> np.
 
 @dataclass(frozen=True)
 class CameraResult:
-    """Per pedestrian (all M of the snapshot): the rule's inputs and the verdict."""
+    """Per pedestrian (all M of the snapshot): the rule's inputs and the verdict.
+
+    ``contrast_fraction``: share of the visible samples whose delta E reaches the threshold (the
+    median delta E reaches it exactly when this share is at least one half).
+    """
 
     detected: np.ndarray
     visible_fraction: np.ndarray
     height_px: np.ndarray
-    delta_e: np.ndarray
+    contrast_fraction: np.ndarray
 
 
 def finish_camera(
@@ -252,30 +257,22 @@ def finish_camera(
 ) -> CameraResult:
     m = len(world.pedestrians)
     vis_frac = np.zeros(m)
-    delta = np.zeros(m)
+    contrast = np.zeros(m)
     cand = plan.extra["candidates"]
     if cand.size:
         n_s = plan.extra["n_samples"]
         visible = plan.extra["in_image"] & ~(hits.t_m < plan.extra["dist"] - 1e-6)
-        vis2 = visible.reshape(cand.size, n_s)
-        vis_frac[cand] = vis2.mean(axis=1)
-        background = surface_rgb(world, hits, ground_rgb, sky_rgb)
-        clothing = np.repeat(world.pedestrians.rgb[cand], n_s, axis=0)
-        de = delta_e_cie76(clothing, background).reshape(cand.size, n_s)
-        de = np.where(vis2, de, np.nan)
-        with np.errstate(all="ignore"):
-            any_vis = vis2.any(axis=1)
-            med = np.zeros(cand.size)
-            if np.any(any_vis):
-                med[any_vis] = np.nanmedian(de[any_vis], axis=1)
-        delta[cand] = med
+        n_vis = visible.reshape(cand.size, n_s).sum(axis=1)
+        vis_frac[cand] = n_vis / n_s
+        if np.any(visible):
+            background = surface_rgb(world, hits, ground_rgb, sky_rgb)[visible]
+            clothing = world.pedestrians.rgb[np.repeat(cand, n_s)[visible]]
+            strong = delta_e_cie76(clothing, background) >= spec.delta_e_threshold
+            n_strong = np.bincount(np.repeat(np.arange(cand.size), n_s)[visible][strong], minlength=cand.size)
+            contrast[cand] = n_strong / np.maximum(n_vis, 1)
     height_px = plan.extra["height_px"]
-    detected = (
-        (vis_frac >= spec.min_visible_fraction)
-        & (height_px >= spec.min_height_px)
-        & (delta >= spec.delta_e_threshold)
-    )
-    return CameraResult(detected, vis_frac, height_px, delta)
+    detected = (vis_frac >= spec.min_visible_fraction) & (height_px >= spec.min_height_px) & (contrast >= 0.5)
+    return CameraResult(detected, vis_frac, height_px, contrast)
 
 
 # --------------------------------------------------------------------------------------------- LiDAR

@@ -40,6 +40,8 @@ EDGE_GRID_CELL_M = 16.0
 
 def _f(values, n=None) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
+    if n is not None and arr.shape[0] == 1 and n != 1:
+        arr = np.full(n, arr[0])
     if n is not None and arr.shape[0] != n:
         raise ValueError(f"expected {n} values, got {arr.shape[0]}")
     return arr
@@ -111,8 +113,7 @@ class Pedestrians:
     @classmethod
     def build(cls, ids, x_m, y_m, radius_m, height_m, rgb) -> Pedestrians:
         n = len(ids)
-        radius = _f(np.broadcast_to(np.asarray(radius_m, dtype=float), (n,)), n)
-        return cls(tuple(ids), _f(x_m, n), _f(y_m, n), radius, _f(height_m, n), _rgb(rgb, n))
+        return cls(tuple(ids), _f(x_m, n), _f(y_m, n), _f(radius_m, n), _f(height_m, n), _rgb(rgb, n))
 
     @classmethod
     def empty(cls) -> Pedestrians:
