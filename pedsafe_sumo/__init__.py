@@ -8,3 +8,9 @@ __version__ = "0.1.0"
 REPO_ROOT = Path(__file__).resolve().parent.parent
 NETWORKS_DIR = REPO_ROOT / "networks"
 ROUTES_DIR = REPO_ROOT / "routes"
+
+#: Attribution required by the Open Database License for everything derived from OpenStreetMap.
+OSM_ATTRIBUTION = (
+    "Map data (c) OpenStreetMap contributors, licensed under the Open Database License (ODbL) 1.0, "
+    "https://www.openstreetmap.org/copyright"
+)

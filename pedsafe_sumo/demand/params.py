@@ -1,0 +1,126 @@
+"""Validators of the `[traffic]` and `[pedestrians]` sections of the parameter file.
+
+Registered with the loader in `pedsafe_sumo.params`, which imports this module before validating. Each
+check raises `ParameterError` with a message naming the dotted key and the rule it breaks.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from pedsafe_sumo.params import ParameterError, register_validator
+
+#: Shares summing to 1 within this tolerance are accepted (TOML decimals such as 0.1 + 0.2 are inexact).
+SHARE_SUM_TOLERANCE = 1e-6
+
+TURN_MOVEMENTS = ("left", "straight", "right")
+RISK_TYPES = ("unaware", "hasten", "yield")
+AGE_GROUP_KEYS = ("age_min_years", "age_max_years", "weight_share", "speed_mean_mps", "speed_p15_mps")
+
+
+def _number(section: dict[str, Any], key: str, where: str) -> float:
+    if key not in section:
+        raise ParameterError(f"parameter '{where}.{key}' is missing")
+    value = section[key]
+    # bool is an int subclass in Python; `true` is never a valid number here.
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ParameterError(f"parameter '{where}.{key}' must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _positive(section: dict[str, Any], key: str, where: str) -> float:
+    value = _number(section, key, where)
+    if value <= 0:
+        raise ParameterError(f"parameter '{where}.{key}' must be > 0, got {value!r}")
+    return value
+
+
+def _non_negative(section: dict[str, Any], key: str, where: str) -> float:
+    value = _number(section, key, where)
+    if value < 0:
+        raise ParameterError(f"parameter '{where}.{key}' must be >= 0, got {value!r}")
+    return value
+
+
+def _share(section: dict[str, Any], key: str, where: str) -> float:
+    value = _number(section, key, where)
+    if not 0.0 <= value <= 1.0:
+        raise ParameterError(f"parameter '{where}.{key}' is a share and must lie in [0, 1], got {value!r}")
+    return value
+
+
+def _shares_sum_to_one(section: dict[str, Any], keys: list[str], where: str) -> None:
+    total = sum(_share(section, key, where) for key in keys)
+    if abs(total - 1.0) > SHARE_SUM_TOLERANCE:
+        names = ", ".join(f"{where}.{key}" for key in keys)
+        raise ParameterError(f"shares {names} must sum to 1, they sum to {total:.6g}")
+
+
+@register_validator("traffic")
+def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
+    """Rates and sigmas > 0, mus finite, turn shares in [0, 1] summing to 1, lengths > 0."""
+    _positive(section, "headway_rate_per_s", where)
+    for fit in ("nonintersection", "intersection"):
+        _number(section, f"speed_{fit}_log_mu", where)
+        _positive(section, f"speed_{fit}_log_sigma", where)
+    _shares_sum_to_one(section, [f"turn_share_{m}" for m in TURN_MOVEMENTS], where)
+    sigma = _number(section, "driver_imperfection_sigma", where)
+    if not 0.0 <= sigma <= 1.0:
+        raise ParameterError(
+            f"parameter '{where}.driver_imperfection_sigma' must lie in [0, 1], got {sigma!r}"
+        )
+    _positive(section, "vehicle_length_m", where)
+    _non_negative(section, "vehicle_min_gap_m", where)
+
+
+@register_validator("pedestrians")
+def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") -> None:
+    """Rates > 0, shares in [0, 1] summing to 1, age groups ordered and not overlapping, speeds sensible."""
+    _positive(section, "arrival_rate_per_h", where)
+    _share(section, "gender_female_share", where)
+    _positive(section, "speed_factor_female", where)
+    _positive(section, "speed_factor_male", where)
+    _shares_sum_to_one(section, [f"risk_share_{r}" for r in RISK_TYPES], where)
+    _non_negative(section, "awareness_ttc_s", where)
+    _non_negative(section, "reaction_time_s", where)
+    if _positive(section, "hasten_factor", where) < 1.0:
+        raise ParameterError(f"parameter '{where}.hasten_factor' must be >= 1 (hasten means faster)")
+    _positive(section, "hasten_max_speed_mps", where)
+    _positive(section, "step_back_speed_mps", where)
+    _non_negative(section, "corridor_half_width_m", where)
+
+    groups = section.get("age_groups")
+    if not isinstance(groups, dict) or not groups:
+        raise ParameterError(f"parameter '{where}.age_groups' must be a non-empty table of age groups")
+    spans = []
+    for name, group in groups.items():
+        gwhere = f"{where}.age_groups.{name}"
+        if not isinstance(group, dict):
+            raise ParameterError(f"parameter '{gwhere}' must be a table")
+        for key in AGE_GROUP_KEYS:
+            _number(group, key, gwhere)
+        low, high = group["age_min_years"], group["age_max_years"]
+        if int(low) != low or int(high) != high or not 0 <= low <= high:
+            raise ParameterError(
+                f"parameters '{gwhere}.age_min_years'/'age_max_years' must be whole years with "
+                f"0 <= min <= max, got {low!r}..{high!r}"
+            )
+        spans.append((low, high, name))
+        _share(group, "weight_share", gwhere)
+        mean = _positive(group, "speed_mean_mps", gwhere)
+        p15 = _positive(group, "speed_p15_mps", gwhere)
+        if p15 >= mean:
+            # A lognormal's 15th percentile lies below its mean; the sigma derivation needs mean > p15.
+            raise ParameterError(
+                f"parameter '{gwhere}.speed_p15_mps' ({p15}) must be below '{gwhere}.speed_mean_mps' ({mean})"
+            )
+    spans.sort()
+    for (_, high_a, name_a), (low_b, _, name_b) in zip(spans, spans[1:], strict=False):
+        if low_b <= high_a:
+            raise ParameterError(f"age groups '{where}.age_groups.{name_a}' and '{name_b}' overlap")
+    total = sum(float(g["weight_share"]) for g in groups.values())
+    if abs(total - 1.0) > SHARE_SUM_TOLERANCE:
+        raise ParameterError(
+            f"shares {where}.age_groups.*.weight_share must sum to 1, they sum to {total:.6g}"
+        )

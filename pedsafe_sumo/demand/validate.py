@@ -1,0 +1,445 @@
+"""Validation that measures SUMO, not the generator: detectors on the site, SUMO's own output, KS distances.
+
+    python -m pedsafe_sumo.demand.validate --site xueqing [--duration 3600] [--seed 1] [--params FILE]
+
+1. Generates the site's demand (the same generator as `python -m pedsafe_sumo.demand`) into a work folder.
+2. Places instantaneous induction loops (E1 with per-vehicle `instantOut` records) on every entering lane
+   - mid-block: MIDBLOCK_OFFSET_M downstream of where the lane enters the site (its middle if shorter),
+     upstream of the reach of the signal's queues at a demand the junction can carry;
+   - mid-lane: halfway along the entering edge (reported, inside the queue reach on the short approaches);
+   and inside the junction: halfway along the first internal lane of every vehicle connection of the
+   signalised junction.
+3. Runs the `sumo` binary for the duration with the site's step length and pedestrian model, and reads the
+   loops' output: each vehicle's speed as its front crosses a loop, and the gaps between successive fronts
+   over the same mid-block loop (same-lane headways).
+4. Compares with the fits by the Kolmogorov-Smirnov distance, plots ECDFs (docs/figures/*.png), and writes the
+   measured part of docs/demand_validation.md.
+
+When the site cannot carry the demand (more than BACKLOG_MAX_SHARE of the vehicles still waiting to be
+inserted at the end: queues back up to where vehicles enter), speeds measured on the approaches are queue
+speeds and say nothing about the speed model. The command then lowers the headway rate step by step
+(RATE_STEP_FACTOR) until the site carries it, and reports every run. Exit status 1 when the mid-block
+speed's KS distance exceeds MIDBLOCK_SPEED_KS_MAX in a run the site carries; 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import subprocess
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
+from pedsafe_sumo.demand.generate import generate_demand
+from pedsafe_sumo.demand.routes_xml import attrs
+from pedsafe_sumo.demand.sampling import traffic_distributions
+from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
+from pedsafe_sumo.params import ParameterError, load_params, with_overrides
+from pedsafe_sumo.sumo_binaries import sumo_binary
+
+#: Acceptance bound of the issue: mid-block approach speeds vs the non-intersection fit.
+MIDBLOCK_SPEED_KS_MAX = 0.10
+#: Distance (m) from the start of an entering lane to its mid-block loop. The clipped approaches are 70-180 m
+#: long and the signal's queues reach back over most of them, so the loop sits near where vehicles enter, yet
+#: after a few seconds of SUMO car-following (insertion gaps, catching up slower leaders).
+MIDBLOCK_OFFSET_M = 30.0
+#: A run whose share of vehicles never inserted exceeds this is oversaturated (queues reach the entries).
+BACKLOG_MAX_SHARE = 0.01
+DOCS_DIR = REPO_ROOT / "docs"
+FIGURES_DIR = DOCS_DIR / "figures"
+
+
+@dataclass(frozen=True)
+class Detector:
+    detector_id: str
+    lane_id: str
+    pos_m: float
+    kind: str  # "midblock", "midlane" or "junction"
+
+
+def main_junction(site: Site):
+    """The signalised junction of the study: the traffic-light node with the most incoming vehicle lanes."""
+    tls = [n for n in site.net.getNodes() if n.getType().startswith("traffic_light")]
+    if not tls:
+        raise SiteError(f"network {site.files.net_file} has no signalised junction")
+
+    def incoming_lanes(node) -> int:
+        return sum(1 for e in node.getIncoming() for lane in e.getLanes() if lane.allows(VEHICLE_CLASS))
+
+    return max(tls, key=lambda n: (incoming_lanes(n), n.getID()))
+
+
+def place_detectors(site: Site) -> list[Detector]:
+    """Mid-block and mid-lane loops on the entering lanes, loops on the main junction's internal lanes."""
+    detectors = []
+    for lane in site.entering_lanes:
+        midblock_m = min(MIDBLOCK_OFFSET_M, lane.length_m / 2.0)
+        detectors.append(Detector(f"mid_{lane.lane_id}", lane.lane_id, midblock_m, "midblock"))
+        detectors.append(Detector(f"half_{lane.lane_id}", lane.lane_id, lane.length_m / 2.0, "midlane"))
+    junction = main_junction(site)
+    seen = set()
+    for edge in sorted(junction.getIncoming(), key=lambda e: e.getID()):
+        for lane in edge.getLanes():
+            if not lane.allows(VEHICLE_CLASS):
+                continue
+            for conn in lane.getOutgoing():
+                via = conn.getViaLaneID()
+                if not via or via in seen or not conn.getTo().allows(VEHICLE_CLASS):
+                    continue
+                seen.add(via)
+                internal = site.net.getLane(via)
+                detectors.append(Detector(f"jct_{via}", via, internal.getLength() / 2.0, "junction"))
+    return detectors
+
+
+def detector_lines(detectors: list[Detector], output_file: str) -> list[str]:
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', "<additional>"]
+    for d in detectors:
+        lines.append(
+            "    <instantInductionLoop "
+            + attrs(id=d.detector_id, lane=d.lane_id, pos=f"{d.pos_m:.2f}", file=output_file)
+            + "/>"
+        )
+    lines.append("</additional>")
+    return lines
+
+
+def _sumocfg_settings(site: Site) -> tuple[float, str, list[str]]:
+    """(step length s, pedestrian model, additional files) from the site's .sumocfg when there is one."""
+    step_length_s, ped_model, additionals = 0.1, "striping", []
+    cfg = site.files.directory / f"{site.files.name}.sumocfg"
+    if cfg.is_file():
+        root = ET.parse(cfg).getroot()
+        for el in root.iter():
+            value = el.get("value")
+            if el.tag == "step-length" and value:
+                step_length_s = float(value)
+            elif el.tag == "pedestrian.model" and value:
+                ped_model = value
+            elif el.tag == "additional-files" and value:
+                additionals = [str(site.files.directory / f) for f in value.split(",") if f.strip()]
+    return step_length_s, ped_model, additionals
+
+
+def run_sumo(
+    site: Site, route_files: list[Path], detector_file: Path, end_s: float, log_file: Path
+) -> subprocess.CompletedProcess:
+    """Run the sumo binary headless over the site with the demand and the detectors."""
+    step_length_s, ped_model, additionals = _sumocfg_settings(site)
+    cmd = [
+        sumo_binary("sumo"),
+        "--net-file", str(site.files.net_file),
+        "--route-files", ",".join(str(p) for p in route_files),
+        "--additional-files", ",".join([*additionals, str(detector_file)]),
+        "--step-length", f"{step_length_s:g}",
+        "--pedestrian.model", ped_model,
+        "--end", f"{end_s:g}",
+        "--no-step-log", "true",
+        "--duration-log.statistics", "true",
+        "--seed", "1",
+        "--log", str(log_file),
+    ]  # fmt: skip
+    return subprocess.run(cmd, capture_output=True, text=True, check=False)
+
+
+def read_instant_output(path: Path) -> dict[str, list[tuple[float, float]]]:
+    """detector id -> [(time s, speed m/s)] of every vehicle front entering the loop, in time order."""
+    out: dict[str, list[tuple[float, float]]] = {}
+    for _event, el in ET.iterparse(path):
+        if el.tag == "instantOut" and el.get("state") == "enter":
+            out.setdefault(el.get("id"), []).append((float(el.get("time")), float(el.get("speed"))))
+        el.clear()
+    return out
+
+
+@dataclass(frozen=True)
+class Comparison:
+    name: str  # what was measured
+    reference: str  # the fit it is compared with
+    n: int
+    ks_distance: float
+    measured_median: float
+    fitted_median: float
+    samples: np.ndarray
+    cdf: object  # callable x -> F(x) of the fit
+    slug: str  # file-name part of its figure
+
+
+def compare(
+    samples: np.ndarray, cdf, name: str, reference: str, fitted_median: float, slug: str
+) -> Comparison:
+    samples = np.asarray(samples, dtype=float)
+    ks = float(stats.kstest(samples, cdf).statistic) if samples.size else math.nan
+    median = float(np.median(samples)) if samples.size else math.nan
+    return Comparison(name, reference, samples.size, ks, median, fitted_median, samples, cdf, slug)
+
+
+def measure(
+    records: dict[str, list[tuple[float, float]]], detectors: list[Detector], traffic: dict, warmup_s: float
+) -> list[Comparison]:
+    """KS comparisons of the loop records (after `warmup_s`) with the fitted distributions."""
+    headway, nonint, inter = traffic_distributions(traffic)
+    kind = {d.detector_id: d.kind for d in detectors}
+    speeds_by_kind: dict[str, list[np.ndarray]] = {"midblock": [], "midlane": [], "junction": []}
+    mid_headways = []
+    for det_id, events in records.items():
+        times = np.array([t for t, _ in events])
+        speeds = np.array([v for _, v in events])
+        keep = times >= warmup_s
+        speeds_by_kind[kind[det_id]].append(speeds[keep])
+        if kind[det_id] == "midblock":
+            # Headway: gap between successive fronts over the same loop, both after the warm-up.
+            mid_headways.append(np.diff(times[keep]))
+
+    def cat(parts):
+        return np.concatenate(parts) if parts else np.array([])
+
+    return [
+        compare(cat(speeds_by_kind["midblock"]), nonint.cdf, "speed, mid-block approach (m/s)",
+                "non-intersection lognormal", nonint.median, "speed_midblock"),
+        compare(cat(speeds_by_kind["midlane"]), nonint.cdf, "speed, middle of entering edge (m/s)",
+                "non-intersection lognormal", nonint.median, "speed_midlane"),
+        compare(cat(speeds_by_kind["junction"]), inter.cdf, "speed, within the junction (m/s)",
+                "intersection lognormal", inter.median, "speed_junction"),
+        compare(cat(mid_headways), headway.cdf, "same-lane headway, mid-block (s)", "exponential",
+                math.log(2) / headway.rate_per_s, "headway_midblock"),
+    ]  # fmt: skip
+
+
+def plot_ecdfs(comparisons: list[Comparison], figures_dir: Path, prefix: str, title: str) -> list[Path]:
+    """One ECDF-vs-fit PNG per comparison (matplotlib Agg: no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for comp in comparisons:
+        fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+        if comp.n:
+            x = np.sort(comp.samples)
+            ax.step(x, np.arange(1, x.size + 1) / x.size, where="post", label=f"SUMO detectors (n={comp.n})")
+            grid = np.linspace(0, np.quantile(x, 0.995) * 1.1, 400)
+            ax.plot(grid, comp.cdf(grid), "--", label=f"fit: {comp.reference}")
+        ax.set_xlabel(comp.name)
+        ax.set_ylabel("cumulative share")
+        ax.set_title(f"{title}\n{comp.name}: KS D = {comp.ks_distance:.3f}", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right")
+        fig.tight_layout()
+        path = figures_dir / f"{prefix}_{comp.slug}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def sumo_statistics(log_text: str) -> dict[str, str]:
+    """Lines of SUMO's --duration-log.statistics summary (inserted, waiting, teleports...), first of each."""
+    wanted = ("Inserted", "Running", "Waiting", "Teleports", "Emergency Braking", "Collisions", "DepartDelay")
+    out: dict[str, str] = {}
+    for line in log_text.splitlines():
+        key, _, value = line.strip().partition(":")
+        if key in wanted and key not in out:
+            out[key] = value.strip()
+    return out
+
+
+def backlog_share(sim_stats: dict[str, str], n_vehicles: int) -> float:
+    """Share of the generated vehicles SUMO still had waiting for insertion at the end."""
+    waiting = int(sim_stats.get("Waiting", "0").split()[0] or 0)
+    return waiting / n_vehicles if n_vehicles else 0.0
+
+
+@dataclass
+class Run:
+    label: str  # "paper" or "sustainable"
+    headway_rate_per_s: float
+    n_vehicles: int
+    n_persons: int
+    sim_stats: dict[str, str]
+    backlog: float
+    comparisons: list[Comparison]
+    figures: list[Path]
+
+    @property
+    def oversaturated(self) -> bool:
+        return self.backlog > BACKLOG_MAX_SHARE
+
+
+def run_once(args, site: Site, params: dict, rate_per_s: float, label: str, work: Path) -> Run:
+    """Generate the demand at `rate_per_s`, run SUMO with the loops, measure."""
+    params = with_overrides(params, {"traffic.headway_rate_per_s": rate_per_s})
+    work.mkdir(parents=True, exist_ok=True)
+    source = f"{args.params or 'defaults'} with traffic.headway_rate_per_s={rate_per_s:.6g}"
+    demand = generate_demand(
+        args.site, args.duration, args.seed, work, net_file=args.net, params=params, params_label=source
+    )
+    detectors = place_detectors(site)
+    det_file = work / "detectors.add.xml"
+    det_out = work / "detectors.out.xml"
+    det_file.write_text("\n".join(detector_lines(detectors, det_out.name)) + "\n", encoding="utf-8")
+    log_file = work / "sumo.log"
+    result = run_sumo(
+        site, [demand.vehicles_file, demand.pedestrians_file], det_file, args.duration, log_file
+    )
+    log_text = log_file.read_text(encoding="utf-8") if log_file.is_file() else ""
+    if result.returncode != 0:
+        last = (result.stderr or log_text).strip().splitlines()[-1:] or ["(no output)"]
+        raise RuntimeError(f"sumo exited with {result.returncode}: {last[0]}")
+    records = read_instant_output(det_out)
+    comparisons = measure(records, detectors, params["traffic"], args.warmup)
+    sim_stats = sumo_statistics(result.stdout + "\n" + log_text)
+    return Run(
+        label, rate_per_s, demand.n_vehicles, demand.n_persons, sim_stats,
+        backlog_share(sim_stats, demand.n_vehicles), comparisons, [],
+    )  # fmt: skip
+
+
+#: When the site cannot carry the demand, the rate is lowered by this factor per try (two tries halve it),
+#: at most RATE_TRIES_MAX times.
+RATE_STEP_FACTOR = 1.0 / math.sqrt(2.0)
+RATE_TRIES_MAX = 6
+
+
+def validate(args) -> list[Run]:
+    params = load_params(args.params)
+    site = load_site(args.site, NETWORKS_DIR, args.net)
+    rate = float(params["traffic"]["headway_rate_per_s"])
+    runs = []
+    with tempfile.TemporaryDirectory(prefix="pedsafe_validate_") as tmp:
+        work = Path(args.work) if args.work else Path(tmp)
+        runs.append(run_once(args, site, params, rate, "configured", work / "configured"))
+        tries = 0
+        while runs[-1].oversaturated and tries < RATE_TRIES_MAX:
+            rate *= RATE_STEP_FACTOR
+            tries += 1
+            label = "reduced" if tries < RATE_TRIES_MAX else "lowest"
+            runs.append(run_once(args, site, params, rate, f"{label}_{tries}", work / f"reduced_{tries}"))
+    # Figures for the configured demand and for the last (carried) one; the runs between are in the table.
+    for run, name in (
+        (runs[0], "configured"),
+        (runs[-1], "carried" if not runs[-1].oversaturated else "lowest"),
+    ):
+        if run.figures:
+            continue
+        title = f"{args.site}, {name} demand: {run.headway_rate_per_s:.4g} veh/s per lane, seed {args.seed}"
+        run.figures = plot_ecdfs(run.comparisons, args.docs / "figures", f"demand_{args.site}_{name}", title)
+    return runs
+
+
+MEASURED_BEGIN = "<!-- measured:begin (written by python -m pedsafe_sumo.demand.validate) -->"
+MEASURED_END = "<!-- measured:end -->"
+
+
+def measured_markdown(args, runs: list[Run], n_loops: dict[str, int]) -> str:
+    lines = [
+        MEASURED_BEGIN,
+        f"Command: `python -m pedsafe_sumo.demand.validate --site {args.site} --duration {args.duration:g} "
+        f"--seed {args.seed}" + (f" --params {args.params}" if args.params else "") + "`",
+        "",
+        f"Loops: {n_loops['midblock']} mid-block ({MIDBLOCK_OFFSET_M:g} m into each entering lane), "
+        f"{n_loops['midlane']} mid-lane, {n_loops['junction']} inside the junction. Records of the first "
+        f"{args.warmup:g} s are ignored. KS distance = sup |ECDF - fitted CDF|.",
+        "",
+    ]
+    for run in runs:
+        verdict = (
+            "oversaturated: vehicles still waiting to enter at the end, approach speeds are queue speeds"
+            if run.oversaturated
+            else "the site carries this demand"
+        )
+        lines += [
+            f"### {run.label} demand: {run.headway_rate_per_s:.4g} veh/s per entering lane "
+            f"(mean headway {1 / run.headway_rate_per_s:.1f} s)",
+            "",
+            f"{run.n_vehicles} vehicles and {run.n_persons} pedestrians generated; {verdict} "
+            f"(backlog {100 * run.backlog:.1f}% of the vehicles).",
+            "SUMO: " + "; ".join(f"{k} {v}" for k, v in run.sim_stats.items()),
+            "",
+            "| measured | fit | n | KS distance | measured median | fit median |",
+            "|---|---|---:|---:|---:|---:|",
+        ]
+        for c in run.comparisons:
+            lines.append(
+                f"| {c.name} | {c.reference} | {c.n} | {c.ks_distance:.3f} | {c.measured_median:.2f} | "
+                f"{c.fitted_median:.2f} |"
+            )
+        lines.append("")
+        lines += [f"![{fig.stem}](figures/{fig.name})" for fig in run.figures]
+        lines.append("")
+    lines.append(MEASURED_END)
+    return "\n".join(lines)
+
+
+def write_report(path: Path, measured: str) -> None:
+    """Replace the measured part of the validation page, keeping its hand-written explanation."""
+    if path.is_file():
+        text = path.read_text(encoding="utf-8")
+        if MEASURED_BEGIN in text and MEASURED_END in text:
+            head, rest = text.split(MEASURED_BEGIN, 1)
+            tail = rest.split(MEASURED_END, 1)[1]
+            path.write_text(head + measured + tail, encoding="utf-8")
+            return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("# Demand validation\n\n## Measured\n\n" + measured + "\n", encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0]
+    )
+    parser.add_argument("--site", default="xueqing")
+    parser.add_argument("--duration", type=float, default=3600.0, help="simulated time in s (default 3600)")
+    parser.add_argument("--warmup", type=float, default=300.0, help="s of records ignored at the start")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--params", type=Path, help="parameter TOML laid over the defaults")
+    parser.add_argument("--net", type=Path, help="use this .net.xml instead of the site's network")
+    parser.add_argument(
+        "--docs", type=Path, default=DOCS_DIR, help="folder of demand_validation.md and figures/"
+    )
+    parser.add_argument("--work", type=Path, help="keep the routes, loops and SUMO output here")
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    try:
+        runs = validate(args)
+        site = load_site(args.site, NETWORKS_DIR, args.net)
+        n_loops = {
+            k: sum(d.kind == k for d in place_detectors(site)) for k in ("midblock", "midlane", "junction")
+        }
+        write_report(args.docs / "demand_validation.md", measured_markdown(args, runs, n_loops))
+    except (SiteError, ParameterError, OSError, RuntimeError, ValueError) as exc:
+        print(f"pedsafe_sumo.demand.validate: error: {exc}", file=sys.stderr)
+        return 2
+    failed = False
+    for run in runs:
+        state = "OVERSATURATED" if run.oversaturated else "carried"
+        print(
+            f"[{run.label}: {run.headway_rate_per_s:.4g} veh/s/lane, {state}, "
+            f"backlog {100 * run.backlog:.1f}%]"
+        )
+        for c in run.comparisons:
+            print(f"  {c.name:38s} vs {c.reference:27s} n={c.n:6d}  KS D={c.ks_distance:.3f}  "
+                  f"median {c.measured_median:.2f} (fit {c.fitted_median:.2f})")  # fmt: skip
+        if not run.oversaturated and not run.comparisons[0].ks_distance <= MIDBLOCK_SPEED_KS_MAX:
+            failed = True
+    print(f"wrote {args.docs / 'demand_validation.md'} ({time.perf_counter() - started:.0f} s)")
+    if failed:
+        print(
+            f"mid-block speed KS distance above {MIDBLOCK_SPEED_KS_MAX} in a run the site carries",
+            file=sys.stderr,
+        )
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,64 @@
+"""Study sites: where each intersection is, and where its files live."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
+
+OSM_DIR = REPO_ROOT / "osm"
+#: The unmodified OpenStreetMap export the team shares beside the repository (not shipped).
+SHARED_OSM_SOURCE = REPO_ROOT.parent / "shared" / "data" / "osm" / "haidian_xueqing.osm"
+
+
+@dataclass(frozen=True)
+class Site:
+    """A signalised intersection built from OpenStreetMap."""
+
+    name: str
+    description: str
+    center_lat: float
+    center_lon: float
+    radius_m: float
+    source_osm: Path
+    #: Corner of the main junction where the roadside camera pole stands, and the arm it watches.
+    rsu_corner: str = "NE"
+    rsu_watch_arm: str = "N"
+
+    @property
+    def clip_osm(self) -> Path:
+        return OSM_DIR / f"{self.name}.osm"
+
+    @property
+    def network_dir(self) -> Path:
+        return NETWORKS_DIR / self.name
+
+    def file(self, suffix: str) -> Path:
+        """A file of the built site, e.g. file('net.xml') -> networks/xueqing/xueqing.net.xml."""
+        return self.network_dir / f"{self.name}.{suffix}"
+
+
+SITES: dict[str, Site] = {
+    "xueqing": Site(
+        name="xueqing",
+        description="Xueqing Road (学清路) x Shibanfang South Road (石板房南路) / Linye Daxue North Road, "
+        "Haidian, Beijing",
+        center_lat=40.00640,
+        center_lon=116.34620,
+        radius_m=200.0,
+        source_osm=SHARED_OSM_SOURCE,
+    ),
+}
+
+
+class UnknownSiteError(KeyError):
+    def __str__(self) -> str:
+        return f"unknown site '{self.args[0]}' (known: {', '.join(sorted(SITES))})"
+
+
+def get_site(name: str) -> Site:
+    try:
+        return SITES[name]
+    except KeyError:
+        raise UnknownSiteError(name) from None

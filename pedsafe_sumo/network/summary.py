@@ -1,0 +1,135 @@
+"""A human summary of a built study site: the junction, its arms, crosswalks, occluders, roadside unit."""
+
+from __future__ import annotations
+
+import json
+import math
+import xml.etree.ElementTree as ET
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import sumolib
+
+from pedsafe_sumo.network.sites import Site
+
+
+@dataclass
+class Arm:
+    direction: str
+    names: list[str]
+    lanes_in: int
+    lanes_out: int
+    crosswalks: int
+
+
+@dataclass
+class SiteSummary:
+    name: str
+    main_junction: str
+    junction_type: str
+    cycle_s: float
+    phases: int
+    arms: list[Arm]
+    crosswalks_signalised: int
+    road_edges: int
+    road_length_m: float
+    sidewalk_length_m: float
+    polygons: Counter = field(default_factory=Counter)
+    rsu: dict = field(default_factory=dict)
+
+    def lines(self) -> list[str]:
+        out = [
+            f"site {self.name}: main junction {self.main_junction} ({self.junction_type}, "
+            f"{self.phases} phases, {self.cycle_s:.0f} s cycle)",
+            f"  {len(self.arms)} arms:",
+        ]
+        for arm in self.arms:
+            out.append(
+                f"    {arm.direction}: {', '.join(arm.names) or '(unnamed)'} - {arm.lanes_in} lane(s) in, "
+                f"{arm.lanes_out} out, {arm.crosswalks} signalised crosswalk(s)"
+            )
+        out += [
+            f"  {self.crosswalks_signalised} signalised crosswalks; {self.road_edges} road edges, "
+            f"{self.road_length_m / 1000:.2f} km of road, {self.sidewalk_length_m / 1000:.2f} km of sidewalk",
+            "  occluders: " + (", ".join(f"{n} {t}" for t, n in sorted(self.polygons.items())) or "none"),
+            f"  roadside camera {self.rsu.get('id')}: x {self.rsu.get('x')} m, y {self.rsu.get('y')} m, "
+            f"{self.rsu.get('height_m')} m high, yaw {self.rsu.get('yaw_deg')} deg, "
+            f"pitch {self.rsu.get('pitch_deg')} deg down",
+        ]
+        return out
+
+
+def _is_road(edge) -> bool:
+    return edge.getFunction() == "" and any(lane.allows("passenger") for lane in edge.getLanes())
+
+
+def summarise(site: Site) -> SiteSummary:
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    junction = net.getNode(info["main_junction"])
+    jx, jy = junction.getCoord()
+    root = ET.parse(site.file("net.xml")).getroot()
+    logic = next(tl for tl in root.iter("tlLogic") if tl.get("id") == junction.getID())
+    phases = [float(p.get("duration")) for p in logic.iter("phase")]
+    crossings = {
+        e.get("id"): e.get("crossingEdges").split()
+        for e in root.iter("edge")
+        if e.get("function") == "crossing" and e.get("id").startswith(f":{junction.getID()}_")
+    }
+    signalised = {c.get("to") for c in root.iter("connection") if c.get("to") in crossings and c.get("tl")}
+
+    def direction(edge, incoming: bool) -> str:
+        x, y = edge.getShape()[0] if incoming else edge.getShape()[-1]
+        bearing = math.degrees(math.atan2(x - jx, y - jy)) % 360.0
+        return "NESW"[int(((bearing + 45.0) % 360.0) // 90.0)]
+
+    arms: dict[str, Arm] = {}
+    edge_dir: dict[str, str] = {}
+    for incoming, edges in ((True, junction.getIncoming()), (False, junction.getOutgoing())):
+        for edge in edges:
+            if not _is_road(edge):
+                continue
+            d = direction(edge, incoming)
+            edge_dir[edge.getID()] = d
+            arm = arms.setdefault(d, Arm(d, [], 0, 0, 0))
+            if edge.getName() and edge.getName() not in arm.names:
+                arm.names.append(edge.getName())
+            lanes = sum(lane.allows("passenger") for lane in edge.getLanes())
+            if incoming:
+                arm.lanes_in += lanes
+            else:
+                arm.lanes_out += lanes
+    for crossing, crossed in crossings.items():
+        dirs = {edge_dir[e] for e in crossed if e in edge_dir}
+        if crossing in signalised and dirs:
+            arms[sorted(dirs)[0]].crosswalks += 1
+
+    roads = [e for e in net.getEdges() if _is_road(e)]
+    polygons = Counter(
+        p.get("type", "").split(".")[0] for p in ET.parse(site.file("poly.xml")).getroot().iter("poly")
+    )
+    return SiteSummary(
+        name=site.name,
+        main_junction=junction.getID(),
+        junction_type=junction.getType(),
+        cycle_s=sum(phases),
+        phases=len(phases),
+        arms=[arms[d] for d in "NESW" if d in arms],
+        crosswalks_signalised=len(signalised),
+        road_edges=len(roads),
+        road_length_m=sum(e.getLength() for e in roads),
+        sidewalk_length_m=sum(
+            e.getLength()
+            for e in net.getEdges()
+            if e.getFunction() == ""
+            and e.getLane(0).allows("pedestrian")
+            and not e.getLane(0).allows("passenger")
+        ),
+        polygons=polygons,
+        rsu=info["roadside_unit"],
+    )
+
+
+def site_files(site: Site) -> list[Path]:
+    return [site.file(s) for s in ("net.xml", "poly.xml", "rsu.add.xml", "sumocfg", "site.json")]

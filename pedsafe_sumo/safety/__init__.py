@@ -1,0 +1,60 @@
+"""Safety indexes computed after the run from the per-step log: pure functions, no SUMO, no plotting.
+
+`episode_indexes(log, ped_age_years, injury_model)` gives one episode's row of `episodes.parquet`;
+`stats.table_one` and `stats.paired_mcnemar` turn many rows into the paper's Table I. The log's
+contract (columns, frames, units) is in `pedsafe_sumo.safety.log`; formulas and choices in
+docs/safety_indexes.md.
+"""
+
+from pedsafe_sumo.safety.collision import CollisionResult, detect_collision
+from pedsafe_sumo.safety.conflict import (
+    AMINI_2022,
+    ConflictModel,
+    ConflictResult,
+    conflict_steps,
+    conflict_without_collision,
+    episode_conflict,
+)
+from pedsafe_sumo.safety.detection import FirstDetection, first_detection
+from pedsafe_sumo.safety.episode import INDEX_COLUMNS, episode_indexes
+from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.safety.injury import (
+    INJURY_MODELS,
+    InjuryModel,
+    episode_injury,
+    injury_probability,
+    register_injury_model,
+)
+from pedsafe_sumo.safety.log import LogError
+from pedsafe_sumo.safety.stats import mcnemar_exact, paired_counts, paired_mcnemar, table_one, wilson_interval
+from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s, ttc_steps_s
+
+__all__ = [
+    "AMINI_2022",
+    "INDEX_COLUMNS",
+    "INJURY_MODELS",
+    "CollisionResult",
+    "ConflictModel",
+    "ConflictResult",
+    "FirstDetection",
+    "InjuryModel",
+    "LogError",
+    "conflict_steps",
+    "conflict_without_collision",
+    "detect_collision",
+    "episode_conflict",
+    "episode_indexes",
+    "episode_injury",
+    "first_detection",
+    "injury_probability",
+    "mcnemar_exact",
+    "min_ttc_s",
+    "paired_counts",
+    "paired_mcnemar",
+    "pet_s",
+    "rectangle_circle_distance_m",
+    "register_injury_model",
+    "table_one",
+    "ttc_steps_s",
+    "wilson_interval",
+]

@@ -1,0 +1,65 @@
+"""All safety indexes of one episode, under the column names of `episodes.parquet` (DESIGN section 3)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pedsafe_sumo.safety import log as steplog
+from pedsafe_sumo.safety.collision import detect_collision
+from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
+from pedsafe_sumo.safety.detection import first_detection
+from pedsafe_sumo.safety.injury import episode_injury
+from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
+
+#: The columns of episodes.parquet that `episode_indexes` fills, in DESIGN's order.
+INDEX_COLUMNS = (
+    "collision",
+    "impact_speed_mps",
+    "injury_probability",
+    "conflict",
+    "md_m",
+    "tmd_s",
+    "cs_mps",
+    "conflict_probability",
+    "min_ttc_s",
+    "pet_s",
+    "first_detection_distance_m",
+    "first_detection_time_s",
+    "detected_by",
+)
+
+
+def episode_indexes(
+    log: Any,
+    ped_age_years: float,
+    injury_model: str = "saade2020",
+    conflict_model: ConflictModel = AMINI_2022,
+) -> dict[str, Any]:
+    """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
+
+    Conflict measures and TTC are taken over the steps up to and including the first contact (all steps
+    without a collision): what follows a collision says nothing about the encounter. PET is 0 for an
+    episode with a collision (the two met), else computed from the whole trajectories. `conflict` is the
+    raw flag; Table I counts `conflict and not collision` (`conflict_without_collision`).
+    Values that do not exist are NaN (impact speed without a collision, measures without a candidate
+    step, detection distance when never perceived); `injury_probability` is 0 without a collision.
+    """
+    arrays = steplog.as_arrays(log)
+    hit = detect_collision(arrays)
+    conflict = episode_conflict(arrays, conflict_model, last_step=hit.step)
+    detection = first_detection(arrays)
+    return {
+        "collision": hit.collided,
+        "impact_speed_mps": hit.impact_speed_mps,
+        "injury_probability": episode_injury(hit.collided, hit.impact_speed_mps, ped_age_years, injury_model),
+        "conflict": conflict.conflict,
+        "md_m": conflict.md_m,
+        "tmd_s": conflict.tmd_s,
+        "cs_mps": conflict.cs_mps,
+        "conflict_probability": conflict.conflict_probability,
+        "min_ttc_s": min_ttc_s(arrays, last_step=hit.step),
+        "pet_s": 0.0 if hit.collided else pet_s(arrays),
+        "first_detection_distance_m": detection.distance_m,
+        "first_detection_time_s": detection.time_s,
+        "detected_by": detection.detected_by,
+    }

@@ -1,0 +1,130 @@
+"""Exact geometry of an oriented rectangle (the ego's footprint) and a circle (the pedestrian).
+
+All functions are vectorised over numpy arrays (scalars broadcast). Angles in radians, counter-clockwise
+from +x; lengths in metres; velocities in m/s; times in s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def to_rectangle_frame(x_m, y_m, centre_x_m, centre_y_m, yaw_rad) -> tuple[np.ndarray, np.ndarray]:
+    """World point(s) -> the rectangle's frame (origin at its centre, +x along its heading)."""
+    dx = np.asarray(x_m, dtype=float) - centre_x_m
+    dy = np.asarray(y_m, dtype=float) - centre_y_m
+    cos, sin = np.cos(yaw_rad), np.sin(yaw_rad)
+    return cos * dx + sin * dy, -sin * dx + cos * dy
+
+
+def box_signed_distance_m(local_x_m, local_y_m, half_length_m, half_width_m) -> np.ndarray:
+    """Signed distance from a point (in the rectangle frame) to an axis-aligned box centred on the origin.
+
+    Positive outside (Euclidean distance to the nearest edge or corner), zero on the boundary, negative
+    inside (minus the distance to the nearest edge).
+    """
+    qx = np.abs(local_x_m) - half_length_m
+    qy = np.abs(local_y_m) - half_width_m
+    outside = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+    inside = np.minimum(np.maximum(qx, qy), 0.0)
+    return outside + inside
+
+
+def rectangle_circle_distance_m(
+    rect_x_m, rect_y_m, rect_yaw_rad, rect_length_m, rect_width_m, circle_x_m, circle_y_m, circle_radius_m
+) -> np.ndarray:
+    """Signed clearance between an oriented rectangle and a circle, m: <= 0 means they touch or overlap.
+
+    The circle's centre is taken into the rectangle's frame; the result is the signed distance from it
+    to the rectangle minus the radius (exact for any orientation).
+    """
+    lx, ly = to_rectangle_frame(circle_x_m, circle_y_m, rect_x_m, rect_y_m, rect_yaw_rad)
+    return (
+        box_signed_distance_m(lx, ly, 0.5 * np.asarray(rect_length_m), 0.5 * np.asarray(rect_width_m))
+        - circle_radius_m
+    )
+
+
+def slab_entry_time_s(px, py, vx, vy, half_x, half_y) -> np.ndarray:
+    """First time t >= 0 at which p + v t lies in [-half_x, half_x] x [-half_y, half_y] (inf if never)."""
+    t_enter = np.zeros(np.broadcast(px, py, vx, vy).shape)
+    t_exit = np.full(t_enter.shape, np.inf)
+    for p, v, half in ((px, vx, half_x), (py, vy, half_y)):
+        p, v, half = np.broadcast_arrays(p, v, half)
+        moving = v != 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (-half - p) / v
+            t2 = (half - p) / v
+        lo = np.where(moving, np.minimum(t1, t2), np.where(np.abs(p) <= half, -np.inf, np.inf))
+        hi = np.where(moving, np.maximum(t1, t2), np.where(np.abs(p) <= half, np.inf, -np.inf))
+        t_enter = np.maximum(t_enter, lo)
+        t_exit = np.minimum(t_exit, hi)
+    return np.where(t_enter <= t_exit, t_enter, np.inf)
+
+
+def circle_entry_time_s(px, py, vx, vy, cx, cy, radius) -> np.ndarray:
+    """First time t >= 0 at which p + v t lies within `radius` of (cx, cy) (inf if never)."""
+    rx, ry = px - cx, py - cy
+    c = rx * rx + ry * ry - radius * radius
+    a = vx * vx + vy * vy
+    b = 2.0 * (rx * vx + ry * vy)
+    disc = b * b - 4.0 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a)
+    hit = (a > 0.0) & (disc >= 0.0) & (t >= 0.0)
+    return np.where(c <= 0.0, 0.0, np.where(hit, t, np.inf))
+
+
+def rectangle_circle_contact_time_s(
+    local_x_m, local_y_m, local_vx_mps, local_vy_mps, half_length_m, half_width_m, radius_m
+) -> np.ndarray:
+    """Time until a circle moving at constant velocity first touches a fixed box, s (0 if touching now).
+
+    Position and velocity of the circle's centre are in the box's frame (box centred on the origin,
+    axis-aligned): for two road users under constant velocity that is the relative motion, and the box
+    does not turn. The centre touches the box grown by the radius (a rounded rectangle), which is the
+    union of two slabs and four corner discs; the first entry into the union is the smallest entry time
+    into its parts. Returns inf where the circle never touches the box.
+    """
+    px, py = np.asarray(local_x_m, dtype=float), np.asarray(local_y_m, dtype=float)
+    vx, vy = np.asarray(local_vx_mps, dtype=float), np.asarray(local_vy_mps, dtype=float)
+    a, b, r = np.asarray(half_length_m), np.asarray(half_width_m), np.asarray(radius_m)
+    times = [slab_entry_time_s(px, py, vx, vy, a + r, b), slab_entry_time_s(px, py, vx, vy, a, b + r)]
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            times.append(circle_entry_time_s(px, py, vx, vy, sx * a, sy * b, r))
+    return np.minimum.reduce(np.broadcast_arrays(*times))
+
+
+def first_polyline_crossing(
+    ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray, block: int = 256
+) -> tuple[float, float] | None:
+    """The first point where polyline A crosses polyline B (first along A, then along B), or None.
+
+    Segments of zero length and parallel segments never cross. Endpoints count (a crossing exactly at a
+    vertex is found). A's segments are tested against all of B's in blocks of `block`, so memory stays
+    bounded for long logs.
+    """
+    ax, ay, bx, by = (np.asarray(v, dtype=float) for v in (ax_m, ay_m, bx_m, by_m))
+    if len(ax) < 2 or len(bx) < 2:
+        return None
+    # Segment i of A: a_i + s (a_{i+1} - a_i); segment j of B: b_j + u (b_{j+1} - b_j); s, u in [0, 1].
+    b0x, b0y, bdx, bdy = bx[None, :-1], by[None, :-1], np.diff(bx)[None, :], np.diff(by)[None, :]
+    b_len = np.hypot(bdx, bdy)
+    eps = 1e-12
+    for start in range(0, len(ax) - 1, block):
+        stop = min(start + block + 1, len(ax))
+        a0x, a0y = ax[start : stop - 1, None], ay[start : stop - 1, None]
+        adx, ady = np.diff(ax[start:stop])[:, None], np.diff(ay[start:stop])[:, None]
+        denom = adx * bdy - ady * bdx
+        wx, wy = b0x - a0x, b0y - a0y
+        scale = np.hypot(adx, ady) * b_len
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (wx * bdy - wy * bdx) / denom
+            u = (wx * ady - wy * adx) / denom
+        hit = (np.abs(denom) > eps * scale) & (scale > 0) & (s >= -eps) & (s <= 1 + eps)
+        hit &= (u >= -eps) & (u <= 1 + eps)
+        if hit.any():
+            i, j = np.argwhere(hit)[0]
+            return float(a0x[i, 0] + s[i, j] * adx[i, 0]), float(a0y[i, 0] + s[i, j] * ady[i, 0])
+    return None

@@ -1,0 +1,120 @@
+"""Where the scenarios happen on a site: the approach its roadside camera watches.
+
+All three scenarios are staged on the approach of the main junction that the roadside unit watches
+(on Xueqing, the southbound main carriageway of Xueqing Road: two vehicle lanes, a sidewalk on the
+right, a signalised crosswalk at the stop line). Everything is derived from the network with sumolib,
+never from hard-coded edge ids, so another site built by tools/build_network.py works the same way.
+
+Frames: SUMO network coordinates (x east, y north, metres); headings in radians counter-clockwise
+from +x. Lane positions are metres from the start of the lane, as in SUMO.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import sumolib
+
+from pedsafe_sumo.network.sites import Site
+
+
+@dataclass(frozen=True)
+class Approach:
+    edge_id: str
+    #: Vehicle lanes from the right (kerb side) to the left (median side).
+    lane_ids: tuple[str, ...]
+    lane_shapes: tuple[tuple[tuple[float, float], ...], ...]
+    lane_lengths_m: tuple[float, ...]
+    lane_width_m: float
+    sidewalk_lane_id: str
+    sidewalk_width_m: float
+    #: Edges of a straight-through route: the approach, then the outgoing road beyond the junction.
+    through_route: tuple[str, ...]
+    #: The crosswalk over the approach at the stop line, oriented from the kerb side to the far side.
+    crosswalk_id: str
+    crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
+    crosswalk_width_m: float
+    junction_id: str
+
+    def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
+        """(x, y, heading) of the centre of vehicle lane `lane_index` at lane position `pos_m`."""
+        shape = self.lane_shapes[lane_index]
+        pos_m = min(max(pos_m, 0.0), self.lane_lengths_m[lane_index])
+        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, pos_m)
+        # sumolib returns atan2(dy, dx) in radians: counter-clockwise from +x, as used here.
+        return x, y, sumolib.geomhelper.rotationAtShapeOffset(shape, pos_m)
+
+    def across(self, lane_index: int, pos_m: float, from_offset_m: float, to_offset_m: float):
+        """Two points on the line across the road at a lane position, offsets measured to the left
+        of the centre of `lane_index` (negative: towards the kerb)."""
+        x, y, heading = self.pose(lane_index, pos_m)
+        left = (-math.sin(heading), math.cos(heading))
+        return (
+            (x + from_offset_m * left[0], y + from_offset_m * left[1]),
+            (x + to_offset_m * left[0], y + to_offset_m * left[1]),
+        )
+
+
+@lru_cache(maxsize=4)
+def load_approach(site: Site) -> Approach:
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    junction = net.getNode(info["main_junction"])
+    jx, jy = junction.getCoord()
+    arm = info["roadside_unit"]["watched_arm"]
+
+    def sector(x: float, y: float) -> str:
+        bearing = math.degrees(math.atan2(x - jx, y - jy)) % 360.0
+        return "NESW"[int(((bearing + 45.0) % 360.0) // 90.0)]
+
+    candidates = [
+        e
+        for e in junction.getIncoming()
+        if e.getFunction() == ""
+        and sector(*e.getShape()[0]) == arm
+        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 2
+    ]
+    if not candidates:
+        raise ValueError(f"site {site.name}: the watched arm {arm} has no approach with two vehicle lanes")
+    edge = max(candidates, key=lambda e: e.getLaneNumber())
+    vehicle_lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
+    sidewalk = edge.getLane(0)
+    if not sidewalk.allows("pedestrian") or sidewalk.allows("passenger"):
+        raise ValueError(f"site {site.name}: approach {edge.getID()} has no sidewalk")
+
+    straight = [c.getTo() for lane in vehicle_lanes for c in lane.getOutgoing() if c.getDirection() == "s"]
+    if not straight:
+        raise ValueError(f"site {site.name}: no straight movement from {edge.getID()}")
+
+    crossing = next(
+        (
+            c
+            for c in net.getEdges(withInternal=True)
+            if c.getFunction() == "crossing" and edge in c._crossingEdges
+        ),
+        None,
+    )
+    if crossing is None:
+        raise ValueError(f"site {site.name}: no crosswalk over {edge.getID()}")
+    a, b = crossing.getLane(0).getShape()[0], crossing.getLane(0).getShape()[-1]
+    kerb = sidewalk.getShape()[-1]
+    if math.dist(b, kerb) < math.dist(a, kerb):
+        a, b = b, a
+
+    return Approach(
+        edge_id=edge.getID(),
+        lane_ids=tuple(lane.getID() for lane in vehicle_lanes),
+        lane_shapes=tuple(tuple(map(tuple, lane.getShape())) for lane in vehicle_lanes),
+        lane_lengths_m=tuple(lane.getLength() for lane in vehicle_lanes),
+        lane_width_m=vehicle_lanes[0].getWidth(),
+        sidewalk_lane_id=sidewalk.getID(),
+        sidewalk_width_m=sidewalk.getWidth(),
+        through_route=(edge.getID(), straight[0].getID()),
+        crosswalk_id=crossing.getID(),
+        crosswalk_path=(tuple(a), tuple(b)),
+        crosswalk_width_m=crossing.getLane(0).getWidth(),
+        junction_id=junction.getID(),
+    )

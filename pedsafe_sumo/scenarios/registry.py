@@ -1,0 +1,386 @@
+"""The three safety-critical scenarios of the paper, as frozen data in one registry.
+
+`--scenario NAME` is a lookup in SCENARIOS; `--set key=value` replaces fields of the spec (an unknown
+key or a value out of range is an error). `draw_episode(spec, approach, seed, ...)` turns a spec and
+a seed into one concrete initial world (EpisodeSetup): the same seed gives the same world, whatever
+the condition (SV or V2I) it is then run under.
+
+Staging (see scenarios/geometry.py): the ego drives the kerb-far (left) lane of the watched approach;
+the pedestrian comes from the kerb-side sidewalk and crosses towards the median:
+- crossing: on the signalised crosswalk at the stop line, stepping out in front of a black vehicle
+  stopped at the stop line in the kerb lane (the head of a short queue), which hides them from the
+  ego (the "multiple threat" crosswalk crash);
+- jaywalking: mid-block, 30-45 m before the crosswalk, through the gap between vehicles queued or
+  parked in the kerb lane; the ego cruises at a stable (non-intersection) speed;
+- background_blending: just behind the rear bumper of a vehicle waiting at the stop line in the kerb
+  lane, closer to it than the LiDAR cluster tolerance and dressed in its colour, so that seen from
+  the ego the vehicle is right behind them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pedsafe_sumo.scenarios.geometry import Approach
+
+#: Car body colours drawn for occluders and waiting vehicles (RGB 0-255): white, black, silver, grey,
+#: red, blue - the common colours of the Beijing fleet.
+CAR_COLOURS_RGB = (
+    (235, 235, 235),
+    (20, 20, 20),
+    (192, 192, 192),
+    (110, 110, 110),
+    (170, 25, 30),
+    (30, 60, 150),
+)
+#: Clothing colours for pedestrians who are not blending: saturated and dark/bright garments.
+CLOTHING_COLOURS_RGB = (
+    (200, 40, 40),
+    (40, 80, 180),
+    (40, 140, 60),
+    (230, 200, 40),
+    (240, 240, 240),
+    (30, 30, 30),
+)
+OCCLUDER_BLACK_RGB = (20, 20, 20)
+EGO_BLUE_RGB = (30, 110, 255)
+
+
+class ScenarioError(ValueError):
+    """Unknown scenario, unknown parameter, or a parameter out of range."""
+
+
+@dataclass(frozen=True)
+class VehicleSize:
+    length_m: float = 5.0  # SUMO's default passenger car
+    width_m: float = 1.8
+    height_m: float = 1.5
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    name: str
+    description: str
+    #: "crosswalk", "midblock" or "behind_waiting_vehicle"
+    placement: str
+    #: Which lognormal speed fit the ego's initial speed comes from: "intersection" or "non_intersection".
+    ego_speed_fit: str
+    #: The ego reaches the pedestrian's path this long after the pedestrian reaches the centre of the
+    #: ego's lane (uniform draw; negative: before) [s]. Sets how tight the encounter is.
+    conflict_offset_min_s: float = -0.5
+    conflict_offset_max_s: float = 2.0
+    #: Pedestrian waits this long before stepping off the kerb [s].
+    ped_start_delay_s: float = 1.0
+    #: Distance of the mid-block crossing line before the crosswalk (jaywalking) [m].
+    midblock_distance_min_m: float = 30.0
+    midblock_distance_max_m: float = 45.0
+    #: Gap between the two queued/parked vehicles the jaywalker steps out between [m].
+    parked_gap_min_m: float = 1.2
+    parked_gap_max_m: float = 2.5
+    #: Vehicles queued in the kerb lane behind the occluder (crossing) or upstream of the gap
+    #: (jaywalking). One car stopped at the stop line hides the kerb from the next lane only once the
+    #: ego is within ~19 m; a queue of three hides it from ~70 m (the sight line to the kerb crosses
+    #: the kerb lane 40-70 % of the way there).
+    queue_vehicles: float = 3
+    #: Bumper-to-bumper gaps inside the queue [m].
+    queue_gap_min_m: float = 1.5
+    queue_gap_max_m: float = 3.0
+    #: Gap between the blending pedestrian's body and the waiting vehicle's rear [m]; below the LiDAR
+    #: cluster tolerance (0.5 m) so the two merge.
+    blend_gap_min_m: float = 0.1
+    blend_gap_max_m: float = 0.4
+    #: Ego initial speeds outside this range are clipped (the lognormal tails reach 1.5 and 25 m/s) [m/s].
+    ego_speed_min_mps: float = 2.0
+    ego_speed_max_mps: float = 20.0
+    #: The episode ends at this time at the latest [s].
+    time_limit_s: float = 30.0
+    vehicle: VehicleSize = field(default_factory=VehicleSize)
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.placement in ("crosswalk", "midblock", "behind_waiting_vehicle"), "placement"),
+            (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
+            (
+                self.conflict_offset_min_s <= self.conflict_offset_max_s,
+                "conflict_offset_min_s <= conflict_offset_max_s",
+            ),
+            (self.ped_start_delay_s >= 0, "ped_start_delay_s >= 0"),
+            (
+                0 < self.midblock_distance_min_m <= self.midblock_distance_max_m,
+                "0 < midblock_distance_min_m <= max",
+            ),
+            (0 < self.parked_gap_min_m <= self.parked_gap_max_m, "0 < parked_gap_min_m <= parked_gap_max_m"),
+            (
+                self.queue_vehicles >= 1 and float(self.queue_vehicles).is_integer(),
+                "queue_vehicles is a whole number >= 1",
+            ),
+            (0 < self.queue_gap_min_m <= self.queue_gap_max_m, "0 < queue_gap_min_m <= queue_gap_max_m"),
+            (0 <= self.blend_gap_min_m <= self.blend_gap_max_m, "0 <= blend_gap_min_m <= blend_gap_max_m"),
+            (
+                0 < self.ego_speed_min_mps <= self.ego_speed_max_mps,
+                "0 < ego_speed_min_mps <= ego_speed_max_mps",
+            ),
+            (self.time_limit_s > 0, "time_limit_s > 0"),
+        ]
+        for ok, rule in checks:
+            if not ok:
+                raise ScenarioError(f"scenario '{self.name}': {rule} does not hold")
+
+    def with_overrides(self, overrides: dict[str, str | float]) -> ScenarioSpec:
+        """A copy with fields replaced from --set key=value pairs (values parsed as numbers)."""
+        names = {f.name for f in dataclasses.fields(self)} - {"name", "description", "vehicle"}
+        changes = {}
+        for key, value in overrides.items():
+            if key not in names:
+                raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
+            if key in ("placement", "ego_speed_fit"):
+                changes[key] = str(value)
+                continue
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                raise ScenarioError(f"scenario parameter '{key}' must be a number, got '{value}'") from None
+            if not math.isfinite(number):
+                raise ScenarioError(f"scenario parameter '{key}' must be finite, got '{value}'")
+            changes[key] = number
+        return dataclasses.replace(self, **changes)
+
+
+SCENARIOS: dict[str, ScenarioSpec] = {
+    spec.name: spec
+    for spec in (
+        ScenarioSpec(
+            "crossing",
+            "a pedestrian on the signalised crosswalk steps out in front of a black vehicle stopped in the "
+            "kerb lane, which hides them from the ego",
+            placement="crosswalk",
+            ego_speed_fit="intersection",
+        ),
+        ScenarioSpec(
+            "jaywalking",
+            "a pedestrian crosses mid-block, 30-45 m before the crosswalk, stepping out between vehicles "
+            "queued in the kerb lane, while the ego cruises at a stable speed",
+            placement="midblock",
+            ego_speed_fit="non_intersection",
+        ),
+        ScenarioSpec(
+            "background_blending",
+            "a pedestrian dressed in the colour of a waiting vehicle crosses right behind its rear bumper, "
+            "closer to it than the LiDAR cluster tolerance",
+            placement="behind_waiting_vehicle",
+            ego_speed_fit="intersection",
+        ),
+    )
+}
+
+
+def get_scenario(name: str) -> ScenarioSpec:
+    try:
+        return SCENARIOS[name]
+    except KeyError:
+        raise ScenarioError(f"unknown scenario '{name}' (known: {', '.join(SCENARIOS)})") from None
+
+
+@dataclass(frozen=True)
+class PedestrianSetup:
+    path_xy: tuple[tuple[float, float], ...]
+    start_delay_s: float
+    age_years: float
+    gender: str
+    risk: str
+    walking_speed_mps: float
+    clothing_rgb: tuple[int, int, int]
+    radius_m: float
+    height_m: float
+
+
+@dataclass(frozen=True)
+class VehicleSetup:
+    vehicle_id: str
+    lane_id: str
+    #: Position of the vehicle's FRONT on its lane (SUMO's convention) [m].
+    front_pos_m: float
+    speed_mps: float
+    colour_rgb: tuple[int, int, int]
+    size: VehicleSize
+
+
+@dataclass(frozen=True)
+class EpisodeSetup:
+    """One concrete initial world; identical under SV and V2I for the same seed."""
+
+    scenario: str
+    seed: int
+    ego: VehicleSetup
+    ego_route: tuple[str, ...]
+    pedestrian: PedestrianSetup
+    parked: tuple[VehicleSetup, ...]
+    conflict_xy: tuple[float, float]
+    conflict_offset_s: float
+    time_limit_s: float
+
+
+def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
+    """The lane's centreline continued straight past its end (over the crosswalk into the junction)."""
+    shape = list(approach.lane_shapes[lane_index])
+    (px, py), (qx, qy) = shape[-2], shape[-1]
+    norm = math.hypot(qx - px, qy - py)
+    shape.append((qx + beyond_m * (qx - px) / norm, qy + beyond_m * (qy - py) / norm))
+    return shape
+
+
+def _lane_pos_of(approach: Approach, lane_index: int, xy: tuple[float, float]) -> float:
+    """Distance along the (extended) lane centreline to the point nearest `xy` [m]."""
+    import sumolib
+
+    return sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(
+        xy, _extended_shape(approach, lane_index)
+    )
+
+
+def draw_episode(
+    spec: ScenarioSpec,
+    approach: Approach,
+    seed: int,
+    pedestrian_traits: dict,
+    ego_speed_mps: float,
+    rng: np.random.Generator,
+) -> EpisodeSetup:
+    """Place one episode of `spec` on the approach.
+
+    `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
+    demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
+    (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
+    """
+    size = spec.vehicle
+    kerb_lane, ego_lane = 0, len(approach.lane_ids) - 1
+    ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
+    radius_m = 0.3
+    height_m = {"m": 1.72, "f": 1.60}.get(pedestrian_traits["gender"], 1.66)
+    if pedestrian_traits["age_years"] < 19:
+        height_m -= 0.05
+    lane_w = approach.lane_width_m
+    # Across the road: from the middle of the sidewalk to 1 m beyond the ego lane's far edge.
+    kerb_offset_m = -(lane_w / 2 + approach.sidewalk_width_m / 2)
+    far_offset_m = (len(approach.lane_ids) - 1) * lane_w + lane_w / 2 + 1.0
+    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
+    stop_line_pos = approach.lane_lengths_m[kerb_lane]
+    parked: list[VehicleSetup] = []
+    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+
+    def queue_behind(first_front_pos: float, start_index: int, colours) -> None:
+        """Queued vehicles upstream of a vehicle whose front is at `first_front_pos`."""
+        front = first_front_pos
+        for k in range(int(spec.queue_vehicles)):
+            front -= size.length_m + float(rng.uniform(spec.queue_gap_min_m, spec.queue_gap_max_m))
+            parked.append(
+                VehicleSetup(
+                    f"queued_{start_index + k}", approach.lane_ids[kerb_lane], front, 0.0, colours[k], size
+                )
+            )
+
+    if spec.placement == "crosswalk":
+        path = approach.crosswalk_path
+        # Extend from the crosswalk's kerb end back onto the sidewalk so the pedestrian starts off the road.
+        (ax, ay), (bx, by) = path
+        ux, uy = (bx - ax) / math.dist(path[0], path[1]), (by - ay) / math.dist(path[0], path[1])
+        path = ((ax - ux * 1.0, ay - uy * 1.0), (bx + ux * 1.0, by + uy * 1.0))
+        occluder_front = stop_line_pos - 0.5
+        parked.append(
+            VehicleSetup(
+                "occluder_0", approach.lane_ids[kerb_lane], occluder_front, 0.0, OCCLUDER_BLACK_RGB, size
+            )
+        )
+        colours = [
+            CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))] for _ in range(int(spec.queue_vehicles))
+        ]
+        queue_behind(occluder_front, 1, colours)
+    elif spec.placement == "midblock":
+        distance_m = float(rng.uniform(spec.midblock_distance_min_m, spec.midblock_distance_max_m))
+        gap_m = float(rng.uniform(spec.parked_gap_min_m, spec.parked_gap_max_m))
+        cross_pos = stop_line_pos - distance_m
+        path = approach.across(kerb_lane, cross_pos, kerb_offset_m, far_offset_m)
+        colours = [
+            CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
+            for _ in range(int(spec.queue_vehicles) + 1)
+        ]
+        # Downstream vehicle: its rear gap/2 past the line; the queue upstream: the first one's front
+        # gap/2 before the line.
+        parked.append(
+            VehicleSetup(
+                "occluder_0",
+                approach.lane_ids[kerb_lane],
+                cross_pos + gap_m / 2 + size.length_m,
+                0.0,
+                colours[0],
+                size,
+            )
+        )
+        upstream_front = cross_pos - gap_m / 2
+        parked.append(
+            VehicleSetup("occluder_1", approach.lane_ids[kerb_lane], upstream_front, 0.0, colours[1], size)
+        )
+        queue_behind(upstream_front, 2, colours[2:] + [colours[0]])
+    else:  # behind_waiting_vehicle
+        gap_m = float(rng.uniform(spec.blend_gap_min_m, spec.blend_gap_max_m))
+        colour = CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
+        front = stop_line_pos - 0.5
+        cross_pos = front - size.length_m - gap_m - radius_m
+        path = approach.across(kerb_lane, cross_pos, kerb_offset_m, far_offset_m)
+        parked.append(VehicleSetup("waiting_0", approach.lane_ids[kerb_lane], front, 0.0, colour, size))
+        clothing = colour
+
+    # Where the pedestrian's path meets the centre of the ego's lane, and when they get there.
+    conflict_xy = _crossing_with_lane(approach, ego_lane, path)
+    walk_to_conflict_s = math.dist(path[0], conflict_xy) / pedestrian_traits["walking_speed_mps"]
+    start_delay_s = spec.ped_start_delay_s
+    ego_conflict_pos = _lane_pos_of(approach, ego_lane, conflict_xy)
+    arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
+    front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
+    if front_pos < size.length_m:
+        # Not enough road behind the conflict point: hold the pedestrian back instead.
+        start_delay_s += (size.length_m - front_pos) / ego_speed_mps
+        front_pos = size.length_m
+    ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, size)
+    pedestrian = PedestrianSetup(
+        path_xy=tuple(tuple(float(c) for c in p) for p in path),
+        start_delay_s=start_delay_s,
+        age_years=float(pedestrian_traits["age_years"]),
+        gender=str(pedestrian_traits["gender"]),
+        risk=str(pedestrian_traits["risk"]),
+        walking_speed_mps=float(pedestrian_traits["walking_speed_mps"]),
+        clothing_rgb=tuple(int(c) for c in clothing),
+        radius_m=radius_m,
+        height_m=height_m,
+    )
+    return EpisodeSetup(
+        scenario=spec.name,
+        seed=seed,
+        ego=ego,
+        ego_route=approach.through_route,
+        pedestrian=pedestrian,
+        parked=tuple(parked),
+        conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
+        conflict_offset_s=conflict_offset_s,
+        time_limit_s=spec.time_limit_s,
+    )
+
+
+def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[float, float]:
+    """Intersection of the pedestrian's straight path with the centreline of a lane."""
+    (ax, ay), (bx, by) = path
+    shape = _extended_shape(approach, lane_index)
+    for (px, py), (qx, qy) in zip(shape[:-1], shape[1:]):
+        d1x, d1y, d2x, d2y = bx - ax, by - ay, qx - px, qy - py
+        denom = d1x * d2y - d1y * d2x
+        if abs(denom) < 1e-12:
+            continue
+        t = ((px - ax) * d2y - (py - ay) * d2x) / denom
+        u = ((px - ax) * d1y - (py - ay) * d1x) / denom
+        if 0 <= t <= 1 and 0 <= u <= 1:
+            return ax + t * d1x, ay + t * d1y
+    raise ValueError("the pedestrian's path does not cross the ego's lane")

@@ -1,0 +1,150 @@
+"""The scenario registry: three frozen specs, validated overrides, and placements on the real network
+that have the property each scenario is about (checked with independent geometry)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.scenarios.geometry import load_approach
+from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError, draw_episode, get_scenario
+
+TRAITS = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
+
+
+@pytest.fixture(scope="module")
+def approach():
+    return load_approach(get_site("xueqing"))
+
+
+def draw(name, seed, approach, speed=8.0, traits=TRAITS):
+    return draw_episode(get_scenario(name), approach, seed, traits, speed, np.random.default_rng(seed))
+
+
+def _segments_intersect(p, q, a, b):
+    def orient(u, v, w):
+        return (v[0] - u[0]) * (w[1] - u[1]) - (v[1] - u[1]) * (w[0] - u[0])
+
+    return orient(p, q, a) * orient(p, q, b) < 0 and orient(a, b, p) * orient(a, b, q) < 0
+
+
+def _footprint(approach, lane_id, front_pos_m, length_m, width_m):
+    """Corners of a vehicle whose front is at `front_pos_m` on a lane (straight over its length)."""
+    index = approach.lane_ids.index(lane_id)
+    fx, fy, heading = approach.pose(index, front_pos_m)
+    ux, uy = math.cos(heading), math.sin(heading)
+    lx, ly = -uy, ux
+    rx, ry = fx - length_m * ux, fy - length_m * uy
+    half = width_m / 2
+    return [
+        (fx + half * lx, fy + half * ly),
+        (fx - half * lx, fy - half * ly),
+        (rx - half * lx, ry - half * ly),
+        (rx + half * lx, ry + half * ly),
+    ]
+
+
+def test_registry_holds_the_three_scenarios_of_the_paper():
+    assert sorted(SCENARIOS) == ["background_blending", "crossing", "jaywalking"]
+    with pytest.raises(ScenarioError, match="unknown scenario 'parking'"):
+        get_scenario("parking")
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"no_such_key": 1}, "unknown scenario parameter 'no_such_key'"),
+        ({"time_limit_s": -5}, "time_limit_s > 0"),
+        (
+            {"conflict_offset_min_s": 3, "conflict_offset_max_s": 1},
+            "conflict_offset_min_s <= conflict_offset_max_s",
+        ),
+        ({"ego_speed_min_mps": "fast"}, "must be a number"),
+        ({"midblock_distance_min_m": "nan"}, "must be finite"),
+    ],
+)
+def test_overrides_are_validated(overrides, message):
+    with pytest.raises(ScenarioError, match=message):
+        get_scenario("jaywalking").with_overrides(overrides)
+
+
+def test_override_changes_only_that_field():
+    spec = get_scenario("jaywalking").with_overrides({"time_limit_s": "12.5"})
+    assert spec.time_limit_s == 12.5 and spec.midblock_distance_min_m == 30.0
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_same_seed_same_world_other_seed_other_world(name, approach):
+    assert draw(name, 7, approach) == draw(name, 7, approach)
+    assert draw(name, 7, approach) != draw(name, 8, approach)
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_ego_reaches_the_conflict_point_at_the_drawn_offset(name, approach):
+    setup = draw(name, 11, approach)
+    ped = setup.pedestrian
+    walk_s = math.dist(ped.path_xy[0], setup.conflict_xy) / ped.walking_speed_mps
+    # Ego front travels (distance to conflict) / speed; SUMO lane positions are of the front.
+    index = approach.lane_ids.index(setup.ego.lane_id)
+    fx, fy, _ = approach.pose(index, setup.ego.front_pos_m)
+    ego_s = math.dist((fx, fy), setup.conflict_xy) / setup.ego.speed_mps
+    assert ego_s == pytest.approx(ped.start_delay_s + walk_s + setup.conflict_offset_s, abs=0.05)
+    # The path starts on the kerb side of the kerb lane and ends beyond the ego's lane.
+    kerb_x, kerb_y, _ = approach.pose(0, approach.lane_lengths_m[0] - 5)
+    assert math.dist(ped.path_xy[0], setup.conflict_xy) > approach.lane_width_m
+
+
+def test_jaywalker_crosses_30_to_45_m_before_the_crosswalk_between_parked_vehicles(approach):
+    for seed in range(20):
+        setup = draw("jaywalking", seed, approach)
+        crosswalk_mid = np.mean(approach.crosswalk_path, axis=0)
+        assert 30.0 - 3.0 <= math.dist(setup.conflict_xy, crosswalk_mid) <= 45.0 + 3.0
+        downstream, upstream = setup.parked[0], setup.parked[1]
+        gap_start = upstream.front_pos_m
+        gap_end = downstream.front_pos_m - downstream.size.length_m
+        crossing_pos = approach.lane_lengths_m[0] - (approach.lane_lengths_m[0] - (gap_start + gap_end) / 2)
+        assert gap_start < crossing_pos < gap_end
+        assert 1.2 <= gap_end - gap_start <= 2.5
+
+
+@pytest.mark.parametrize("name", ["crossing", "jaywalking"])
+def test_queued_vehicles_hide_the_waiting_pedestrian_from_the_ego(name, approach):
+    """When the pedestrian steps off the kerb, the 2D sight line from the ego's front to them crosses a
+    queued vehicle's footprint, for every seed where the ego is then within 50 m (further out, where
+    the approach bends, the sight line can pass along the kerb side of the queue, as it would in reality)."""
+    checked = 0
+    for seed in range(30):
+        setup = draw(name, seed, approach)
+        ego_index = approach.lane_ids.index(setup.ego.lane_id)
+        ego_front = setup.ego.front_pos_m + setup.ego.speed_mps * setup.pedestrian.start_delay_s
+        camera = approach.pose(ego_index, ego_front)[:2]
+        start = setup.pedestrian.path_xy[0]
+        if math.dist(camera, start) > 50.0:
+            continue
+        checked += 1
+        hidden = False
+        for vehicle in setup.parked:
+            corners = _footprint(approach, vehicle.lane_id, vehicle.front_pos_m, 5.0, 1.8)
+            edges = list(zip(corners, corners[1:] + corners[:1]))
+            hidden |= any(_segments_intersect(camera, start, a, b) for a, b in edges)
+        assert hidden, f"seed {seed}: the pedestrian's start is in plain view of the ego"
+    assert checked >= 10
+
+
+def test_blending_pedestrian_passes_within_the_lidar_cluster_tolerance_of_the_vehicle_rear(approach):
+    for seed in range(20):
+        setup = draw("background_blending", seed, approach)
+        waiting = setup.parked[0]
+        rear_pos = waiting.front_pos_m - waiting.size.length_m
+        rear_x, rear_y, _ = approach.pose(0, rear_pos)
+        (ax, ay), (bx, by) = setup.pedestrian.path_xy
+        # Distance from the rear-centre point to the path line, minus the pedestrian's radius.
+        dist_to_line = abs((bx - ax) * (ay - rear_y) - (ax - rear_x) * (by - ay)) / math.dist(
+            (ax, ay), (bx, by)
+        )
+        gap = dist_to_line - setup.pedestrian.radius_m
+        assert 0.05 <= gap < 0.5
+        assert setup.pedestrian.clothing_rgb == waiting.colour_rgb

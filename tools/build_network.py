@@ -1,0 +1,12 @@
+#!/usr/bin/env python3
+"""Build networks/<site>/ from OpenStreetMap: python tools/build_network.py --site xueqing [--help]."""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from pedsafe_sumo.network.build import main  # noqa: E402
+
+if __name__ == "__main__":
+    raise SystemExit(main())
