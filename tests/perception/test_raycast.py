@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import world
+from perception_scenes import world
 
 from pedsafe_sumo.perception import StaticOccluders
 from pedsafe_sumo.perception.raycast import (

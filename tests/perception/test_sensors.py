@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import BLUE, EGO, RED, YELLOW, ego_box, make_suite, pole, world
+from perception_scenes import BLUE, EGO, RED, YELLOW, ego_box, make_suite, pole, world
 
 from pedsafe_sumo.perception import perceive
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import EGO, RED, ego_box, make_suite, pole, world
+from perception_scenes import EGO, RED, ego_box, make_suite, pole, world
 
 from pedsafe_sumo.perception import PerceptionSystem, V2ILink, V2ISpec
 from pedsafe_sumo.perception.geometry import world_to_camera_transform
