@@ -27,7 +27,9 @@ def _non_negative(table, key, where):
 
 def _probability(table, key, where):
     if not 0.0 <= _num(table, key, where) <= 1.0:
-        raise ParameterError(f"parameter '{where}.{key}' is a probability and must be in [0, 1], got {table[key]!r}")
+        raise ParameterError(
+            f"parameter '{where}.{key}' is a probability and must be in [0, 1], got {table[key]!r}"
+        )
 
 
 def _positive_int(table, key, where):
@@ -102,7 +104,9 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     _positive_int(lid, "channels", w)
     lo, hi = _num(lid, "elevation_min_deg", w), _num(lid, "elevation_max_deg", w)
     if not -90 <= lo <= hi <= 90 or (lid["channels"] > 1 and lo == hi):
-        raise ParameterError(f"parameters '{w}.elevation_min_deg' <= '{w}.elevation_max_deg' must lie in [-90, 90]")
+        raise ParameterError(
+            f"parameters '{w}.elevation_min_deg' <= '{w}.elevation_max_deg' must lie in [-90, 90]"
+        )
     res = _num(lid, "horizontal_resolution_deg", w)
     if not 0 < res <= 360:
         raise ParameterError(f"parameter '{w}.horizontal_resolution_deg' must be in (0, 360], got {res!r}")

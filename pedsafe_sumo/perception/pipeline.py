@@ -129,6 +129,9 @@ class SensorDetections:
         return len(self.ids)
 
 
+_EMPTY = SensorDetections.empty()
+
+
 @dataclass(frozen=True)
 class Detections:
     """Everything perceived in one frame.
@@ -150,11 +153,20 @@ class Detections:
     ego_camera_px: np.ndarray
     diagnostics: dict = field(default_factory=dict, repr=False)
 
+    def by_source(self) -> dict[str, SensorDetections]:
+        """Detections under the AD interface's sensor names (``pedsafe_sumo.control.agent.KNOWN_SENSORS``):
+        the condition grants ``"v2i"`` (roadside detections delivered this frame) or not."""
+        return {"onboard_camera": self.camera, "onboard_lidar": self.lidar, "v2i": self.v2i_received}
+
 
 def _select(world: WorldSnapshot, ego: EgoPose, mask: np.ndarray) -> SensorDetections:
+    if not mask.any():
+        return _EMPTY
     idx = np.nonzero(mask)[0]
     peds = world.pedestrians
-    xy = np.stack([peds.x_m[idx], peds.y_m[idx]], axis=1)
+    xy = np.empty((idx.size, 2))
+    xy[:, 0] = peds.x_m[idx]
+    xy[:, 1] = peds.y_m[idx]
     dist = np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)
     return SensorDetections(tuple(peds.ids[i] for i in idx), xy, dist)
 
@@ -256,7 +268,7 @@ def perceive(
     if link is not None:
         for unit, pose, det in zip(sensors.roadside_units, rsu_poses, rsu_dets, strict=True):
             idx = np.nonzero(det)[0]
-            xy = np.stack([peds.x_m[idx], peds.y_m[idx]], axis=1)
+            xy = np.column_stack([peds.x_m[idx], peds.y_m[idx]])
             link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, rng)
         ids, xys, pxs = [], [], []
         for msg in link.receive(time_s):

@@ -120,15 +120,11 @@ def cast_rays(
     # Corridor box of each group: 2D bounding box of its segments.
     ex = ox + dx * t_max
     ey = oy + dy * t_max
-    gbox = np.stack(
-        [
-            np.minimum.reduceat(np.minimum(ox, ex), group_start),
-            np.minimum.reduceat(np.minimum(oy, ey), group_start),
-            np.maximum.reduceat(np.maximum(ox, ex), group_start),
-            np.maximum.reduceat(np.maximum(oy, ey), group_start),
-        ],
-        axis=1,
-    )
+    gbox = np.empty((group_start.shape[0], 4))
+    gbox[:, 0] = np.minimum.reduceat(np.minimum(ox, ex), group_start)
+    gbox[:, 1] = np.minimum.reduceat(np.minimum(oy, ey), group_start)
+    gbox[:, 2] = np.maximum.reduceat(np.maximum(ox, ex), group_start)
+    gbox[:, 3] = np.maximum.reduceat(np.maximum(oy, ey), group_start)
 
     parts_t, parts_ray, parts_kind, parts_idx = [], [], [], []
 
@@ -197,14 +193,9 @@ def cast_rays(
 
     # Prism walls: 2D segment intersection plus a height check at the crossing.
     if st.n_edges:
-        gis, eis = [], []
-        for g in range(gbox.shape[0]):
-            e = st.edges_in_box(*gbox[g])
-            if e.size:
-                gis.append(np.full(e.shape[0], g))
-                eis.append(e)
-        if gis:
-            ray, ei = _expand(np.concatenate(gis), np.concatenate(eis), group_start, group_count)
+        gi, ei = st.edges_in_boxes(gbox)
+        if gi.size:
+            ray, ei = _expand(gi, ei, group_start, group_count)
             ex_ = st.bx[ei] - st.ax[ei]
             ey_ = st.by[ei] - st.ay[ei]
             wx = st.ax[ei] - ox[ray]

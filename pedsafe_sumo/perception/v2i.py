@@ -34,7 +34,9 @@ class V2ISpec:
 
     @classmethod
     def from_params(cls, p: dict) -> V2ISpec:
-        return cls(float(p["latency_s"]), float(p["packet_loss_probability"]), float(p["position_noise_sigma_m"]))
+        return cls(
+            float(p["latency_s"]), float(p["packet_loss_probability"]), float(p["position_noise_sigma_m"])
+        )
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,9 @@ class V2ILink:
 def message_to_vehicle(msg: V2IMessage, world_to_vehicle_camera: np.ndarray, intrinsics: np.ndarray):
     """Eqs. 5-6 for one message: (points in the ego camera frame (K, 3), pixels (K, 2), in_front (K,),
     world ground positions (K, 3)). Pixels are NaN behind the ego camera."""
-    p_v = transform_points(world_to_vehicle_camera @ invert_transform(msg.world_to_roadside), msg.points_roadside_m)
+    p_v = transform_points(
+        world_to_vehicle_camera @ invert_transform(msg.world_to_roadside), msg.points_roadside_m
+    )
     pixels, in_front = project_points(intrinsics, p_v)
     world = transform_points(invert_transform(world_to_vehicle_camera), p_v)
     return p_v, pixels, in_front, world

@@ -252,6 +252,28 @@ class StaticOccluders:
             ymax=ymax,
         )
 
+    def edges_in_boxes(self, boxes: np.ndarray):
+        """(group, edge) index pairs for every edge whose bounding box overlaps one of the (G, 4) boxes
+        ``[xmin, ymin, xmax, ymax]`` (world frame, m): one grid query for the union, then a
+        vectorised box test."""
+        if self.n_edges == 0 or boxes.shape[0] == 0:
+            empty = np.zeros(0, dtype=np.int64)
+            return empty, empty
+        lo = boxes.min(axis=0)
+        hi = boxes.max(axis=0)
+        cand = self.edges_in_box(lo[0], lo[1], hi[2], hi[3])
+        if cand.size == 0:
+            return cand, cand
+        g = self._grid
+        ok = (
+            (g["xmin"][cand][None, :] <= boxes[:, 2:3])
+            & (g["xmax"][cand][None, :] >= boxes[:, 0:1])
+            & (g["ymin"][cand][None, :] <= boxes[:, 3:4])
+            & (g["ymax"][cand][None, :] >= boxes[:, 1:2])
+        )
+        gi, k = np.nonzero(ok)
+        return gi, cand[k]
+
     def edges_in_box(self, xmin: float, ymin: float, xmax: float, ymax: float) -> np.ndarray:
         """Indices of the edges whose bounding box overlaps the axis-aligned box (world frame, m)."""
         g = self._grid
@@ -406,7 +428,12 @@ def load_static_occluders(path: str | Path, occluders: dict) -> StaticOccluders:
             z0, z1, default_rgb = 0.0, height, o["building_rgb"]
             kind_name = "building"
         elif _matches(kind, o["canopy_type_prefixes"]):
-            z0, z1, default_rgb, kind_name = o["canopy_base_m"], o["canopy_top_m"], o["tree_crown_rgb"], "canopy"
+            z0, z1, default_rgb, kind_name = (
+                o["canopy_base_m"],
+                o["canopy_top_m"],
+                o["tree_crown_rgb"],
+                "canopy",
+            )
         elif _matches(kind, o["hedge_type_prefixes"]):
             z0, z1, default_rgb, kind_name = 0.0, o["hedge_height_m"], o["tree_crown_rgb"], "hedge"
         else:
@@ -427,7 +454,10 @@ def load_static_occluders(path: str | Path, occluders: dict) -> StaticOccluders:
 
 
 def load_roadside_units(
-    path: str | Path, default_height_m: float, default_pitch_down_deg: float, poi_type: str = "roadside_camera"
+    path: str | Path,
+    default_height_m: float,
+    default_pitch_down_deg: float,
+    poi_type: str = "roadside_camera",
 ) -> list[RoadsideUnit]:
     """Roadside cameras from an additional file's ``<poi type="roadside_camera">`` elements.
 

@@ -7,6 +7,7 @@ Scene frame: the ego's box centre at the origin heading east (yaw 0), so the onb
 from __future__ import annotations
 
 import numpy as np
+
 from pedsafe_sumo.params import with_overrides
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -46,4 +47,6 @@ EGO = EgoPose(0.0, 0.0, 0.0, "ego")
 
 def pole(x=22.0, y=-12.0, height=6.0, sumo_yaw_deg=0.0, pitch_deg=30.0):
     """A roadside camera; sumo_yaw_deg 0 looks north."""
-    return RoadsideUnit("rsu_camera_0", x, y, height, float(np.radians(90.0 - sumo_yaw_deg)), float(np.radians(pitch_deg)))
+    return RoadsideUnit(
+        "rsu_camera_0", x, y, height, float(np.radians(90.0 - sumo_yaw_deg)), float(np.radians(pitch_deg))
+    )

@@ -9,7 +9,10 @@ from pedsafe_sumo.params import ParameterError, load_params, with_overrides
 
 def test_defaults_hold_the_issue_numbers(params):
     p = params["perception"]
-    assert p["camera"]["hfov_deg"] == 90 and (p["camera"]["width_px"], p["camera"]["height_px"]) == (1280, 720)
+    assert p["camera"]["hfov_deg"] == 90 and (p["camera"]["width_px"], p["camera"]["height_px"]) == (
+        1280,
+        720,
+    )
     assert (p["camera"]["forward_offset_m"], p["camera"]["height_m"]) == (1.5, 1.6)
     assert p["camera"]["min_visible_fraction"] == 0.3 and p["camera"]["min_height_px"] == 20
     assert p["camera"]["delta_e_threshold"] == 15

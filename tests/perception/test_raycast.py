@@ -25,7 +25,9 @@ def cast(snap, origins, dirs, t_max=100.0, skip=-1):
     d = np.asarray(dirs, dtype=float).reshape(-1, 3)
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     n = o.shape[0]
-    return cast_rays(snap, o, d, np.full(n, t_max), np.arange(n), np.ones(n, dtype=np.int64), np.full(n, skip))
+    return cast_rays(
+        snap, o, d, np.full(n, t_max), np.arange(n), np.ones(n, dtype=np.int64), np.full(n, skip)
+    )
 
 
 def test_ray_hits_rotated_box_face():
@@ -43,7 +45,8 @@ def test_ray_hits_ground_and_cylinders():
     snap = world()
     hits = cast(snap, [[0, 0, 2.0]], [[1, 0, -1]])
     assert (hits.kind[0], hits.t_m[0]) == (KIND_GROUND, pytest.approx(2 * math.sqrt(2)))
-    # A pedestrian cylinder r = 0.25 at (10, 0.15): the ray y = 0 enters at x = 10 - sqrt(0.25^2 - 0.15^2) = 9.8.
+    # A pedestrian cylinder r = 0.25 at (10, 0.15): the ray y = 0 enters at
+    # x = 10 - sqrt(0.25^2 - 0.15^2) = 9.8.
     snap = world(peds=[("p", 10.0, 0.15, 0.25, 1.75, (1, 2, 3))])
     hits = cast(snap, [[0, 0, 1.0]], [[1, 0, 0]])
     assert (hits.kind[0], hits.t_m[0]) == (KIND_PEDESTRIAN, pytest.approx(9.8))
@@ -77,8 +80,12 @@ def test_ray_hits_building_wall_and_passes_over_low_wall():
 
 
 def test_first_hit_wins_and_t_max_limits():
-    st = StaticOccluders.build([("b", "building", np.array([[20, -5], [22, -5], [22, 5], [20, 5]], float), 0, 9, (9, 9, 9))])
-    snap = world([("v", 10.0, 0.0, 0.0, 4.0, 2.0, 1.5, (0, 0, 0))], [("p", 5.0, 0.0, 0.25, 1.75, (1, 1, 1))], st)
+    st = StaticOccluders.build(
+        [("b", "building", np.array([[20, -5], [22, -5], [22, 5], [20, 5]], float), 0, 9, (9, 9, 9))]
+    )
+    snap = world(
+        [("v", 10.0, 0.0, 0.0, 4.0, 2.0, 1.5, (0, 0, 0))], [("p", 5.0, 0.0, 0.25, 1.75, (1, 1, 1))], st
+    )
     hits = cast(snap, [[0, 0, 1.0]], [[1, 0, 0]])
     assert (hits.kind[0], hits.t_m[0]) == (KIND_PEDESTRIAN, pytest.approx(4.75))
     hits = cast(snap, [[0, 0, 1.0]], [[1, 0, 0]], skip=0)

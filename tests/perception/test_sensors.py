@@ -84,14 +84,19 @@ def test_lidar_range_and_camera_resolution_limit(params, suite):
     # With a 40 m range: at 35 m, 5 azimuths (asin(0.25/35) = 0.41 deg) x 3 channels (-3.06, -1.77,
     # -0.48 deg within -3.13..-0.25 deg) = 15 returns; at 45 m, out of range.
     short = make_suite(params, {"perception.lidar.range_m": 40.0})
-    det = run(short, world([ego_box()], [("near", 35.0, 0.0, 0.25, 1.75, RED), ("far", 45.0, 0.0, 0.25, 1.75, RED)]))
+    det = run(
+        short, world([ego_box()], [("near", 35.0, 0.0, 0.25, 1.75, RED), ("far", 45.0, 0.0, 0.25, 1.75, RED)])
+    )
     assert list(det.diagnostics["lidar"].n_returns) == [15, 0]
     assert det.lidar.ids == ("near",)
 
 
 def test_outside_camera_fov_only_lidar_sees(suite):
     # Bearing from the camera atan2(10, 3.5) = 70.7 deg > 45 deg half FOV; behind the ego as well.
-    det = run(suite, world([ego_box()], [("side", 5.0, 10.0, 0.25, 1.75, RED), ("back", -20.0, 0.0, 0.25, 1.75, RED)]))
+    det = run(
+        suite,
+        world([ego_box()], [("side", 5.0, 10.0, 0.25, 1.75, RED), ("back", -20.0, 0.0, 0.25, 1.75, RED)]),
+    )
     assert det.camera.ids == ()
     assert set(det.lidar.ids) == {"side", "back"}
 
@@ -165,7 +170,9 @@ def test_tree_crown_hides_nothing_below_it_but_trunk_hides_a_slice(params):
 
 
 def test_random_miss_probability_one_removes_every_detection(params):
-    suite = make_suite(params, {"perception.camera.miss_probability": 1.0, "perception.lidar.miss_probability": 1.0})
+    suite = make_suite(
+        params, {"perception.camera.miss_probability": 1.0, "perception.lidar.miss_probability": 1.0}
+    )
     det = run(suite, world([ego_box()], [("p", 31.5, 0.0, 0.25, 1.75, RED)]))
     assert det.diagnostics["camera"].detected[0] and det.diagnostics["lidar"].detected[0]
     assert det.sv.ids == ()
@@ -175,6 +182,8 @@ def test_ego_box_does_not_hide_its_own_view(suite):
     # The LiDAR sits inside the ego box (centre, 1.9 m over a 1.5 m roof is above it, but the camera
     # 1.5 m ahead sits on the bumper plane at 1.6 m): without skipping the ego the camera would be blocked.
     tall_ego = ("ego", 0.0, 0.0, 0.0, 4.5, 1.8, 2.0, (255, 255, 255))
-    det = run(suite, world([tall_ego], [("p", 31.5, 0.0, 0.25, 1.75, RED), ("q", -20.0, 0.0, 0.25, 1.75, RED)]))
+    det = run(
+        suite, world([tall_ego], [("p", 31.5, 0.0, 0.25, 1.75, RED), ("q", -20.0, 0.0, 0.25, 1.75, RED)])
+    )
     assert det.camera.ids == ("p",)
     assert set(det.lidar.ids) == {"p", "q"}

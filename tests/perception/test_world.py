@@ -64,12 +64,14 @@ def test_edge_grid_query_returns_exactly_the_overlapping_edges(tmp_path, occlude
     xmin, xmax = np.minimum(st.ax, st.bx), np.maximum(st.ax, st.bx)
     ymin, ymax = np.minimum(st.ay, st.by), np.maximum(st.ay, st.by)
     brute = set(np.nonzero((xmin <= 21) & (xmax >= 9) & (ymin <= 1) & (ymax >= -1))[0].tolist())
-    assert got == brute and len(got) == 4  # right wall and bottom of b_height, left wall and bottom of b_levels
+    assert (
+        got == brute and len(got) == 4
+    )  # right wall and bottom of b_height, left wall and bottom of b_levels
 
 
 def test_poly_loader_rejects_lon_lat_and_broken_files(tmp_path, occluder_params):
     bad = tmp_path / "geo.poly.xml"
-    bad.write_text('<additional><poly id="g" type="building" geo="1" shape="116.3,39.9 116.4,39.9 116.4,40"/></additional>')
+    bad.write_text('<additional><poly id="g" type="building" geo="1" shape="116,39 117,40"/></additional>')
     with pytest.raises(ValueError, match="lon/lat"):
         load_static_occluders(bad, occluder_params)
     broken = tmp_path / "broken.poly.xml"
@@ -83,7 +85,8 @@ def test_roadside_unit_loader(tmp_path):
     path.write_text(
         """<additional>
         <poi id="rsu_camera_0" type="roadside_camera" x="12.5" y="-3.0" color="blue">
-            <param key="height_m" value="6.5"/><param key="yaw_deg" value="90"/><param key="pitch_deg" value="25"/>
+            <param key="height_m" value="6.5"/><param key="yaw_deg" value="90"/>
+            <param key="pitch_deg" value="25"/>
         </poi>
         <poi id="rsu_camera_1" type="roadside_camera" x="0" y="0" angle="180"/>
         <poi id="other" type="bench" x="1" y="1"/>
