@@ -198,7 +198,7 @@ def sensor_fns(suite: SensorSuite):
     def roadside(world, ego):
         for pose in suite.roadside_poses:
             plan = plan_camera(suite.roadside, pose, world.pedestrians)
-            (hits,) = _cast_all(world, [plan], skip(world, ego))
+            (hits,) = _cast_all(world, [plan], -1)
             if hits is not None:
                 finish_camera(suite.roadside, plan, hits, world, suite.ground_rgb, suite.sky_rgb)
 

@@ -188,14 +188,25 @@ def _union(first: SensorDetections, second: SensorDetections) -> SensorDetection
     )
 
 
-def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle: int):
-    """Cast the rays of all plans in one pass; return each plan's slice of hits."""
+def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle, onboard=None):
+    """Cast the rays of all plans in one pass; return each plan's slice of hits.
+
+    ``skip_vehicle``: the ego's vehicle index (-1 none), ignored by the rays of the plans flagged in
+    ``onboard`` (default: all plans)."""
     from .raycast import RayHits
 
     live = [p for p in plans if p.group_count.size]
     if not live:
         return [None] * len(plans)
+    flags = [True] * len(plans) if onboard is None else list(onboard)
     counts = np.concatenate([p.group_count for p in live])
+    group_skip = np.concatenate(
+        [
+            np.full(p.group_count.size, skip_vehicle if f else -1)
+            for p, f in zip(plans, flags, strict=True)
+            if p.group_count.size
+        ]
+    )
     starts = np.cumsum(counts) - counts
     hits = cast_rays(
         world,
@@ -205,7 +216,7 @@ def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle: int):
         starts,
         counts,
         np.concatenate([p.skip_ped for p in live]),
-        skip_vehicle,
+        group_skip,
     )
     out, pos = [], 0
     for p in plans:
@@ -240,7 +251,7 @@ def perceive(
     rsu_poses = sensors.roadside_poses
     plans = [plan_camera(sensors.camera, cam_pose, peds), plan_lidar(sensors.lidar, lidar_pose, peds)]
     plans += [plan_camera(sensors.roadside, pose, peds) for pose in rsu_poses]
-    hit_list = _cast_all(snapshot, plans, skip_vehicle)
+    hit_list = _cast_all(snapshot, plans, skip_vehicle, onboard=[True, True] + [False] * len(rsu_poses))
 
     def cam_result(spec, plan, hits) -> CameraResult:
         if hits is None:

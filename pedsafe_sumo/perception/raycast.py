@@ -92,14 +92,16 @@ def cast_rays(
     group_start: np.ndarray,
     group_count: np.ndarray,
     skip_pedestrian: np.ndarray,
-    skip_vehicle: int = -1,
+    skip_vehicle=-1,
 ) -> RayHits:
     """First hit of each ray.
 
     origin, direction: (R, 3) world frame, unit directions; t_max: (R,) metres. Rays are sorted by
     group: group g owns rays ``group_start[g] : group_start[g] + group_count[g]`` (count >= 1).
     skip_pedestrian: (R,) pedestrian index each ray passes through (-1: none); skip_vehicle: index of
-    a vehicle box ignored by every ray (the ego's own body), -1 for none.
+    a vehicle box ignored by every ray (the ego's own body), -1 for none, or a (G,) array of such
+    indices, one per group (the ego hides nothing from its own sensors but does hide from the
+    roadside camera).
     """
     n_rays = origin.shape[0]
     t_best = t_max.astype(float).copy()
@@ -141,8 +143,10 @@ def cast_rays(
     if len(veh):
         half_diag = 0.5 * np.hypot(veh.length_m, veh.width_m)
         cand = _circle_overlap(gbox, veh.x_m, veh.y_m, half_diag)
-        if skip_vehicle >= 0:
-            cand[:, skip_vehicle] = False
+        skip = np.broadcast_to(np.asarray(skip_vehicle, dtype=np.int64), (gbox.shape[0],))
+        own = skip >= 0
+        if own.any():
+            cand[np.nonzero(own)[0], skip[own]] = False
         gi, vi = np.nonzero(cand)
         if gi.size:
             ray, vi = _expand(gi, vi, group_start, group_count)

@@ -331,11 +331,10 @@ def plan_lidar(spec: LidarSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     k1 = np.floor((az_c + half) / res).astype(np.int64)
     elev = spec.elevations_rad
     z_lo, z_hi = -zs, h + tol - zs  # nothing returns from below the ground
-    e_candidates = np.stack(
-        [np.arctan2(z_lo, d_near), np.arctan2(z_lo, d_far), np.arctan2(z_hi, d_near), np.arctan2(z_hi, d_far)]
-    )
-    c0 = np.searchsorted(elev, e_candidates.min(axis=0), side="left")
-    c1 = np.searchsorted(elev, e_candidates.max(axis=0), side="right") - 1
+    e_near_lo, e_far_lo = np.arctan2(z_lo, d_near), np.arctan2(z_lo, d_far)
+    e_near_hi, e_far_hi = np.arctan2(z_hi, d_near), np.arctan2(z_hi, d_far)
+    c0 = np.searchsorted(elev, np.minimum(e_near_lo, e_far_lo), side="left")
+    c1 = np.searchsorted(elev, np.maximum(e_near_hi, e_far_hi), side="right") - 1
     n_az = np.maximum(k1 - k0 + 1, 0)
     n_ch = np.maximum(c1 - c0 + 1, 0)
     count = n_az * n_ch

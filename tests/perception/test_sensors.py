@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from perception_scenes import BLUE, EGO, RED, YELLOW, ego_box, make_suite, pole, world
 
-from pedsafe_sumo.perception import perceive
+from pedsafe_sumo.perception import EgoPose, perceive
 
 
 def run(suite, snap, seed=0):
@@ -187,3 +187,20 @@ def test_ego_box_does_not_hide_its_own_view(suite):
     )
     assert det.camera.ids == ("p",)
     assert set(det.lidar.ids) == {"p", "q"}
+
+
+def test_ego_hides_a_pedestrian_from_the_roadside_camera(params):
+    # Regression: the ego's own box is ignored by its own sensors only. Pole at (22, -12, 6 m) looking
+    # north, pitched 30 deg down; pedestrian at (22, -4.5). An ego van (4.5 x 1.8 x 2.6 m, heading
+    # east) centred at (22, -5.8) spans y -6.7..-4.9: the sight line to the highest sample
+    # (1.575 m, on the front at y = -4.75) is at z = 6 - 4.425 * 7.1 / 7.25 = 1.67 m < 2.6 m when it
+    # leaves the van's far side, so every sample is hidden.
+    suite = make_suite(params, units=[pole(22.0, -12.0, 6.0, 0.0, 30.0)])
+    ped = ("p", 22.0, -4.5, 0.25, 1.75, RED)
+    van = ("ego", 22.0, -5.8, 0.0, 4.5, 1.8, 2.6, (255, 255, 255))
+    ego = EgoPose(22.0, -5.8, 0.0, "ego")
+    det = perceive(world([van], [ped]), ego, suite, np.random.default_rng(0), 0.0)
+    assert det.diagnostics["roadside"][0].visible_fraction[0] == 0.0
+    assert det.roadside.ids == ()
+    det = perceive(world([], [ped]), ego, suite, np.random.default_rng(0), 0.0)
+    assert det.roadside.ids == ("p",)
