@@ -100,3 +100,20 @@ def test_roadside_unit_loader(tmp_path):
     assert u0.pitch_down_rad == pytest.approx(math.radians(25))
     assert u1.yaw_rad == pytest.approx(-math.pi / 2)  # angle 180 = south
     assert (u1.height_m, u1.pitch_down_rad) == (6.0, pytest.approx(math.radians(20)))
+
+
+def test_xueqing_site_occluders_and_roadside_unit(params):
+    from pedsafe_sumo import NETWORKS_DIR
+
+    site = NETWORKS_DIR / "xueqing"
+    if not (site / "xueqing.poly.xml").exists():
+        pytest.skip("Xueqing network not built")
+    p = params["perception"]
+    st = load_static_occluders(site / "xueqing.poly.xml", p["occluders"])
+    assert len(st.poly_ids) >= 20 and set(st.poly_kinds) == {"building"}
+    assert np.all(st.z_top_m > 0)
+    (unit,) = load_roadside_units(site / "xueqing.rsu.add.xml", 6.0, 20.0)
+    assert unit.id == "rsu_camera_0" and unit.height_m == 6.0
+    # yaw_deg 299.31 (SUMO, clockwise from north) = 150.69 deg counter-clockwise from east.
+    assert math.degrees(unit.yaw_rad) % 360 == pytest.approx(150.69)
+    assert math.degrees(unit.pitch_down_rad) == pytest.approx(14.04)
