@@ -5,6 +5,9 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+ifndef RUN_DIR
+RUN_DIR := results/crossing-$(shell date -u +%Y%m%d-%H%M%S)
+endif
 
 .PHONY: run test lint network clean-venv
 
@@ -14,9 +17,10 @@ $(STAMP): pyproject.toml requirements.lock
 	$(PY) -m pip install --quiet -c requirements.lock -e ".[dev]"
 	touch $(STAMP)
 
-# Until the batch runner exists, the main job builds the study network and summarises it.
+# The main job: a batch of paired SV/V2I crossing episodes (about a minute), its Table I and report.
 run: $(STAMP)
-	$(PY) -m pedsafe_sumo.network --site xueqing
+	$(PY) -m pedsafe_sumo.batch --scenario crossing --out $(RUN_DIR)
+	$(PY) -m pedsafe_sumo.report $(RUN_DIR)
 
 test: $(STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
@@ -26,7 +30,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check .
 
 network: $(STAMP)
-	$(PY) tools/build_network.py --site xueqing
+	$(PY) -m pedsafe_sumo.network --site xueqing
 
 clean-venv:
 	rm -rf $(VENV)

@@ -118,7 +118,7 @@ def _arm_axis(junction, arm: str) -> tuple[float, float]:
 def place_roadside_unit(
     net: sumolib.net.Net,
     junction,
-    corner: str = "NE",
+    corner: str = "NW",
     watch_arm: str = "N",
     aim_distance_m: float = RSU_AIM_DISTANCE_M,
 ) -> dict:
@@ -235,7 +235,7 @@ def build_site(
     clip_out: Path,
     clip: bool = True,
     patches_dir: Path | None = None,
-    rsu_corner: str = "NE",
+    rsu_corner: str = "NW",
     rsu_watch_arm: str = "N",
 ) -> BuildReport:
     """Build networks/<name>/ from an OSM file; see the module docstring."""

@@ -23,7 +23,7 @@ class Site:
     radius_m: float
     source_osm: Path
     #: Corner of the main junction where the roadside camera pole stands, and the arm it watches.
-    rsu_corner: str = "NE"
+    rsu_corner: str = "NW"
     rsu_watch_arm: str = "N"
 
     @property

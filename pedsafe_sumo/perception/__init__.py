@@ -6,11 +6,11 @@ units: see :mod:`pedsafe_sumo.perception.geometry` and docs/perception.md.
 
 from .geometry import (
     focal_length_px,
-    front_bumper_to_centre,
     intrinsic_matrix,
     project_points,
     roadside_to_vehicle_camera,
     sumo_angle_to_yaw_rad,
+    sumo_front_to_centre,
     world_to_camera_transform,
     yaw_rad_to_sumo_angle,
 )
@@ -43,7 +43,7 @@ __all__ = [
     "VehicleBoxes",
     "WorldSnapshot",
     "focal_length_px",
-    "front_bumper_to_centre",
+    "sumo_front_to_centre",
     "intrinsic_matrix",
     "load_roadside_units",
     "load_static_occluders",

@@ -18,21 +18,9 @@ import math
 
 import numpy as np
 
+from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
 
-def sumo_angle_to_yaw_rad(angle_deg):
-    """SUMO angle (degrees clockwise from north) -> yaw (radians counter-clockwise from east)."""
-    return np.deg2rad(90.0 - np.asarray(angle_deg, dtype=float))
-
-
-def yaw_rad_to_sumo_angle(yaw_rad):
-    """Yaw (radians counter-clockwise from east) -> SUMO angle in [0, 360) degrees clockwise from north."""
-    return np.mod(90.0 - np.rad2deg(np.asarray(yaw_rad, dtype=float)), 360.0)
-
-
-def front_bumper_to_centre(x_m, y_m, yaw_rad, length_m):
-    """Box centre from SUMO's vehicle position (the middle of the front bumper), world frame, metres."""
-    x_m, y_m, yaw_rad, length_m = (np.asarray(a, dtype=float) for a in (x_m, y_m, yaw_rad, length_m))
-    return x_m - 0.5 * length_m * np.cos(yaw_rad), y_m - 0.5 * length_m * np.sin(yaw_rad)
+__all__ = ["sumo_angle_to_yaw_rad", "sumo_front_to_centre", "yaw_rad_to_sumo_angle"]
 
 
 def focal_length_px(width_px: float, hfov_deg: float) -> float:

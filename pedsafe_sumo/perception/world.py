@@ -62,7 +62,7 @@ def _rgb(values, n: int) -> np.ndarray:
 class VehicleBoxes:
     """N vehicles as oriented boxes standing on the ground.
 
-    ``x_m, y_m``: box centre (not SUMO's front bumper: see ``geometry.front_bumper_to_centre``),
+    ``x_m, y_m``: box centre (not SUMO's front bumper: see ``geometry.sumo_front_to_centre``),
     ``yaw_rad``: heading counter-clockwise from east, ``length_m`` along the heading, ``width_m``,
     ``height_m`` (box spans z = 0 .. height_m), ``rgb``: body colour (N, 3) 0-255.
     """

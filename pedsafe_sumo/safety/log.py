@@ -31,11 +31,12 @@ Every numeric value must be finite: the engine logs a step only when both road u
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+
+from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre  # noqa: F401 - part of the log API
 
 TIME = "time_s"
 EGO_X, EGO_Y, EGO_YAW, EGO_SPEED = "ego_x_m", "ego_y_m", "ego_yaw_rad", "ego_speed_mps"
@@ -122,15 +123,3 @@ def ego_velocity_mps(arrays: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.n
     """Ego velocity (vx, vy) in the world frame, m/s: speed along the heading."""
     speed, yaw = arrays[EGO_SPEED], arrays[EGO_YAW]
     return speed * np.cos(yaw), speed * np.sin(yaw)
-
-
-def sumo_angle_to_yaw_rad(angle_deg: float) -> float:
-    """SUMO's vehicle angle (degrees, clockwise from north) -> yaw (radians, counter-clockwise from +x)."""
-    return math.radians(90.0 - angle_deg)
-
-
-def sumo_front_to_centre(
-    front_x_m: float, front_y_m: float, yaw_rad: float, length_m: float
-) -> tuple[float, float]:
-    """SUMO's position (front bumper centre) -> footprint centre, half a length back along the heading."""
-    return front_x_m - 0.5 * length_m * math.cos(yaw_rad), front_y_m - 0.5 * length_m * math.sin(yaw_rad)

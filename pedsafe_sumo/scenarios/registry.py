@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -56,9 +56,21 @@ class ScenarioError(ValueError):
 
 @dataclass(frozen=True)
 class VehicleSize:
-    length_m: float = 5.0  # SUMO's default passenger car
-    width_m: float = 1.8
-    height_m: float = 1.5
+    length_m: float
+    width_m: float
+    height_m: float
+
+
+#: Body sizes of the vehicle classes in the scenes [m]. Height decides what a roof LiDAR (1.9 m) and a
+#: 1.6 m camera see over: a 1.5 m car hides a pedestrian's legs only, an SUV or van hides them whole.
+VEHICLE_CLASSES = {
+    "car": VehicleSize(4.6, 1.8, 1.5),
+    "suv": VehicleSize(4.8, 1.9, 1.75),
+    "van": VehicleSize(5.0, 1.95, 2.0),
+}
+#: Shares of the classes among queued and waiting vehicles (assumption: Beijing urban fleet, where
+#: SUVs and MPVs make up about a third of new passenger cars).
+QUEUE_CLASS_WEIGHTS = {"car": 0.55, "suv": 0.35, "van": 0.10}
 
 
 @dataclass(frozen=True)
@@ -98,12 +110,18 @@ class ScenarioSpec:
     ego_speed_max_mps: float = 20.0
     #: The episode ends at this time at the latest [s].
     time_limit_s: float = 30.0
-    vehicle: VehicleSize = field(default_factory=VehicleSize)
+    #: Class of the black occluder at the head of the queue (crossing), from VEHICLE_CLASSES.
+    occluder_class: str = "suv"
+    #: Background traffic from the demand model on every other entering lane (1 = on, 0 = off), with
+    #: vehicles that would have entered up to `background_warmup_s` before the start already on the road.
+    background_traffic: float = 1
+    background_warmup_s: float = 60.0
 
     def __post_init__(self) -> None:
         checks = [
             (self.placement in ("crosswalk", "midblock", "behind_waiting_vehicle"), "placement"),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
+            (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
                 self.conflict_offset_min_s <= self.conflict_offset_max_s,
                 "conflict_offset_min_s <= conflict_offset_max_s",
@@ -125,6 +143,8 @@ class ScenarioSpec:
                 "0 < ego_speed_min_mps <= ego_speed_max_mps",
             ),
             (self.time_limit_s > 0, "time_limit_s > 0"),
+            (self.background_traffic in (0, 1), "background_traffic is 0 or 1"),
+            (self.background_warmup_s >= 0, "background_warmup_s >= 0"),
         ]
         for ok, rule in checks:
             if not ok:
@@ -132,12 +152,12 @@ class ScenarioSpec:
 
     def with_overrides(self, overrides: dict[str, str | float]) -> ScenarioSpec:
         """A copy with fields replaced from --set key=value pairs (values parsed as numbers)."""
-        names = {f.name for f in dataclasses.fields(self)} - {"name", "description", "vehicle"}
+        names = {f.name for f in dataclasses.fields(self)} - {"name", "description"}
         changes = {}
         for key, value in overrides.items():
             if key not in names:
                 raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
-            if key in ("placement", "ego_speed_fit"):
+            if key in ("placement", "ego_speed_fit", "occluder_class"):
                 changes[key] = str(value)
                 continue
             try:
@@ -210,6 +230,21 @@ class VehicleSetup:
 
 
 @dataclass(frozen=True)
+class BackgroundVehicle:
+    """A vehicle of the background traffic: enters at `depart_s` (>= 0) at `depart_pos_m` of its route's
+    first edge, at its desired speed, and is then driven by SUMO."""
+
+    vehicle_id: str
+    route: tuple[str, ...]
+    lane_index: int  # SUMO lane index on the first edge
+    depart_s: float
+    depart_pos_m: float
+    desired_speed_mps: float
+    speed_factor: float  # desired speed / speed limit of the entering lane
+    colour_rgb: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
 class EpisodeSetup:
     """One concrete initial world; identical under SV and V2I for the same seed."""
 
@@ -222,6 +257,7 @@ class EpisodeSetup:
     conflict_xy: tuple[float, float]
     conflict_offset_s: float
     time_limit_s: float
+    background: tuple[BackgroundVehicle, ...] = ()
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
@@ -256,8 +292,9 @@ def draw_episode(
     demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
     (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
     """
-    size = spec.vehicle
+    ego_size = VEHICLE_CLASSES["car"]
     kerb_lane, ego_lane = 0, len(approach.lane_ids) - 1
+    kerb_lane_id = approach.lane_ids[kerb_lane]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
     radius_m = 0.3
     height_m = {"m": 1.72, "f": 1.60}.get(pedestrian_traits["gender"], 1.66)
@@ -271,17 +308,23 @@ def draw_episode(
     stop_line_pos = approach.lane_lengths_m[kerb_lane]
     parked: list[VehicleSetup] = []
     clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    class_names = list(QUEUE_CLASS_WEIGHTS)
+    class_p = np.array([QUEUE_CLASS_WEIGHTS[c] for c in class_names])
 
-    def queue_behind(first_front_pos: float, start_index: int, colours) -> None:
-        """Queued vehicles upstream of a vehicle whose front is at `first_front_pos`."""
-        front = first_front_pos
+    def random_vehicle(vehicle_id: str, front_pos: float, colour=None) -> VehicleSetup:
+        size = VEHICLE_CLASSES[class_names[int(rng.choice(len(class_names), p=class_p / class_p.sum()))]]
+        if colour is None:
+            colour = CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
+        return VehicleSetup(vehicle_id, kerb_lane_id, front_pos, 0.0, colour, size)
+
+    def queue_behind(first: VehicleSetup, start_index: int) -> None:
+        """`queue_vehicles` vehicles queued upstream of `first`, bumper to bumper with small gaps."""
+        rear = first.front_pos_m - first.size.length_m
         for k in range(int(spec.queue_vehicles)):
-            front -= size.length_m + float(rng.uniform(spec.queue_gap_min_m, spec.queue_gap_max_m))
-            parked.append(
-                VehicleSetup(
-                    f"queued_{start_index + k}", approach.lane_ids[kerb_lane], front, 0.0, colours[k], size
-                )
-            )
+            front = rear - float(rng.uniform(spec.queue_gap_min_m, spec.queue_gap_max_m))
+            vehicle = random_vehicle(f"queued_{start_index + k}", front)
+            parked.append(vehicle)
+            rear = front - vehicle.size.length_m
 
     if spec.placement == "crosswalk":
         path = approach.crosswalk_path
@@ -289,50 +332,36 @@ def draw_episode(
         (ax, ay), (bx, by) = path
         ux, uy = (bx - ax) / math.dist(path[0], path[1]), (by - ay) / math.dist(path[0], path[1])
         path = ((ax - ux * 1.0, ay - uy * 1.0), (bx + ux * 1.0, by + uy * 1.0))
-        occluder_front = stop_line_pos - 0.5
-        parked.append(
-            VehicleSetup(
-                "occluder_0", approach.lane_ids[kerb_lane], occluder_front, 0.0, OCCLUDER_BLACK_RGB, size
-            )
+        occluder = VehicleSetup(
+            "occluder_0",
+            kerb_lane_id,
+            stop_line_pos - 0.5,
+            0.0,
+            OCCLUDER_BLACK_RGB,
+            VEHICLE_CLASSES[spec.occluder_class],
         )
-        colours = [
-            CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))] for _ in range(int(spec.queue_vehicles))
-        ]
-        queue_behind(occluder_front, 1, colours)
+        parked.append(occluder)
+        queue_behind(occluder, 1)
     elif spec.placement == "midblock":
         distance_m = float(rng.uniform(spec.midblock_distance_min_m, spec.midblock_distance_max_m))
         gap_m = float(rng.uniform(spec.parked_gap_min_m, spec.parked_gap_max_m))
         cross_pos = stop_line_pos - distance_m
         path = approach.across(kerb_lane, cross_pos, kerb_offset_m, far_offset_m)
-        colours = [
-            CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
-            for _ in range(int(spec.queue_vehicles) + 1)
-        ]
-        # Downstream vehicle: its rear gap/2 past the line; the queue upstream: the first one's front
-        # gap/2 before the line.
-        parked.append(
-            VehicleSetup(
-                "occluder_0",
-                approach.lane_ids[kerb_lane],
-                cross_pos + gap_m / 2 + size.length_m,
-                0.0,
-                colours[0],
-                size,
-            )
+        # Downstream vehicle: its rear gap/2 past the line; upstream: the queue, its head gap/2 before it.
+        downstream = random_vehicle("occluder_0", 0.0)
+        downstream = dataclasses.replace(
+            downstream, front_pos_m=cross_pos + gap_m / 2 + downstream.size.length_m
         )
-        upstream_front = cross_pos - gap_m / 2
-        parked.append(
-            VehicleSetup("occluder_1", approach.lane_ids[kerb_lane], upstream_front, 0.0, colours[1], size)
-        )
-        queue_behind(upstream_front, 2, colours[2:] + [colours[0]])
+        upstream = random_vehicle("occluder_1", cross_pos - gap_m / 2)
+        parked += [downstream, upstream]
+        queue_behind(upstream, 2)
     else:  # behind_waiting_vehicle
         gap_m = float(rng.uniform(spec.blend_gap_min_m, spec.blend_gap_max_m))
-        colour = CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
-        front = stop_line_pos - 0.5
-        cross_pos = front - size.length_m - gap_m - radius_m
+        waiting = random_vehicle("waiting_0", stop_line_pos - 0.5)
+        cross_pos = waiting.front_pos_m - waiting.size.length_m - gap_m - radius_m
         path = approach.across(kerb_lane, cross_pos, kerb_offset_m, far_offset_m)
-        parked.append(VehicleSetup("waiting_0", approach.lane_ids[kerb_lane], front, 0.0, colour, size))
-        clothing = colour
+        parked.append(waiting)
+        clothing = waiting.colour_rgb
 
     # Where the pedestrian's path meets the centre of the ego's lane, and when they get there.
     conflict_xy = _crossing_with_lane(approach, ego_lane, path)
@@ -341,11 +370,11 @@ def draw_episode(
     ego_conflict_pos = _lane_pos_of(approach, ego_lane, conflict_xy)
     arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
     front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
-    if front_pos < size.length_m:
+    if front_pos < ego_size.length_m:
         # Not enough road behind the conflict point: hold the pedestrian back instead.
-        start_delay_s += (size.length_m - front_pos) / ego_speed_mps
-        front_pos = size.length_m
-    ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, size)
+        start_delay_s += (ego_size.length_m - front_pos) / ego_speed_mps
+        front_pos = ego_size.length_m
+    ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size)
     pedestrian = PedestrianSetup(
         path_xy=tuple(tuple(float(c) for c in p) for p in path),
         start_delay_s=start_delay_s,

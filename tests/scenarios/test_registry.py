@@ -127,7 +127,9 @@ def test_queued_vehicles_hide_the_waiting_pedestrian_from_the_ego(name, approach
         checked += 1
         hidden = False
         for vehicle in setup.parked:
-            corners = _footprint(approach, vehicle.lane_id, vehicle.front_pos_m, 5.0, 1.8)
+            corners = _footprint(
+                approach, vehicle.lane_id, vehicle.front_pos_m, vehicle.size.length_m, vehicle.size.width_m
+            )
             edges = list(zip(corners, corners[1:] + corners[:1]))
             hidden |= any(_segments_intersect(camera, start, a, b) for a, b in edges)
         assert hidden, f"seed {seed}: the pedestrian's start is in plain view of the ego"

@@ -1,0 +1,154 @@
+"""Run one episode and tell a human what happened.
+
+    python -m pedsafe_sumo.episode --scenario jaywalking --condition sv --seed 3
+    python -m pedsafe_sumo.episode --scenario crossing --condition both --seed 7 --log /tmp/steps.csv
+    python -m pedsafe_sumo.episode --scenario crossing --set conflict_offset_max_s=0 \
+        --set perception.v2i.latency_s=0.3
+
+`--set key=value` sets a scenario field (see pedsafe_sumo/scenarios/registry.py) or, with a dotted
+key, a value of the parameter file (pedsafe_sumo/params/defaults.toml). Bad input ends in one line
+on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.io.cases import write_case
+from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
+from pedsafe_sumo.params import ParameterError
+from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.settings import UsageError, configure
+from pedsafe_sumo.sim.connection import SimulatorError
+from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeResult, EpisodeRunner
+
+SENSOR_NAMES = {
+    "onboard_camera": "onboard camera",
+    "onboard_lidar": "onboard LiDAR",
+    "roadside": "roadside camera",
+}
+
+
+def describe(result: EpisodeResult, algorithm: str) -> list[str]:
+    setup, outcome, log = result.setup, result.outcome, result.log
+    ped = setup.pedestrian
+    gender = {"f": "woman", "m": "man"}.get(ped.gender, "person")
+    lines = [
+        f"{setup.scenario}, condition {result.condition}, seed {setup.seed}",
+        f"  pedestrian: {ped.age_years:.0f}-year-old {gender}, {ped.risk}, "
+        f"walking {ped.walking_speed_mps:.2f} m/s, steps off at t={ped.start_delay_s:.2f} s",
+        f"  ego: {setup.ego.speed_mps:.2f} m/s ({setup.ego.speed_mps * 3.6:.0f} km/h) initial speed, "
+        f"driven by {algorithm}",
+    ]
+    if math.isnan(outcome["first_detection_distance_m"]):
+        lines.append("  first perceived: never")
+    else:
+        sensors = " + ".join(SENSOR_NAMES.get(s, s) for s in outcome["detected_by"].split("+") if s)
+        lines.append(
+            f"  first perceived: t={outcome['first_detection_time_s']:.2f} s "
+            f"at {outcome['first_detection_distance_m']:.1f} m ({sensors})"
+        )
+    raw = log[log["roadside_raw"]]
+    if len(raw):
+        first = raw.iloc[0]
+        distance = math.hypot(first.ped_x_m - first.ego_x_m, first.ped_y_m - first.ego_y_m)
+        note = "" if result.condition == "v2i" else ", not available under SV"
+        lines.append(f"  roadside camera first saw them: t={first.time_s:.2f} s at {distance:.1f} m{note}")
+    gap = log["clearance_m"]
+    closest = log.loc[gap.idxmin()]
+    lines.append(
+        f"  closest approach: {max(gap.min(), 0.0):.2f} m between car body and pedestrian "
+        f"at t={closest.time_s:.2f} s"
+    )
+    if outcome["collision"]:
+        impact_mps = outcome["impact_speed_mps"]
+        lines.append(
+            f"  COLLISION at {impact_mps:.2f} m/s ({impact_mps * 3.6:.1f} km/h); "
+            f"injury probability {outcome['injury_probability']:.3f}"
+        )
+        seen = "also recorded" if outcome["sumo_collision"] else "not recorded"
+        lines.append(
+            f"  SUMO's own collision check: {seen}"
+            + (
+                ""
+                if outcome["sumo_collision"]
+                else " (SUMO checks persons only on shared lanes and crosswalks)"
+            )
+        )
+    else:
+        conflict = "yes" if outcome["conflict"] else "no"
+        probability = outcome["conflict_probability"]
+        detail = f" (risk p = {probability:.2f})" if not math.isnan(probability) else ""
+        lines.append(
+            f"  no collision; conflict: {conflict}{detail}; minimum TTC {outcome['min_ttc_s']:.2f} s"
+        )
+    lines.append(
+        f"  ended: {result.end_reason.replace('_', ' ')} at t={log['time_s'].iloc[-1]:.2f} s "
+        f"after {len(log)} steps"
+    )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m pedsafe_sumo.episode", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("--scenario", required=True, help=f"one of: {', '.join(SCENARIOS)}")
+    parser.add_argument("--condition", default="both", help="sv, v2i or both (default: both, same seed)")
+    parser.add_argument("--seed", type=int, default=1, help="episode seed (default 1)")
+    parser.add_argument(
+        "--site", default="xueqing", help=f"study site (default xueqing; known: {', '.join(SITES)})"
+    )
+    parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
+    parser.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
+    )
+    parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
+    parser.add_argument("--log", type=Path, help="write the per-step log as CSV (one file per condition)")
+    parser.add_argument(
+        "--case-dir", type=Path, help="write each episode as a case (Parquet log + JSON world)"
+    )
+    parser.add_argument("--gui", action="store_true", help="run in sumo-gui instead of headless libsumo")
+    args = parser.parse_args(argv)
+
+    conditions = list(CONDITIONS) if args.condition == "both" else [args.condition]
+    try:
+        if any(c not in CONDITIONS for c in conditions):
+            raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
+        site = get_site(args.site)
+        specs, params = configure([args.scenario], args.params, args.set)
+        spec = specs[args.scenario]
+        agent_class = load_agent_class(args.algorithm)
+    except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+    runner = EpisodeRunner(site, params, agent_class, gui=args.gui)
+    try:
+        for condition in conditions:
+            result = runner.run(spec, condition, args.seed)
+            print("\n".join(describe(result, args.algorithm)))
+            if args.log:
+                path = (
+                    args.log
+                    if len(conditions) == 1
+                    else args.log.with_name(f"{args.log.stem}_{condition}{args.log.suffix or '.csv'}")
+                )
+                result.log.to_csv(path, index=False)
+                print(f"  per-step log: {path}")
+            if args.case_dir:
+                print(f"  case: {write_case(args.case_dir, result)}")
+    except SimulatorError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        runner.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,56 @@
+"""Settings layered defaults -> scenario -> parameter file -> command line, shared by the CLIs.
+
+`--set key=value` sets a scenario field (pedsafe_sumo/scenarios/registry.py) or, with a dotted key, a
+value of the parameter file (pedsafe_sumo/params/defaults.toml). Unknown keys and out-of-range values
+raise, naming the key.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pedsafe_sumo.params import load_params, with_overrides
+from pedsafe_sumo.scenarios.registry import ScenarioSpec, get_scenario
+
+
+class UsageError(ValueError):
+    """Bad command-line input; the CLIs print it as one line and exit with 2."""
+
+
+def parse_set(pairs: list[str]) -> tuple[dict[str, str], dict[str, Any]]:
+    """Split --set key=value pairs into scenario fields and dotted parameter-file keys."""
+    scenario: dict[str, str] = {}
+    params: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise UsageError(f"--set needs key=value, got '{pair}'")
+        if "." in key:
+            params[key] = parse_value(value)
+        else:
+            scenario[key] = value
+    return scenario, params
+
+
+def parse_value(text: str) -> Any:
+    lowered = text.strip().lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    try:
+        number = float(text)
+    except ValueError:
+        return text
+    return int(number) if number.is_integer() and "." not in text and "e" not in lowered else number
+
+
+def configure(
+    scenario_names: list[str], params_file: Path | None, set_pairs: list[str] | None
+) -> tuple[dict[str, ScenarioSpec], dict[str, Any]]:
+    """Scenario specs with their overrides applied, and the validated parameters."""
+    scenario_overrides, param_overrides = parse_set(set_pairs or [])
+    params = load_params(params_file)
+    if param_overrides:
+        params = with_overrides(params, param_overrides)
+    specs = {name: get_scenario(name).with_overrides(scenario_overrides) for name in scenario_names}
+    return specs, params

@@ -1,0 +1,543 @@
+"""One episode: a scenario under a condition, driven through SUMO by the AD stack under test.
+
+The loop, at every step of `step_length_s` (default 0.05 s):
+  1. read the world from SUMO's subscriptions (vehicles' front positions, angles, speeds);
+  2. check the collision of the ego's footprint with the pedestrian's circle, and SUMO's own;
+  3. build the world snapshot and run the sensors (perception layer);
+  4. hand the AD stack what its condition grants (SV: onboard; V2I: onboard + roadside over the link);
+  5. actuate the ego the TraCI way (speed mode 0, setSpeed to the stack's command);
+  6. move the pedestrian by the behaviour model (person.moveToXY, so jaywalking leaves the crosswalks);
+  7. log the step, and advance SUMO.
+The episode ends on a collision, when the ego has passed the pedestrian, when the pedestrian has
+finished crossing, when the ego has left the network, or at the scenario's time limit.
+
+Randomness: the episode seed is split (numpy SeedSequence) into a world stream, drawn identically
+under SV and V2I, and a perception stream; SUMO gets the seed too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker
+from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
+from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
+from pedsafe_sumo.demand.site import load_site as load_demand_site
+from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
+from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.perception import (
+    EgoPose,
+    Pedestrians,
+    SensorSuite,
+    V2ILink,
+    VehicleBoxes,
+    WorldSnapshot,
+    load_roadside_units,
+    load_static_occluders,
+    perceive,
+)
+from pedsafe_sumo.safety.episode import episode_indexes
+from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.scenarios.geometry import load_approach
+from pedsafe_sumo.scenarios.registry import (
+    CAR_COLOURS_RGB,
+    VEHICLE_CLASSES,
+    BackgroundVehicle,
+    EpisodeSetup,
+    ScenarioSpec,
+    VehicleSetup,
+    draw_episode,
+)
+from pedsafe_sumo.sim.connection import SumoSession
+from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
+
+CONDITIONS = ("sv", "v2i")
+DEFAULT_ALGORITHM = "pedsafe_sumo.control.reference:ReferenceStack"
+STEP_LENGTH_S = 0.05
+PED_ID = "ped"
+EGO_ID = "ego"
+
+
+@dataclass
+class EpisodeResult:
+    setup: EpisodeSetup
+    condition: str
+    #: One row per step (columns of pedsafe_sumo.safety.log plus the command and diagnostics).
+    log: pd.DataFrame
+    #: The DESIGN section 3 columns of this episode (one row of episodes.parquet).
+    outcome: dict[str, Any]
+    end_reason: str
+    timings_s: dict[str, float] = field(default_factory=dict)
+    #: SUMO's own record of the ego-pedestrian collision: {"time_s", "ego_speed_mps", "type"}, or {}.
+    sumo_collision: dict[str, Any] = field(default_factory=dict)
+
+
+class EpisodeRunner:
+    """Runs episodes on one site, reusing one SUMO instance (libsumo, or sumo-gui through traci)."""
+
+    def __init__(
+        self,
+        site: Site,
+        params: dict[str, Any],
+        agent_class: type[Agent],
+        gui: bool = False,
+        step_length_s: float = STEP_LENGTH_S,
+        injury_model: str = "saade2020",
+    ) -> None:
+        self.site = site
+        self.params = params
+        self.agent_class = agent_class
+        self.step_length_s = step_length_s
+        self.injury_model = injury_model
+        self.session = SumoSession(gui=gui)
+        self.approach = load_approach(site)
+        perception = params["perception"]
+        self.static = load_static_occluders(site.file("poly.xml"), perception["occluders"])
+        rsu = perception["roadside_camera"]
+        units = load_roadside_units(
+            site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
+        )
+        self.sensors = SensorSuite.from_params(perception, units)
+        # Background traffic enters on every entering lane except the scenario's own approach.
+        demand_site = load_demand_site(site.name, net_file=site.file("net.xml"))
+        self.background_lanes = [
+            lane for lane in demand_site.entering_lanes if lane.edge_id != self.approach.edge_id
+        ]
+        self._edge_lengths = {lane.edge_id: lane.length_m for lane in demand_site.entering_lanes}
+        self._route_edges = {rid: edges for edges, rid in route_ids(self.background_lanes).items()}
+
+    def close(self) -> None:
+        self.session.close()
+
+    # ------------------------------------------------------------------ setup
+    def draw_setup(self, spec: ScenarioSpec, seed: int) -> EpisodeSetup:
+        """The initial world of episode `seed`: a function of the seed alone (same under SV and V2I).
+
+        The seed is split into three streams: the scenario's world, the perception noise (see run) and
+        the background traffic, so that changing one never shifts the draws of another.
+        """
+        world_seq, _, traffic_seq = np.random.SeedSequence(seed).spawn(3)
+        world_rng = np.random.default_rng(world_seq)
+        person = sample_pedestrians(world_rng, self.params["pedestrians"], 1)[0]
+        _, speed_nonintersection, speed_intersection = traffic_distributions(self.params["traffic"])
+        fit = speed_intersection if spec.ego_speed_fit == "intersection" else speed_nonintersection
+        ego_speed_mps = float(fit.sample(world_rng, 1)[0])
+        traits = {
+            "age_years": person.age_years,
+            "gender": person.gender,
+            "risk": person.risk,
+            "walking_speed_mps": person.speed_mps,
+        }
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng)
+        if spec.background_traffic:
+            setup = dataclasses.replace(setup, background=self._background(spec, traffic_seq))
+        return setup
+
+    def _background(
+        self, spec: ScenarioSpec, seed_seq: np.random.SeedSequence
+    ) -> tuple[BackgroundVehicle, ...]:
+        """Demand-model vehicles for [-warm-up, time limit]; the early ones already down their first edge."""
+        warmup_s = spec.background_warmup_s
+        demand_seq, colour_seq = seed_seq.spawn(2)
+        drawn = generate_vehicles(
+            self.background_lanes, self.params["traffic"], warmup_s + spec.time_limit_s, demand_seq
+        )
+        colour_rng = np.random.default_rng(colour_seq)
+        vehicles = []
+        for vehicle in drawn:
+            depart_s = vehicle.depart_s - warmup_s
+            pos_m = 0.0
+            if depart_s < 0:
+                # Would have entered -depart_s ago: it is now that far down its first edge at free speed
+                # (or has left it, and then it no longer matters to the scene).
+                pos_m = vehicle.desired_speed_mps * -depart_s
+                if pos_m > self._edge_lengths[vehicle.lane.edge_id] - 10.0:
+                    continue
+                depart_s = 0.0
+            route = self._route_edges[vehicle.route_id]
+            colour = CAR_COLOURS_RGB[int(colour_rng.integers(len(CAR_COLOURS_RGB)))]
+            vehicles.append(
+                BackgroundVehicle(
+                    vehicle.vehicle_id,
+                    route,
+                    vehicle.lane.index,
+                    round(depart_s, 2),
+                    round(pos_m, 2),
+                    vehicle.desired_speed_mps,
+                    vehicle.desired_speed_mps / vehicle.lane.speed_limit_mps,
+                    colour,
+                )
+            )
+        return tuple(vehicles)
+
+    def _sumo_args(self, seed: int) -> list[str]:
+        args = [
+            "-n",
+            str(self.site.file("net.xml")),
+            "--step-length",
+            f"{self.step_length_s}",
+            "--seed",
+            str(seed % 2_147_483_647),
+            "--no-step-log",
+            "true",
+            "--no-warnings",
+            "true",
+            "--time-to-teleport",
+            "-1",
+            "--pedestrian.model",
+            "striping",
+            # SUMO's own collision check, for the sumo_collision column: junctions and persons included.
+            "--collision.check-junctions",
+            "true",
+            "--collision.action",
+            "warn",
+            "--collision.mingap-factor",
+            "0",
+        ]
+        if self.session.gui:
+            args += [
+                "-a",
+                f"{self.site.file('poly.xml')},{self.site.file('rsu.add.xml')}",
+                "--gui-settings-file",
+                str(self.site.file("view.xml")),
+                "--start",
+                "true",
+                # Close the window when the episode's TraCI connection closes.
+                "--quit-on-end",
+                "true",
+            ]
+        return args
+
+    def _add_vehicle(self, api, vehicle: VehicleSetup, route_id: str, parked: bool) -> None:
+        lane_index = int(vehicle.lane_id.rsplit("_", 1)[1])  # SUMO's index: the sidewalk is lane 0
+        type_id = f"type_{vehicle.vehicle_id}"
+        api.vehicletype.copy("DEFAULT_VEHTYPE", type_id)
+        api.vehicletype.setLength(type_id, vehicle.size.length_m)
+        api.vehicletype.setWidth(type_id, vehicle.size.width_m)
+        api.vehicletype.setHeight(type_id, vehicle.size.height_m)
+        api.vehicletype.setMinGap(type_id, 0.5)
+        api.vehicletype.setColor(type_id, (*vehicle.colour_rgb, 255))
+        api.vehicletype.setImperfection(type_id, 0.0)
+        if not parked:
+            # The ego's speed is the AD stack's, not SUMO's: allow initial speeds above the limit.
+            api.vehicletype.setSpeedFactor(type_id, 2.0)
+            api.vehicletype.setMaxSpeed(type_id, 50.0)
+        api.vehicle.add(
+            vehicle.vehicle_id,
+            route_id,
+            typeID=type_id,
+            depart="0",
+            departLane=str(lane_index),
+            departPos=repr(float(vehicle.front_pos_m)),
+            departSpeed=repr(float(vehicle.speed_mps)),
+        )
+
+    def _populate(self, api, setup: EpisodeSetup) -> None:
+        approach = self.approach
+        self._routes_added: set[str] = set()
+        api.route.add("ego_route", list(setup.ego_route))
+        api.route.add("kerb_route", [approach.edge_id])
+        self._add_vehicle(api, setup.ego, "ego_route", parked=False)
+        for vehicle in setup.parked:
+            self._add_vehicle(api, vehicle, "kerb_route", parked=True)
+        if setup.background:
+            api.vehicletype.copy("DEFAULT_VEHTYPE", "background")
+            size = VEHICLE_CLASSES["car"]
+            api.vehicletype.setLength("background", size.length_m)
+            api.vehicletype.setWidth("background", size.width_m)
+            api.vehicletype.setHeight("background", size.height_m)
+            api.vehicletype.setImperfection("background", 0.0)
+            api.vehicletype.setMaxSpeed("background", 55.56)
+        for vehicle in setup.background:
+            route_id = "bg_" + "|".join(vehicle.route)
+            if route_id not in self._routes_added:
+                api.route.add(route_id, list(vehicle.route))
+                self._routes_added.add(route_id)
+            api.vehicle.add(
+                vehicle.vehicle_id,
+                route_id,
+                typeID="background",
+                depart=repr(vehicle.depart_s),
+                departLane=str(vehicle.lane_index),
+                departPos=repr(vehicle.depart_pos_m),
+                departSpeed=repr(vehicle.desired_speed_mps),
+            )
+            api.vehicle.setColor(vehicle.vehicle_id, (*vehicle.colour_rgb, 255))
+        ped = setup.pedestrian
+        api.vehicletype.copy("DEFAULT_PEDTYPE", "ped_type")
+        api.vehicletype.setWidth("ped_type", 2 * ped.radius_m)
+        api.vehicletype.setLength("ped_type", 2 * ped.radius_m)
+        api.vehicletype.setHeight("ped_type", ped.height_m)
+        api.vehicletype.setColor("ped_type", (*ped.clothing_rgb, 255))
+        sidewalk_edge = approach.sidewalk_lane_id.rsplit("_", 1)[0]
+        api.person.add(PED_ID, sidewalk_edge, pos=1.0, depart=0.0, typeID="ped_type")
+        api.person.appendWaitingStage(PED_ID, 100_000.0, "pedsafe: moved by the behaviour model")
+
+    # ------------------------------------------------------------------ run
+    def run(
+        self, spec: ScenarioSpec, condition: str, seed: int, setup: EpisodeSetup | None = None
+    ) -> EpisodeResult:
+        if condition not in CONDITIONS:
+            raise ValueError(f"unknown condition '{condition}' (known: {', '.join(CONDITIONS)})")
+        setup = setup or self.draw_setup(spec, seed)
+        perception_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
+        timings = dict.fromkeys(("sumo_s", "snapshot_s", "perception_s", "agent_s", "logging_s"), 0.0)
+        clock = time.perf_counter
+
+        started = clock()
+        self.session.run(self._sumo_args(seed))
+        api = self.session.api
+        tc = api.constants
+        self._populate(api, setup)
+        api.simulation.step()  # inserts everything at t = 0
+        timings["sumo_s"] += clock() - started
+
+        dims: dict[str, tuple[float, float, float, tuple[int, int, int]]] = {}
+        for vehicle in (setup.ego, *setup.parked):
+            if vehicle.vehicle_id not in api.vehicle.getIDList():
+                raise RuntimeError(f"SUMO did not insert vehicle '{vehicle.vehicle_id}'")
+            dims[vehicle.vehicle_id] = (
+                vehicle.size.length_m,
+                vehicle.size.width_m,
+                vehicle.size.height_m,
+                vehicle.colour_rgb,
+            )
+            api.vehicle.subscribe(vehicle.vehicle_id, [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED])
+            api.vehicle.setSpeedMode(vehicle.vehicle_id, 0)
+            api.vehicle.setSpeed(vehicle.vehicle_id, vehicle.speed_mps)
+        for vehicle in setup.parked:
+            api.vehicle.setLaneChangeMode(vehicle.vehicle_id, 0)
+        api.vehicle.setLaneChangeMode(EGO_ID, 0)
+        background = {v.vehicle_id: v for v in setup.background}
+        car = VEHICLE_CLASSES["car"]
+
+        def register_departed() -> None:
+            """Background vehicles inserted in the last step: their speed factor, subscription, size."""
+            for vid in api.simulation.getDepartedIDList():
+                vehicle = background.get(vid)
+                if vehicle is None:
+                    continue
+                api.vehicle.setSpeedFactor(vid, vehicle.speed_factor)
+                api.vehicle.subscribe(vid, [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED])
+                dims[vid] = (car.length_m, car.width_m, car.height_m, vehicle.colour_rgb)
+
+        register_departed()
+
+        ped = setup.pedestrian
+        walker = PedestrianWalker(ped.path_xy, self._behaviour(ped), start_delay_s=ped.start_delay_s)
+        agent = self.agent_class()
+        granted = {"onboard_camera", "onboard_lidar"} | ({"v2i"} if condition == "v2i" else set())
+        agent.setup(
+            {
+                "initial_speed_mps": setup.ego.speed_mps,
+                "condition": condition,
+                "seed": seed,
+                "step_length_s": self.step_length_s,
+                "sensors": sorted(set(agent.sensors()) & granted),
+            }
+        )
+        wanted = set(agent.sensors()) & granted
+        link = V2ILink(self.sensors.v2i) if "v2i" in wanted else None
+        ped_heights = np.array([ped.height_m])
+        ped_rgb = np.array([ped.clothing_rgb], dtype=float)
+
+        rows: list[dict[str, Any]] = []
+        sumo_collision = False
+        sumo_record: dict[str, Any] = {}
+        end_reason = "time_limit"
+        pose = walker.step(0.0, 0.0, (0.0, 0.0), 0.0, 0.0)  # position at the start of the path
+        api.person.moveToXY(
+            PED_ID, "", pose.x_m, pose.y_m, angle=yaw_rad_to_sumo_angle(pose.heading_rad), keepRoute=2
+        )
+        try:
+            while True:
+                t0 = clock()
+                time_s = api.simulation.getTime()
+                if background:
+                    register_departed()
+                results = api.vehicle.getAllSubscriptionResults()
+                if EGO_ID not in results:
+                    end_reason = "ego_left_network"
+                    break
+                # Vectorised: SUMO's front-bumper positions and angles to footprint centres and yaw.
+                ids = [vid for vid in results if vid in dims]
+                front_xy = np.array([results[vid][tc.VAR_POSITION] for vid in ids])
+                yaw = sumo_angle_to_yaw_rad([results[vid][tc.VAR_ANGLE] for vid in ids])
+                sizes = [dims[vid] for vid in ids]
+                lengths = np.array([d[0] for d in sizes])
+                centre_x, centre_y = sumo_front_to_centre(front_xy[:, 0], front_xy[:, 1], yaw, lengths)
+                ego_index = ids.index(EGO_ID)
+                ego_x, ego_y, ego_yaw = (
+                    float(centre_x[ego_index]),
+                    float(centre_y[ego_index]),
+                    float(yaw[ego_index]),
+                )
+                ego_speed = float(results[EGO_ID][tc.VAR_SPEED])
+                ego_length, ego_width = float(lengths[ego_index]), sizes[ego_index][1]
+                if not sumo_collision:
+                    sumo_record = self._sumo_collision(api, time_s)
+                    sumo_collision = bool(sumo_record)
+                vehicles = VehicleBoxes.build(
+                    ids,
+                    centre_x,
+                    centre_y,
+                    yaw,
+                    lengths,
+                    [d[1] for d in sizes],
+                    [d[2] for d in sizes],
+                    [d[3] for d in sizes],
+                )
+                pedestrians = Pedestrians.build(
+                    [PED_ID], [pose.x_m], [pose.y_m], [ped.radius_m], ped_heights, ped_rgb
+                )
+                snapshot = WorldSnapshot(time_s, vehicles, pedestrians, self.static)
+                t1 = clock()
+                timings["snapshot_s"] += t1 - t0
+
+                detections = perceive(
+                    snapshot,
+                    EgoPose(ego_x, ego_y, ego_yaw, EGO_ID),
+                    self.sensors,
+                    perception_rng,
+                    time_s,
+                    link,
+                )
+                t2 = clock()
+                timings["perception_s"] += t2 - t1
+
+                reported: list[PerceivedPedestrian] = []
+                sources = (
+                    ("onboard_camera", detections.camera),
+                    ("onboard_lidar", detections.lidar),
+                    ("v2i", detections.v2i_received),
+                )
+                for source, found in sources:
+                    if source not in wanted:
+                        continue
+                    for pid, xy in zip(found.ids, found.xy_m):
+                        if all(p.ped_id != pid for p in reported):
+                            reported.append(PerceivedPedestrian(pid, float(xy[0]), float(xy[1]), source))
+                observation = Observation(
+                    EgoState(ego_x, ego_y, ego_yaw, ego_speed, ego_length, ego_width),
+                    tuple(reported),
+                    self.step_length_s,
+                )
+                command: Command = agent.run_step(observation, time_s)
+                target_mps = max(0.0, float(command.target_speed_mps))
+                t3 = clock()
+                timings["agent_s"] += t3 - t2
+
+                clearance_m = float(
+                    rectangle_circle_distance_m(
+                        ego_x, ego_y, ego_yaw, ego_length, ego_width, pose.x_m, pose.y_m, ped.radius_m
+                    )
+                )
+                rows.append(
+                    {
+                        "time_s": time_s,
+                        "ego_x_m": ego_x,
+                        "ego_y_m": ego_y,
+                        "ego_yaw_rad": ego_yaw,
+                        "ego_speed_mps": ego_speed,
+                        "ego_length_m": ego_length,
+                        "ego_width_m": ego_width,
+                        "ped_x_m": pose.x_m,
+                        "ped_y_m": pose.y_m,
+                        "ped_vx_mps": pose.speed_mps * math.cos(pose.heading_rad)
+                        if pose.speed_mps >= 0
+                        else -pose.speed_mps * math.cos(pose.heading_rad),
+                        "ped_vy_mps": pose.speed_mps * math.sin(pose.heading_rad)
+                        if pose.speed_mps >= 0
+                        else -pose.speed_mps * math.sin(pose.heading_rad),
+                        "ped_radius_m": ped.radius_m,
+                        "detected_onboard_camera": PED_ID in detections.camera,
+                        "detected_onboard_lidar": PED_ID in detections.lidar,
+                        "detected_roadside": condition == "v2i" and PED_ID in detections.v2i_received,
+                        "perceived": any(p.ped_id == PED_ID for p in reported),
+                        "roadside_raw": PED_ID in detections.roadside,
+                        "clearance_m": clearance_m,
+                        "command_speed_mps": target_mps,
+                        "braking": bool(command.info.get("braking", False)),
+                        "ped_state": pose.state,
+                        "sumo_collision": sumo_collision,
+                    }
+                )
+                timings["logging_s"] += clock() - t3
+
+                # End conditions, on the state at time_s.
+                if clearance_m <= 0.0:
+                    end_reason = "collision"
+                    break
+                lon = (pose.x_m - ego_x) * math.cos(ego_yaw) + (pose.y_m - ego_y) * math.sin(ego_yaw)
+                if lon < -(ego_length / 2 + ped.radius_m) and time_s > ped.start_delay_s:
+                    end_reason = "ego_passed"
+                    break
+                if walker.finished:
+                    end_reason = "pedestrian_crossed"
+                    break
+                if time_s >= setup.time_limit_s:
+                    end_reason = "time_limit"
+                    break
+
+                t4 = clock()
+                api.vehicle.setSpeed(EGO_ID, target_mps)
+                pose = walker.step(self.step_length_s, time_s, (ego_x, ego_y), ego_yaw, ego_speed, ego_length)
+                api.person.moveToXY(
+                    PED_ID, "", pose.x_m, pose.y_m, angle=yaw_rad_to_sumo_angle(pose.heading_rad), keepRoute=2
+                )
+                api.simulation.step()
+                timings["sumo_s"] += clock() - t4
+        finally:
+            agent.close()
+
+        # SUMO may register a collision in the step after ours (it checks after moving).
+        if end_reason == "collision" and not sumo_collision:
+            api.simulation.step()
+            sumo_record = self._sumo_collision(api, api.simulation.getTime())
+            sumo_collision = bool(sumo_record)
+        log = pd.DataFrame(rows)
+        indexes = episode_indexes(log, ped.age_years, injury_model=self.injury_model)
+        outcome = {
+            "scenario": setup.scenario,
+            "condition": condition,
+            "seed": seed,
+            "ped_age": ped.age_years,
+            "ped_gender": ped.gender,
+            "ped_risk": ped.risk,
+            "ped_speed_mps": ped.walking_speed_mps,
+            "ego_initial_speed_mps": setup.ego.speed_mps,
+            **indexes,
+            "sumo_collision": sumo_collision,
+            "status": "ok",
+            "error": "",
+        }
+        return EpisodeResult(setup, condition, log, outcome, end_reason, timings, sumo_record)
+
+    @staticmethod
+    def _sumo_collision(api, time_s: float) -> dict[str, Any]:
+        """SUMO's collision between the ego and the pedestrian in the last step, if it saw one."""
+        for collision in api.simulation.getCollisions():
+            if {collision.collider, collision.victim} == {EGO_ID, PED_ID}:
+                speed = collision.colliderSpeed if collision.collider == EGO_ID else collision.victimSpeed
+                return {"time_s": time_s, "ego_speed_mps": float(speed), "type": collision.type}
+        return {}
+
+    def _behaviour(self, ped) -> BehaviourParams:
+        p = self.params["pedestrians"]
+        return BehaviourParams(
+            risk=ped.risk,
+            walking_speed_mps=ped.walking_speed_mps,
+            reaction_time_s=p["reaction_time_s"],
+            awareness_ttc_s=p["awareness_ttc_s"],
+            hasten_factor=p["hasten_factor"],
+            max_speed_mps=p["hasten_max_speed_mps"],
+            step_back_speed_mps=p["step_back_speed_mps"],
+            corridor_half_width_m=p["corridor_half_width_m"],
+        )

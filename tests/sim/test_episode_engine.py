@@ -1,0 +1,164 @@
+"""The episode engine in real SUMO (libsumo): every scenario under both conditions, V2I seeing earlier
+than SV, a forced collision seen by our detector and by SUMO, a plugin that drives, bad plugins."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import subprocess
+import sys
+
+import pytest
+
+from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo.control.agent import load_agent_class
+from pedsafe_sumo.control.reference import ReferenceStack
+from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.params import load_params
+from pedsafe_sumo.safety.log import REQUIRED_COLUMNS
+from pedsafe_sumo.scenarios.registry import SCENARIOS, get_scenario
+from pedsafe_sumo.sim.episode import EpisodeRunner
+
+SITE = get_site("xueqing")
+STEP_S = 0.05
+
+
+@pytest.fixture(scope="module")
+def runner():
+    runner = EpisodeRunner(SITE, load_params(), ReferenceStack)
+    yield runner
+    runner.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_each_scenario_runs_under_both_conditions_from_the_same_world(runner, name):
+    spec = get_scenario(name)
+    results = {c: runner.run(spec, c, 4) for c in ("sv", "v2i")}
+    assert results["sv"].setup == results["v2i"].setup
+    for condition, result in results.items():
+        log = result.log
+        assert set(REQUIRED_COLUMNS) <= set(log.columns)
+        assert result.end_reason in {"collision", "ego_passed", "pedestrian_crossed", "time_limit"}
+        # Steps of 0.05 s from the insertion step on; the ego starts at its drawn speed.
+        assert log["time_s"].diff().dropna().round(6).eq(STEP_S).all()
+        assert log["ego_speed_mps"].iloc[0] == pytest.approx(result.setup.ego.speed_mps, abs=1e-6)
+        # The pedestrian starts where the scenario put them.
+        assert (log["ped_x_m"].iloc[0], log["ped_y_m"].iloc[0]) == pytest.approx(
+            result.setup.pedestrian.path_xy[0]
+        )
+        if condition == "sv":
+            assert not log["detected_roadside"].any()
+        assert result.outcome["scenario"] == name and result.outcome["status"] == "ok"
+
+
+@pytest.mark.slow
+def test_a_seed_where_v2i_perceives_the_pedestrian_before_sv(runner):
+    spec = get_scenario("crossing")
+    for seed in range(10):
+        sv, v2i = runner.run(spec, "sv", seed), runner.run(spec, "v2i", seed)
+        t_sv, t_v2i = sv.outcome["first_detection_time_s"], v2i.outcome["first_detection_time_s"]
+        if not math.isnan(t_v2i) and (math.isnan(t_sv) or t_v2i < t_sv):
+            # V2I first saw them through the roadside camera, and from further away.
+            assert "roadside" in v2i.outcome["detected_by"]
+            assert (
+                math.isnan(t_sv)
+                or v2i.outcome["first_detection_distance_m"] > sv.outcome["first_detection_distance_m"]
+            )
+            return
+    pytest.fail("no seed in 0..9 where V2I perceives the pedestrian before SV")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_forced_collision_on_the_crosswalk_is_seen_by_us_and_by_sumo_at_the_same_speed(seed):
+    never_brakes = load_agent_class("tests.sim.plugin_agents:NeverBrakes")
+    runner = EpisodeRunner(SITE, load_params(), never_brakes)
+    try:
+        spec = get_scenario("crossing").with_overrides(
+            {"conflict_offset_min_s": 0, "conflict_offset_max_s": 0}
+        )
+        setup = runner.draw_setup(spec, seed)
+        setup = dataclasses.replace(setup, pedestrian=dataclasses.replace(setup.pedestrian, risk="unaware"))
+        result = runner.run(spec, "sv", seed, setup=setup)
+    finally:
+        runner.close()
+    assert result.end_reason == "collision" and result.outcome["collision"]
+    # The ego never braked: the impact speed is its initial speed.
+    assert result.outcome["impact_speed_mps"] == pytest.approx(setup.ego.speed_mps, abs=1e-6)
+    assert result.outcome["sumo_collision"]
+    sumo = result.sumo_collision
+    assert sumo["type"] == "crossing"
+    assert sumo["ego_speed_mps"] == pytest.approx(result.outcome["impact_speed_mps"], abs=0.01)
+    assert abs(sumo["time_s"] - result.log["time_s"].iloc[-1]) <= STEP_S + 1e-9
+
+
+@pytest.mark.slow
+def test_mid_block_collision_is_ours_alone_as_documented():
+    """SUMO checks person-vehicle contact only where they share a lane, crosswalk or walking area; a
+    person moved across the road with moveToXY stays on the sidewalk lane, so SUMO misses it."""
+    runner = EpisodeRunner(SITE, load_params(), load_agent_class("tests.sim.plugin_agents:NeverBrakes"))
+    try:
+        spec = get_scenario("jaywalking").with_overrides(
+            {"conflict_offset_min_s": 0, "conflict_offset_max_s": 0}
+        )
+        setup = runner.draw_setup(spec, 0)
+        setup = dataclasses.replace(setup, pedestrian=dataclasses.replace(setup.pedestrian, risk="unaware"))
+        result = runner.run(spec, "sv", 0, setup=setup)
+    finally:
+        runner.close()
+    assert result.outcome["collision"] and not result.outcome["sumo_collision"]
+
+
+@pytest.mark.slow
+def test_plugin_loaded_by_path_drives_the_ego():
+    agent = load_agent_class("tests.sim.plugin_agents:StopsAtOnce")
+    runner = EpisodeRunner(SITE, load_params(), agent)
+    try:
+        result = runner.run(get_scenario("crossing"), "v2i", 3)
+    finally:
+        runner.close()
+    log = result.log
+    first = log.index[log["perceived"]][0]
+    # It commands 0 m/s from the first perception on; SUMO applies the command in the next step.
+    assert (log.loc[first:, "command_speed_mps"] == 0.0).all()
+    assert (log.loc[first + 1 :, "ego_speed_mps"] == 0.0).all()
+    assert not result.outcome["collision"]
+
+
+@pytest.mark.slow
+def test_reference_stack_brakes_for_a_perceived_pedestrian(runner):
+    spec = get_scenario("crossing").with_overrides({"conflict_offset_min_s": 0, "conflict_offset_max_s": 0})
+    result = runner.run(spec, "v2i", 0)
+    log = result.log
+    assert log["braking"].any()
+    braking_from = log.index[log["braking"]][0]
+    assert log["ego_speed_mps"].iloc[-1] < log["ego_speed_mps"].iloc[braking_from]
+    # It braked only after seeing the pedestrian, and no sooner than the 0.4 s reaction time.
+    first_seen = log.loc[log["perceived"], "time_s"].iloc[0]
+    assert log.loc[braking_from, "time_s"] >= first_seen + 0.4 - 1e-9
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--algorithm", "no_such_pkg.agent:Agent"], "cannot import module 'no_such_pkg.agent'"),
+        (["--algorithm", "tests.sim.plugin_agents:Missing"], "has no class 'Missing'"),
+        (["--algorithm", "pedsafe_sumo.control.agent:Agent"], "abstract methods"),
+        (["--condition", "v3i"], "unknown condition 'v3i'"),
+        (["--set", "time_limit_s=-3"], "time_limit_s > 0"),
+        (["--set", "perception.lidar.range_m=-1"], "perception.lidar.range_m"),
+        (["--set", "no_such_field=1"], "unknown scenario parameter 'no_such_field'"),
+    ],
+)
+def test_bad_input_to_the_episode_cli_is_one_line_and_exit_2(args, message):
+    proc = subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.episode", "--scenario", "crossing", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and message in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.stdout == ""
