@@ -44,11 +44,11 @@ from pedsafe_sumo.perception import (  # noqa: E402
     V2ILink,
     VehicleBoxes,
     WorldSnapshot,
-    front_bumper_to_centre,
     load_roadside_units,
     load_static_occluders,
     perceive,
     sumo_angle_to_yaw_rad,
+    sumo_front_to_centre,
 )
 from pedsafe_sumo.perception.pipeline import _cast_all  # noqa: E402
 from pedsafe_sumo.perception.sensors import (  # noqa: E402
@@ -130,7 +130,7 @@ def read_snapshot(ts) -> tuple:
         x, y = ts.vehicle.getPosition(vid)
         yaw = float(sumo_angle_to_yaw_rad(ts.vehicle.getAngle(vid)))
         length = ts.vehicle.getLength(vid)
-        cx, cy = front_bumper_to_centre(x, y, yaw, length)
+        cx, cy = sumo_front_to_centre(x, y, yaw, length)
         v.append((vid, float(cx), float(cy), yaw, length, ts.vehicle.getWidth(vid), ts.vehicle.getHeight(vid),
                   ts.vehicle.getColor(vid)[:3]))  # fmt: skip
     p = []

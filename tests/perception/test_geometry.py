@@ -10,12 +10,12 @@ import pytest
 
 from pedsafe_sumo.perception.geometry import (
     focal_length_px,
-    front_bumper_to_centre,
     intrinsic_matrix,
     invert_transform,
     project_points,
     roadside_to_vehicle_camera,
     sumo_angle_to_yaw_rad,
+    sumo_front_to_centre,
     transform_points,
     world_to_camera_transform,
     yaw_rad_to_sumo_angle,
@@ -35,9 +35,9 @@ def test_sumo_angle_conversion(sumo_deg, yaw_deg):
     assert float(yaw_rad_to_sumo_angle(math.radians(yaw_deg))) == pytest.approx(sumo_deg % 360)
 
 
-def test_front_bumper_to_centre():
+def test_sumo_front_to_centre():
     # SUMO reports the front bumper; a 4 m car heading north (yaw 90 deg) at (10, 20) is centred at (10, 18).
-    x, y = front_bumper_to_centre(10.0, 20.0, math.pi / 2, 4.0)
+    x, y = sumo_front_to_centre(10.0, 20.0, math.pi / 2, 4.0)
     assert (float(x), float(y)) == pytest.approx((10.0, 18.0))
 
 

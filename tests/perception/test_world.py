@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -113,7 +114,9 @@ def test_xueqing_site_occluders_and_roadside_unit(params):
     assert len(st.poly_ids) >= 20 and set(st.poly_kinds) == {"building"}
     assert np.all(st.z_top_m > 0)
     (unit,) = load_roadside_units(site / "xueqing.rsu.add.xml", 6.0, 20.0)
-    assert unit.id == "rsu_camera_0" and unit.height_m == 6.0
-    # yaw_deg 299.31 (SUMO, clockwise from north) = 150.69 deg counter-clockwise from east.
-    assert math.degrees(unit.yaw_rad) % 360 == pytest.approx(150.69)
-    assert math.degrees(unit.pitch_down_rad) == pytest.approx(14.04)
+    facts = json.loads((site / "xueqing.site.json").read_text())["roadside_unit"]
+    assert unit.id == facts["id"] and unit.height_m == facts["height_m"]
+    assert (unit.x_m, unit.y_m) == (facts["x"], facts["y"])
+    # yaw_deg is SUMO's (clockwise from north): yaw = 90 - yaw_deg counter-clockwise from east.
+    assert math.degrees(unit.yaw_rad) == pytest.approx(90.0 - facts["yaw_deg"])
+    assert math.degrees(unit.pitch_down_rad) == pytest.approx(facts["pitch_deg"])
