@@ -152,6 +152,11 @@ def _empty_plan(extra: dict) -> RayPlan:
 
 def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     """Cull pedestrians and emit one ray per sample point of each remaining pedestrian."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _plan_camera(spec, pose, peds)
+
+
+def _plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     m = len(peds)
     height_px = np.zeros(m)
     extra = {"height_px": height_px, "candidates": np.zeros(0, dtype=np.int64)}
@@ -162,14 +167,15 @@ def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPla
     k = spec.intrinsics
     f, cx, cy = k[0, 0], k[0, 2], k[1, 2]
     # Camera-frame coordinates of each pedestrian's axis bottom and top.
-    base = np.outer(peds.x_m, rot[:, 0]) + np.outer(peds.y_m, rot[:, 1]) + trans
-    top = base + np.outer(peds.height_m, rot[:, 2])
+    base = peds.x_m[:, None] * rot[:, 0] + peds.y_m[:, None] * rot[:, 1] + trans
+    top = base + peds.height_m[:, None] * rot[:, 2]
     zb, zt = base[:, 2], top[:, 2]
-    front = (zb > _NEAR_CLIP_M + peds.radius_m) & (zt > _NEAR_CLIP_M + peds.radius_m)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ub, vb = f * base[:, 0] / zb + cx, f * base[:, 1] / zb + cy
-        ut, vt = f * top[:, 0] / zt + cx, f * top[:, 1] / zt + cy
-        half_w = f * peds.radius_m / np.minimum(zb, zt)
+    front = np.minimum(zb, zt) > _NEAR_CLIP_M + peds.radius_m
+    if not front.any():
+        return _empty_plan(extra)
+    ub, vb = f * base[:, 0] / zb + cx, f * base[:, 1] / zb + cy
+    ut, vt = f * top[:, 0] / zt + cx, f * top[:, 1] / zt + cy
+    half_w = f * peds.radius_m / np.minimum(zb, zt)
     height_px[front] = np.hypot(ub - ut, vb - vt)[front]
     umin = np.minimum(ub, ut) - half_w
     umax = np.maximum(ub, ut) + half_w
@@ -196,9 +202,8 @@ def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPla
     pts[:, 1] = py.ravel()
     pts[:, 2] = pz.ravel()
     pc = pts @ rot.T + trans
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = f * pc[:, 0] / pc[:, 2] + cx
-        v = f * pc[:, 1] / pc[:, 2] + cy
+    u = f * pc[:, 0] / pc[:, 2] + cx
+    v = f * pc[:, 1] / pc[:, 2] + cy
     in_image = (pc[:, 2] > _NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
     vec = pts - cam
     dist = np.sqrt((vec * vec).sum(axis=1))
@@ -234,6 +239,10 @@ def delta_e_cie76(rgb_a: np.ndarray, rgb_b: np.ndarray) -> np.ndarray:
 
 def _lab_tables(world: WorldSnapshot, ground_rgb, sky_rgb) -> dict:
     """CIELAB of every colour in the snapshot, per surface kind (static tables converted once)."""
+    key = (tuple(ground_rgb), tuple(sky_rgb))
+    cached = world.__dict__.get("_lab_tables")
+    if cached is not None and cached[0] == key:
+        return cached[1]
     st = world.static
     static_lab = st._grid.get("lab")
     if static_lab is None:
@@ -241,7 +250,7 @@ def _lab_tables(world: WorldSnapshot, ground_rgb, sky_rgb) -> dict:
         st._grid["lab"] = static_lab
     n_v = len(world.vehicles)
     dyn = rgb_to_lab(np.vstack([world.vehicles.rgb, world.pedestrians.rgb, [ground_rgb, sky_rgb]]))
-    return {
+    tables = {
         KIND_VEHICLE: dyn[:n_v],
         KIND_PEDESTRIAN: dyn[n_v:-2],
         KIND_PRISM: static_lab[0],
@@ -249,6 +258,8 @@ def _lab_tables(world: WorldSnapshot, ground_rgb, sky_rgb) -> dict:
         KIND_GROUND: dyn[-2],
         "sky": dyn[-1],
     }
+    object.__setattr__(world, "_lab_tables", (key, tables))  # converted once per snapshot
+    return tables
 
 
 def surface_lab(hits: RayHits, tables: dict) -> np.ndarray:

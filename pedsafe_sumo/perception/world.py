@@ -288,7 +288,10 @@ class StaticOccluders:
             return np.zeros(0, dtype=np.int64)
         start, edges, ny = g["start"], g["edges"], g["ny"]
         parts = [edges[start[ix * ny + iy0] : start[ix * ny + iy1 + 1]] for ix in range(ix0, ix1 + 1)]
-        cand = np.unique(np.concatenate(parts)) if len(parts) > 1 else np.unique(parts[0])
+        seen = np.zeros(g["n"], dtype=bool)
+        for part in parts:
+            seen[part] = True
+        cand = np.flatnonzero(seen)
         keep = (
             (g["xmin"][cand] <= xmax)
             & (g["xmax"][cand] >= xmin)
