@@ -7,11 +7,12 @@
     det = perceive(snapshot, ego, suite, rng, snapshot.time_s, link)
     det.sv.ids, det.v2i.ids                        # single-vehicle vs cooperative perception
 
-All sensors are evaluated in every condition so that the draws from ``rng`` (per-frame misses,
-packet loss, noise) are the same under SV and V2I for the same seed; the condition only chooses
-which union the AD stack reads. Draw order per frame: onboard camera misses, LiDAR misses,
-roadside misses (each ``rng.random(M)``, only when its miss probability is > 0), then per
-roadside unit one loss draw and, unless lost, two noise draws per detected pedestrian.
+All sensors are evaluated in every condition; the condition only chooses which union the AD stack
+reads. Draw order per frame: onboard camera misses, LiDAR misses, roadside misses (each
+``rng.random(M)``, only when its miss probability is > 0), then, when there is a link, per roadside
+unit one loss draw and, unless lost, two noise draws per detected pedestrian, from the link's own
+generator when it has one (recommended: then the onboard draws are the same with or without a
+link, so SV and V2I episodes of one seed stay paired), else from ``rng``.
 """
 
 from __future__ import annotations
@@ -280,7 +281,8 @@ def perceive(
         for unit, pose, det in zip(sensors.roadside_units, rsu_poses, rsu_dets, strict=True):
             idx = np.nonzero(det)[0]
             xy = np.column_stack([peds.x_m[idx], peds.y_m[idx]])
-            link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, rng)
+            link_rng = link.rng if link.rng is not None else rng
+            link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, link_rng)
         ids, xys, pxs = [], [], []
         for msg in link.receive(time_s):
             if not msg.ped_ids:
@@ -312,11 +314,12 @@ def perceive(
 
 
 class PerceptionSystem:
-    """Per-episode convenience: a sensor suite plus its own V2I link."""
+    """Per-episode convenience: a sensor suite plus its own V2I link (with its own generator when
+    ``link_rng`` is given, see :class:`V2ILink`)."""
 
-    def __init__(self, sensors: SensorSuite):
+    def __init__(self, sensors: SensorSuite, link_rng: np.random.Generator | None = None):
         self.sensors = sensors
-        self.link = V2ILink(sensors.v2i)
+        self.link = V2ILink(sensors.v2i, link_rng)
 
     def perceive(
         self, snapshot: WorldSnapshot, ego: EgoPose, rng: np.random.Generator, time_s: float | None = None

@@ -98,3 +98,20 @@ def test_lost_message_leaves_a_gap_in_v2i(params):
         det = system.perceive(snap(step * STEP_S), EGO, rng, step * STEP_S)
         assert det.v2i.ids == ()
     assert system.link.lost == 4
+
+
+def test_link_with_its_own_generator_leaves_onboard_draws_paired(params):
+    # With per-frame misses on, the onboard draws must not depend on whether a link exists (SV vs V2I).
+    suite, snap = _hidden(params, {"perception.lidar.miss_probability": 0.5})
+    sv_rng, v2i_rng = np.random.default_rng(5), np.random.default_rng(5)
+    with_link = PerceptionSystem(suite, link_rng=np.random.default_rng(99))
+    from pedsafe_sumo.perception import perceive
+
+    for step in range(20):
+        t = step * STEP_S
+        open_snap = world([ego_box()], [("p", 31.5, 0.0, 0.25, 1.75, RED)], time_s=t)
+        a = perceive(open_snap, EGO, suite, sv_rng, t)  # SV: no link
+        b = with_link.perceive(open_snap, EGO, v2i_rng, t)
+        assert a.lidar.ids == b.lidar.ids
+    assert sv_rng.random() == v2i_rng.random()
+    assert with_link.link.sent == 20
