@@ -6,6 +6,8 @@ LiDAR at (0, 0, 1.9), channels every 40/31 = 1.2903 deg from -25 deg, azimuths e
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from perception_scenes import BLUE, EGO, RED, YELLOW, ego_box, make_suite, pole, world
@@ -204,3 +206,40 @@ def test_ego_hides_a_pedestrian_from_the_roadside_camera(params):
     assert det.roadside.ids == ()
     det = perceive(world([], [ped]), ego, suite, np.random.default_rng(0), 0.0)
     assert det.roadside.ids == ("p",)
+
+
+def test_pedestrian_at_the_image_edge_is_partly_visible(suite):
+    # Centre 28.3 m from the camera at a bearing of 44.9 deg (left image edge at 45 deg). The sample
+    # columns sit 0, +-0.1, +-0.2 m across the silhouette, i.e. +-0.20 and +-0.41 deg around 44.9:
+    # the two columns on the left (45.1, 45.3 deg) fall outside the image, three of five remain.
+    b = math.radians(44.9)
+    ped = ("p", 1.5 + 28.3 * math.cos(b), 28.3 * math.sin(b), 0.25, 1.75, RED)
+    det = run(suite, world([ego_box()], [ped]))
+    assert det.diagnostics["camera"].visible_fraction[0] == pytest.approx(3 / 5)
+    assert det.camera.ids == ("p",)
+
+
+def test_projected_height_threshold_near_56m(suite):
+    # 20 px for a 1.75 m pedestrian at Z = 640 * 1.75 / 20 = 56 m: 55 m gives 20.4 px, 57 m 19.6 px.
+    det = run(
+        suite, world([ego_box()], [("near", 56.5, 0.0, 0.25, 1.75, RED), ("far", 58.5, 3.0, 0.25, 1.75, RED)])
+    )
+    assert det.diagnostics["camera"].height_px == pytest.approx([640 * 1.75 / 55, 640 * 1.75 / 57])
+    assert det.camera.ids == ("near",)
+
+
+def test_lidar_merges_a_pedestrian_against_a_wall_but_not_two_pedestrians_together(params):
+    from pedsafe_sumo.perception import StaticOccluders
+
+    # Wall face at x = 20.3, 0.3 m behind the centre of a pedestrian at x = 20 (as for the vehicle).
+    wall = np.array([[20.3, -10], [30, -10], [30, 10], [20.3, 10]], dtype=float)
+    static = StaticOccluders.build([("b", "building", wall, 0.0, 10.0, (200, 190, 175))])
+    det = run(make_suite(params), world([ego_box()], [("p", 20.0, 0.0, 0.25, 1.75, RED)], static))
+    assert det.diagnostics["lidar"].merged[0] and det.lidar.ids == ()
+    # Two pedestrians shoulder to shoulder (centres 0.55 m apart) in the open: both separate clusters
+    # for the rule (pedestrian returns never merge a pedestrian).
+    det = run(
+        make_suite(params),
+        world([ego_box()], [("a", 20.0, 0.275, 0.25, 1.75, RED), ("b", 20.0, -0.275, 0.25, 1.75, RED)]),
+    )
+    assert set(det.lidar.ids) == {"a", "b"}
