@@ -9,9 +9,9 @@
    - mid-lane: halfway along the entering edge (reported, inside the queue reach on the short approaches);
    and inside the junction: halfway along the first internal lane of every vehicle connection of the
    signalised junction.
-3. Runs the `sumo` binary for the duration with the site's step length and pedestrian model, and reads the
-   loops' output: each vehicle's speed as its front crosses a loop, and the gaps between successive fronts
-   over the same mid-block loop (same-lane headways).
+3. Runs the `sumo` binary for the duration with the site's own .sumocfg (step length, pedestrian model,
+   collision checks), and reads the loops' output: each vehicle's speed as its front crosses a loop, and
+   the gaps between successive fronts over the same mid-block loop (same-lane headways).
 4. Compares with the fits by the Kolmogorov-Smirnov distance, plots ECDFs (docs/figures/*.png), and writes the
    measured part of docs/demand_validation.md.
 
@@ -66,10 +66,11 @@ class Detector:
 
 
 def main_junction(site: Site):
-    """The signalised junction of the study: the traffic-light node with the most incoming vehicle lanes."""
+    """The signalised junction of the study: the traffic-light node with the most incoming vehicle lanes
+    (None on a network without traffic lights)."""
     tls = [n for n in site.net.getNodes() if n.getType().startswith("traffic_light")]
     if not tls:
-        raise SiteError(f"network {site.files.net_file} has no signalised junction")
+        return None  # e.g. an open road: no junction loops
 
     def incoming_lanes(node) -> int:
         return sum(1 for e in node.getIncoming() for lane in e.getLanes() if lane.allows(VEHICLE_CLASS))
@@ -86,7 +87,7 @@ def place_detectors(site: Site) -> list[Detector]:
         detectors.append(Detector(f"half_{lane.lane_id}", lane.lane_id, lane.length_m / 2.0, "midlane"))
     junction = main_junction(site)
     seen = set()
-    for edge in sorted(junction.getIncoming(), key=lambda e: e.getID()):
+    for edge in sorted(junction.getIncoming() if junction else [], key=lambda e: e.getID()):
         for lane in edge.getLanes():
             if not lane.allows(VEHICLE_CLASS):
                 continue
@@ -112,35 +113,44 @@ def detector_lines(detectors: list[Detector], output_file: str) -> list[str]:
     return lines
 
 
-def _sumocfg_settings(site: Site) -> tuple[float, str, list[str]]:
-    """(step length s, pedestrian model, additional files) from the site's .sumocfg when there is one."""
-    step_length_s, ped_model, additionals = 0.1, "striping", []
+def _site_config(site: Site) -> tuple[Path | None, list[str]]:
+    """The site's .sumocfg (None when it has none) and the additional files it names."""
     cfg = site.files.directory / f"{site.files.name}.sumocfg"
-    if cfg.is_file():
-        root = ET.parse(cfg).getroot()
-        for el in root.iter():
-            value = el.get("value")
-            if el.tag == "step-length" and value:
-                step_length_s = float(value)
-            elif el.tag == "pedestrian.model" and value:
-                ped_model = value
-            elif el.tag == "additional-files" and value:
-                additionals = [str(site.files.directory / f) for f in value.split(",") if f.strip()]
-    return step_length_s, ped_model, additionals
+    if not cfg.is_file():
+        return None, []
+    additionals: list[str] = []
+    for el in ET.parse(cfg).getroot().iter("additional-files"):
+        additionals = [
+            str(site.files.directory / f.strip()) for f in el.get("value", "").split(",") if f.strip()
+        ]
+    return cfg, additionals
+
+
+#: Settings for a network without a .sumocfg (the test networks).
+FALLBACK_OPTIONS = [
+    "--step-length",
+    "0.1",
+    "--pedestrian.model",
+    "striping",
+    "--collision.check-junctions",
+    "true",
+]
 
 
 def run_sumo(
     site: Site, route_files: list[Path], detector_file: Path, end_s: float, log_file: Path
 ) -> subprocess.CompletedProcess:
-    """Run the sumo binary headless over the site with the demand and the detectors."""
-    step_length_s, ped_model, additionals = _sumocfg_settings(site)
-    cmd = [
-        sumo_binary("sumo"),
+    """Run the sumo binary headless over the site with the demand and the detectors.
+
+    With the site's own .sumocfg (step length, pedestrian model, junction collision checks, its additional
+    files), so the validation sees the simulation the episodes run; only the inputs and outputs change.
+    """
+    cfg, additionals = _site_config(site)
+    cmd = [sumo_binary("sumo"), *(["-c", str(cfg)] if cfg else FALLBACK_OPTIONS)]
+    cmd += [
         "--net-file", str(site.files.net_file),
         "--route-files", ",".join(str(p) for p in route_files),
         "--additional-files", ",".join([*additionals, str(detector_file)]),
-        "--step-length", f"{step_length_s:g}",
-        "--pedestrian.model", ped_model,
         "--end", f"{end_s:g}",
         "--no-step-log", "true",
         "--duration-log.statistics", "true",
@@ -245,7 +255,7 @@ def plot_ecdfs(comparisons: list[Comparison], figures_dir: Path, prefix: str, ti
 
 def sumo_statistics(log_text: str) -> dict[str, str]:
     """Lines of SUMO's --duration-log.statistics summary (inserted, waiting, teleports...), first of each."""
-    wanted = ("Inserted", "Running", "Waiting", "Teleports", "Emergency Braking", "Collisions", "DepartDelay")
+    wanted = ("Inserted", "Running", "Waiting", "Teleports", "Emergency Braking", "Jammed", "DepartDelay")
     out: dict[str, str] = {}
     for line in log_text.splitlines():
         key, _, value = line.strip().partition(":")

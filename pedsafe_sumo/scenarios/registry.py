@@ -81,10 +81,13 @@ class ScenarioSpec:
     placement: str
     #: Which lognormal speed fit the ego's initial speed comes from: "intersection" or "non_intersection".
     ego_speed_fit: str
-    #: The ego reaches the pedestrian's path this long after the pedestrian reaches the centre of the
-    #: ego's lane (uniform draw; negative: before) [s]. Sets how tight the encounter is.
-    conflict_offset_min_s: float = -0.5
-    conflict_offset_max_s: float = 2.0
+    #: The ego's front reaches the pedestrian's path this long after the pedestrian reaches the centre
+    #: of the ego's lane, if nobody reacts (uniform draw; negative: before) [s]. Like Euro NCAP's AEB
+    #: pedestrian tests, every episode is on a collision course: within +-0.6 s a 1.4 m/s pedestrian is
+    #: less than 0.9 m (half the car's width) from the lane centre when the car arrives. Wider windows
+    #: add episodes that end safely whatever the AD stack does.
+    conflict_offset_min_s: float = -0.6
+    conflict_offset_max_s: float = 0.6
     #: Pedestrian waits this long before stepping off the kerb [s].
     ped_start_delay_s: float = 1.0
     #: Distance of the mid-block crossing line before the crosswalk (jaywalking) [m].

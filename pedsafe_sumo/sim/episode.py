@@ -158,7 +158,10 @@ class EpisodeRunner:
                 # Would have entered -depart_s ago: it is now that far down its first edge at free speed
                 # (or has left it, and then it no longer matters to the scene).
                 pos_m = vehicle.desired_speed_mps * -depart_s
-                if pos_m > self._edge_lengths[vehicle.lane.edge_id] - 10.0:
+                # Not within its stopping distance (4.5 m/s2, SUMO's default) of the edge end: SUMO
+                # refuses to insert a vehicle that could not stop there for a red light.
+                stopping_m = vehicle.desired_speed_mps**2 / (2 * 4.5) + 10.0
+                if pos_m > self._edge_lengths[vehicle.lane.edge_id] - stopping_m:
                     continue
                 depart_s = 0.0
             route = self._route_edges[vehicle.route_id]

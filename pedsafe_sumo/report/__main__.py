@@ -1,0 +1,170 @@
+"""Report of a batch run: Table I with 95% intervals, the paired SV-vs-V2I tests, and the figures.
+
+    python -m pedsafe_sumo.report DIR
+
+Prints the tables and writes DIR/tables/{table1,paired}.{csv,md} and DIR/figures/*.png (see
+docs/report.md). Bad input (no DIR, no episodes.parquet, missing columns) ends in one line on stderr
+and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from pathlib import Path
+
+from pedsafe_sumo.report import figures
+from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, run_header
+from pedsafe_sumo.report.summaries import (
+    CASE_SCENARIO,
+    choose_case_pair,
+    detection_summaries,
+    load_case_traces,
+    ok_episodes,
+)
+from pedsafe_sumo.report.tables import (
+    PAIRED_TITLE,
+    TABLE_ONE_TITLE,
+    condition_label,
+    paired_of_run,
+    paired_rows,
+    table_one_of_run,
+    table_one_rows,
+    text_table,
+    write_tables,
+)
+
+TABLES_DIR = "tables"
+FIGURES_DIR = "figures"
+
+
+def _fmt_time(value: float) -> str:
+    return "never" if math.isnan(value) else f"{value:.2f} s"
+
+
+def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
+    """Every figure the run's data allow; `say` gets one line per figure written or skipped."""
+    written: list[Path] = []
+    ok = ok_episodes(run.episodes)
+
+    jaywalking = ok[ok["scenario"] == CASE_SCENARIO]
+    if jaywalking.empty:
+        say(f"note: no {CASE_SCENARIO} episodes (status ok) in this run: injury figures skipped")
+    else:
+        written.append(
+            figures.injury_vs_age(jaywalking, CASE_SCENARIO, out_dir / figures.FIGURE_FILES["injury_vs_age"])
+        )
+        written.append(
+            figures.injury_vs_speed(
+                jaywalking, CASE_SCENARIO, out_dir / figures.FIGURE_FILES["injury_vs_speed"]
+            )
+        )
+
+    summaries = detection_summaries(run.episodes)
+    if summaries:
+        for s in summaries:
+            where = (
+                f"90% of episodes detect beyond {s.distance_90_m:.1f} m"
+                if math.isfinite(s.distance_90_m)
+                else "fewer than 90% of episodes ever detect the pedestrian"
+            )
+            say(
+                f"first detection, {s.scenario} {condition_label(s.condition)}: {where} "
+                f"({s.n_never} of {s.n} never)"
+            )
+        written.append(
+            figures.first_detection_distance(
+                summaries, out_dir / figures.FIGURE_FILES["first_detection_distance"]
+            )
+        )
+    else:
+        say("note: no episode with status ok: first-detection figure skipped")
+
+    pair = choose_case_pair(run)
+    if pair is None:
+        say(
+            f"note: no case pair (SV and V2I case logs of the same seed) in {run.cases_dir}: "
+            "case figure skipped"
+        )
+    else:
+        try:
+            traces = load_case_traces(run, pair)
+        except Exception as exc:  # a broken case file should not cost the rest of the report
+            say(
+                f"note: cannot read the case logs of {pair.scenario} seed {pair.seed} ({exc}): "
+                "case figure skipped"
+            )
+        else:
+            say(
+                f"case figure: {pair.scenario} episode {pair.episode} (seed {pair.seed}), first perceived "
+                f"SV {_fmt_time(pair.sv_first_detection_s)}, V2I {_fmt_time(pair.v2i_first_detection_s)}"
+            )
+            written.append(
+                figures.case_speed_vs_frame(
+                    pair, traces, out_dir / figures.FIGURE_FILES["case_speed_vs_frame"]
+                )
+            )
+    return written
+
+
+def report(run: RunDirectory, say=print) -> list[Path]:
+    """Print the tables, write tables and figures under the run directory; returns the files written."""
+    try:
+        table = table_one_of_run(run.episodes)
+        paired = paired_of_run(run.episodes)
+    except ValueError as exc:
+        raise ReportError(f"{run.path}: {exc}") from exc
+    if run.run_info is not None:
+        say(run_header(run))
+    if run.run_info_problem:
+        say(f"note: {run.run_info_problem}")
+    say("")
+    say(TABLE_ONE_TITLE)
+    say(text_table(*table_one_rows(table)))
+    say("")
+    say(PAIRED_TITLE)
+    say(text_table(*paired_rows(paired)))
+    say("")
+    written = write_tables(table, paired, run.path / TABLES_DIR)
+    written += write_figures(run, run.path / FIGURES_DIR, say)
+    say("wrote " + ", ".join(str(p.relative_to(run.path)) for p in written) + f" in {run.path}")
+    return written
+
+
+class _StdoutLines:
+    """print() that stops printing, not reporting, when stdout goes away (`... | head`)."""
+
+    def __init__(self) -> None:
+        self.closed = False
+
+    def __call__(self, line: str) -> None:
+        if self.closed:
+            return
+        try:
+            print(line, flush=True)
+        except BrokenPipeError:
+            self.closed = True
+            # Further writes, and the interpreter's last flush, go nowhere instead of failing.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m pedsafe_sumo.report", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument(
+        "run_dir", metavar="DIR", type=Path, help="run directory written by pedsafe_sumo.batch"
+    )
+    args = parser.parse_args(argv)
+    try:
+        report(load_run(args.run_dir), say=_StdoutLines())
+    except ReportError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

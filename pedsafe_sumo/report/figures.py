@@ -1,0 +1,222 @@
+"""The report's figures, drawn with matplotlib's Agg canvas (no pyplot, no display, no global state).
+
+Every figure is a PNG at 150 dpi with labelled axes (units in brackets), a title and a legend;
+SV is always orange-red and V2I always blue. The numbers come from `summaries`; nothing is computed
+here beyond laying them out.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from pedsafe_sumo.report.summaries import (
+    MPS_TO_KMH,
+    CasePair,
+    CaseTrace,
+    DetectionSummary,
+    binned_mean,
+    quantile_edges,
+)
+from pedsafe_sumo.report.tables import condition_label
+
+DPI = 150
+COLOURS = {"sv": "orangered", "v2i": "tab:blue"}
+OTHER_COLOUR = "tab:gray"
+FIGURE_FILES = {
+    "injury_vs_age": "injury_vs_age.png",
+    "injury_vs_speed": "injury_vs_speed.png",
+    "first_detection_distance": "first_detection_distance.png",
+    "case_speed_vs_frame": "case_speed_vs_frame.png",
+}
+#: Case figure: long dashes mark the first onboard detection, short dashes the first roadside one.
+ONBOARD_DASHES = (0, (7, 3))
+ROADSIDE_DASHES = (0, (2, 2))
+AGE_BINS = 8
+SPEED_BINS = 8
+
+
+def colour(condition: str) -> str:
+    return COLOURS.get(condition, OTHER_COLOUR)
+
+
+def _new_figure(width_in: float, height_in: float) -> Figure:
+    figure = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def _save(figure: Figure, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=DPI, format="png")
+    return path
+
+
+def _conditions(episodes: pd.DataFrame) -> list[str]:
+    present = list(pd.unique(episodes["condition"]))
+    return [c for c in COLOURS if c in present] + [c for c in present if c not in COLOURS]
+
+
+def _injury_figure(episodes: pd.DataFrame, x: np.ndarray, n_bins: int, xlabel: str, title: str, path: Path):
+    """P_I of each episode against x (scatter) and its mean over equal-count bins of x (line, drawn at
+    each bin's mean x); the bins are shared by SV and V2I."""
+    figure = _new_figure(6.4, 4.2)
+    ax = figure.subplots()
+    edges = quantile_edges(x, n_bins)
+    for condition in _conditions(episodes):
+        mask = (episodes["condition"] == condition).to_numpy()
+        y = episodes["injury_probability"].to_numpy(dtype=float)[mask]
+        xs = x[mask]
+        label = condition_label(condition)
+        ax.scatter(
+            xs, y, s=10, alpha=0.35, color=colour(condition), label=f"{label}: episodes (n={mask.sum()})"
+        )
+        means = binned_mean(xs, y, edges)
+        ax.plot(
+            means["x_mean"],
+            means["mean"],
+            "-o",
+            color=colour(condition),
+            linewidth=2,
+            markersize=4,
+            label=f"{label}: mean per bin",
+        )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("injury probability P_I [-]")
+    top = float(np.nanmax(episodes["injury_probability"].to_numpy(dtype=float), initial=0.0))
+    ax.set_ylim(bottom=-0.02 * max(top, 0.05), top=1.1 * max(top, 0.05))
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    return _save(figure, path)
+
+
+def injury_vs_age(episodes: pd.DataFrame, scenario: str, path: Path) -> Path:
+    """P_I against pedestrian age, SV and V2I (the paper's S-curve figure, age panel)."""
+    return _injury_figure(
+        episodes,
+        episodes["ped_age"].to_numpy(dtype=float),
+        AGE_BINS,
+        "pedestrian age [years]",
+        f"{scenario}: injury probability against pedestrian age",
+        path,
+    )
+
+
+def injury_vs_speed(episodes: pd.DataFrame, scenario: str, path: Path) -> Path:
+    """P_I against the ego's initial speed in km/h, SV and V2I (the S-curve figure, speed panel)."""
+    return _injury_figure(
+        episodes,
+        episodes["ego_initial_speed_mps"].to_numpy(dtype=float) * MPS_TO_KMH,
+        SPEED_BINS,
+        "initial vehicle speed [km/h]",
+        f"{scenario}: injury probability against initial vehicle speed",
+        path,
+    )
+
+
+def first_detection_distance(summaries: list[DetectionSummary], path: Path) -> Path:
+    """Histogram of the first-detection distance, one panel per scenario, SV and V2I overlaid.
+
+    Per-scenario panels rather than one pooled distribution: where the pedestrian can first be seen
+    (at a crosswalk, mid-block, behind parked cars) is set by the scenario's geometry, so a pooled
+    histogram mixes different distributions and its 90% line would move with the mix of scenarios in
+    the run. Each panel marks, per condition, the distance X that at least 90% of that condition's
+    episodes detect at or beyond (never-detected episodes counted against it, and in the legend).
+    """
+    scenarios = list(dict.fromkeys(s.scenario for s in summaries))
+    figure = _new_figure(5.0 * len(scenarios), 4.2)
+    axes = np.atleast_1d(figure.subplots(1, len(scenarios), squeeze=False)[0])
+    for ax, scenario in zip(axes, scenarios):
+        panel = [s for s in summaries if s.scenario == scenario]
+        pooled = np.concatenate([s.distances_m for s in panel])
+        edges = (
+            np.histogram_bin_edges(pooled, bins=min(30, max(5, int(math.sqrt(max(pooled.size, 1))))))
+            if pooled.size
+            else np.array([0.0, 1.0])
+        )
+        for s in panel:
+            label = condition_label(s.condition)
+            ax.hist(
+                s.distances_m,
+                bins=edges,
+                histtype="stepfilled",
+                alpha=0.35,
+                color=colour(s.condition),
+                edgecolor=colour(s.condition),
+                label=f"{label} (n={s.n}, never detected: {s.n_never})",
+            )
+            if math.isfinite(s.distance_90_m):
+                ax.axvline(
+                    s.distance_90_m,
+                    color=colour(s.condition),
+                    linestyle="--",
+                    linewidth=1.8,
+                    label=f"{label}: 90% of episodes detect beyond {s.distance_90_m:.1f} m",
+                )
+            elif s.n:
+                ax.plot([], [], " ", label=f"{label}: fewer than 90% of episodes ever detect")
+        ax.set_xlabel("ego-pedestrian distance at first detection [m]")
+        ax.set_ylabel("episodes")
+        ax.set_title(f"{scenario}: first-detection distance")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    return _save(figure, path)
+
+
+def case_speed_vs_frame(pair: CasePair, traces: list[CaseTrace], path: Path) -> Path:
+    """Speed against frame of one paired episode, SV and V2I, with the first onboard detection and the
+    first roadside (V2I) detection as vertical dashed lines (the paper's case figure)."""
+    figure = _new_figure(7.0, 4.2)
+    ax = figure.subplots()
+    for trace in traces:
+        label = condition_label(trace.condition)
+        # V2I wide underneath, SV narrow on top: where the two runs drive alike, both stay visible.
+        ax.plot(
+            trace.frame,
+            trace.speed_kmh,
+            color=colour(trace.condition),
+            linewidth=1.6 if trace.condition == "sv" else 3.2,
+            zorder=3 if trace.condition == "sv" else 2,
+            label=f"{label}: speed",
+        )
+        if trace.collision and trace.frame.size:
+            ax.plot(
+                trace.frame[-1],
+                trace.speed_kmh[-1],
+                "X",
+                color=colour(trace.condition),
+                markersize=10,
+                markeredgecolor="black",
+                label=f"{label}: collision",
+            )
+        if trace.first_onboard_frame is not None:
+            ax.axvline(
+                trace.first_onboard_frame,
+                color=colour(trace.condition),
+                linestyle=ONBOARD_DASHES,
+                linewidth=1.4,
+                label=f"{label}: first onboard detection (frame {trace.first_onboard_frame})",
+            )
+        if trace.first_roadside_frame is not None:
+            ax.axvline(
+                trace.first_roadside_frame,
+                color=colour(trace.condition),
+                linestyle=ROADSIDE_DASHES,
+                linewidth=1.4,
+                label=f"{label}: first roadside detection (frame {trace.first_roadside_frame})",
+            )
+    ax.set_xlabel("frame [simulation step]")
+    ax.set_ylabel("ego speed [km/h]")
+    ax.set_ylim(bottom=0)
+    ax.set_title(
+        f"{pair.scenario}, episode {pair.episode} (seed {pair.seed}): speed against frame, SV and V2I"
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return _save(figure, path)

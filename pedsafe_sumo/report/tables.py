@@ -1,0 +1,189 @@
+"""Table I and the paired SV-versus-V2I comparison of a run, as DataFrames, text, Markdown and CSV.
+
+The statistics are those of `pedsafe_sumo.safety.stats` (Wilson intervals, Student-t interval of the
+mean injury, exact McNemar); this module only arranges and formats them.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pedsafe_sumo.safety.conflict import conflict_without_collision
+from pedsafe_sumo.safety.stats import paired_mcnemar, table_one
+
+CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
+#: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
+#: conflict (a conflict in an episode without a collision), derived by `paired_of_run`.
+PAIRED_OUTCOMES = {"collision": "collision", "table_conflict": "conflict"}
+TABLE_FILES = ("table1.csv", "table1.md", "paired.csv", "paired.md")
+
+
+def condition_label(condition: str) -> str:
+    return CONDITION_LABELS.get(condition, str(condition))
+
+
+def table_one_of_run(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
+    """Table I (scenario x condition) of `table_one`, rows ordered by scenario then sv before v2i."""
+    table = table_one(episodes, confidence)
+    order = {c: i for i, c in enumerate(CONDITION_LABELS)}
+    scenario_order = {s: i for i, s in enumerate(pd.unique(episodes["scenario"]))}
+    key = table["scenario"].map(scenario_order) * 100 + table["condition"].map(order).fillna(99)
+    return table.iloc[key.argsort(kind="stable")].reset_index(drop=True)
+
+
+def _flags(column: pd.Series) -> np.ndarray:
+    """A boolean column as a numpy bool array; missing values (an errored episode's) read as False."""
+    return column.astype("boolean").fillna(False).to_numpy(dtype=bool)
+
+
+def paired_of_run(episodes: pd.DataFrame) -> pd.DataFrame:
+    """Per scenario and outcome, the exact McNemar test of SV against V2I on pairs of the same episode.
+
+    Outcomes: collisions, and Table I's conflict (a conflict in an episode without a collision).
+    Columns: scenario, outcome, n_pairs, both, b (SV only), c (V2I only), neither, sv_rate, v2i_rate
+    (shares of the pairs), p_value. A scenario run under one condition only has n_pairs = 0, p = 1.
+    """
+    frame = episodes.copy()
+    frame["table_conflict"] = conflict_without_collision(
+        _flags(frame["conflict"]), _flags(frame["collision"])
+    )
+    parts = []
+    for column, name in PAIRED_OUTCOMES.items():
+        test = paired_mcnemar(frame, outcome=column)
+        test.insert(1, "outcome", name)
+        parts.append(test)
+    paired = pd.concat(parts, ignore_index=True).rename(columns={"sv_only": "b", "v2i_only": "c"})
+    n = paired["n_pairs"].where(paired["n_pairs"] > 0)
+    paired.insert(len(paired.columns) - 1, "sv_rate", (paired["both"] + paired["b"]) / n)
+    paired.insert(len(paired.columns) - 1, "v2i_rate", (paired["both"] + paired["c"]) / n)
+    scenario_order = {s: i for i, s in enumerate(pd.unique(episodes["scenario"]))}
+    return paired.sort_values(
+        "scenario", key=lambda s: s.map(scenario_order), kind="stable", ignore_index=True
+    )
+
+
+# ---------------------------------------------------------------- formatting
+def _num(value: float, digits: int = 4) -> str:
+    return "n/a" if value is None or not math.isfinite(float(value)) else f"{value:.{digits}f}"
+
+
+def _with_interval(value: float, low: float, high: float) -> str:
+    interval = "" if not (math.isfinite(low) and math.isfinite(high)) else f" [{low:.4f}, {high:.4f}]"
+    return _num(value) + interval
+
+
+def _p(value: float) -> str:
+    return "n/a" if not math.isfinite(value) else (f"{value:.4f}" if value >= 1e-4 else f"{value:.1e}")
+
+
+def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    """Header and formatted cells of Table I (rate or mean, then its 95% interval)."""
+    header = [
+        "scenario",
+        "condition",
+        "n",
+        "errors",
+        "collision rate [95% CI]",
+        "injury P_I mean [95% CI]",
+        "conflict rate [95% CI]",
+    ]
+    rows = [
+        [
+            str(r.scenario),
+            condition_label(r.condition),
+            str(r.n),
+            str(r.n_error),
+            _with_interval(r.collision_rate, r.collision_low, r.collision_high),
+            _with_interval(r.injury_mean, r.injury_low, r.injury_high),
+            _with_interval(r.conflict_rate, r.conflict_low, r.conflict_high),
+        ]
+        for r in table.itertuples(index=False)
+    ]
+    return header, rows
+
+
+def paired_rows(paired: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    header = [
+        "scenario",
+        "outcome",
+        "pairs",
+        "both",
+        "b (SV only)",
+        "c (V2I only)",
+        "neither",
+        "SV",
+        "V2I",
+        "p",
+    ]
+    rows = [
+        [
+            str(r.scenario),
+            str(r.outcome),
+            str(r.n_pairs),
+            str(r.both),
+            str(r.b),
+            str(r.c),
+            str(r.neither),
+            _num(r.sv_rate),
+            _num(r.v2i_rate),
+            _p(r.p_value),
+        ]
+        for r in paired.itertuples(index=False)
+    ]
+    return header, rows
+
+
+def text_table(header: list[str], rows: list[list[str]]) -> str:
+    """Columns padded to their widest cell; text left-aligned, the rest right-aligned."""
+    widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
+    left = {0, 1}
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(
+            c.ljust(w) if i in left else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
+        )
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([line(header), rule, *(line(r) for r in rows)])
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> str:
+    aligns = ["---" if i < 2 else "---:" for i in range(len(header))]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(aligns) + " |"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+TABLE_ONE_TITLE = (
+    "Table I: collision rate, mean injury probability P_I, conflict rate (conflict without collision)\n"
+    "95% intervals: Wilson for the rates, Student t for the mean P_I; n = episodes counted, "
+    "errors = episodes with status 'error' (left out)"
+)
+PAIRED_TITLE = (
+    "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"
+    "b = event under SV only, c = event under V2I only; SV, V2I = event rate over the pairs"
+)
+
+
+def _md_title(title: str) -> str:
+    first, _, rest = title.partition("\n")
+    return f"**{first}**\n\n{rest}" if rest else f"**{first}**"
+
+
+def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path) -> list[Path]:
+    """DIR/tables/table1.csv, table1.md, paired.csv, paired.md; returns the paths written."""
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = [directory / name for name in TABLE_FILES]
+    table.to_csv(paths[0], index=False)
+    paths[1].write_text(
+        f"{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8"
+    )
+    paired.to_csv(paths[2], index=False)
+    paths[3].write_text(
+        f"{_md_title(PAIRED_TITLE)}\n\n{markdown_table(*paired_rows(paired))}\n", encoding="utf-8"
+    )
+    return paths
