@@ -116,26 +116,24 @@ def _versions_text(versions: Any) -> str:
 
 
 def run_header(run: RunDirectory) -> str:
-    """One line about the run from run.json: episodes, seed, wall time, versions (those that are there).
-
-    run.json's layout belongs to the batch; the keys are looked up at the top level or one level down:
-    episodes (`episodes` / `n_episodes`), seed (`seed` / `base_seed`), wall time (`wall_time_s` / `wall_s`
-    / `elapsed_s`), versions (`versions`). Without run.json the line counts the parquet's rows.
+    """One line about the run from the batch's run.json: episodes per scenario (`episodes_per_scenario`),
+    run seed (`run_seed`), wall time (`wall_time_s`), versions (`versions`), those that are there.
+    Without run.json the line counts the parquet's rows.
     """
     n_rows = len(run.episodes)
     if run.run_info is None:
         return f"run {run.path}: {n_rows} episode rows (no {RUN_FILE})"
     info = run.run_info
     parts = [f"run {run.path}:"]
-    episodes = _find(info, "episodes", "n_episodes")
+    episodes = _find(info, "episodes_per_scenario")
     if isinstance(episodes, (int, float)) and not isinstance(episodes, bool):
         parts.append(f"{episodes:g} episodes per scenario and condition ({n_rows} rows)")
     else:
         parts.append(f"{n_rows} episode rows")
-    seed = _find(info, "seed", "base_seed")
+    seed = _find(info, "run_seed")
     if seed is not None:
         parts.append(f"seed {seed}")
-    wall = _find(info, "wall_time_s", "wall_s", "elapsed_s")
+    wall = _find(info, "wall_time_s")
     if isinstance(wall, (int, float)) and not isinstance(wall, bool) and math.isfinite(wall):
         parts.append(f"wall time {wall:.1f} s")
     versions = _versions_text(_find(info, "versions"))

@@ -213,7 +213,9 @@ STANDARD_SV_CASE = {"n_steps": 140, "first_onboard_step": 99, "first_roadside_st
 STANDARD_V2I_CASE = {"n_steps": 160, "first_onboard_step": 79, "first_roadside_step": 34, "brake_step": 60}
 
 RUN_INFO = {
-    "config": {"scenario": "all", "condition": "both", "episodes": 10, "seed": 100, "workers": 2},
+    "episodes_per_scenario": 10,
+    "run_seed": 100,
+    "workers": 2,
     "versions": {"pedsafe_sumo": "0.1.0", "sumo": "1.28.0"},
     "wall_time_s": 12.34,
 }

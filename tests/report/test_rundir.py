@@ -1,4 +1,4 @@
-"""Reading the run directory: run.json's header line, wherever the batch puts the keys."""
+"""Reading the run directory: the header line from the batch's run.json."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from report_runs import standard_episodes, write_run
 from pedsafe_sumo.report.rundir import load_run, run_header
 
 
-def test_header_finds_keys_at_the_top_or_one_level_down(tmp_path):
+def test_header_reads_the_batch_keys(tmp_path):
     info = {
-        "episodes": 500,
-        "timings": {"wall_s": 61.04},
-        "config": {"seed": 7},
+        "episodes_per_scenario": 500,
+        "wall_time_s": 61.04,
+        "run_seed": 7,
         "versions": {"sumo": "1.28.0", "python": "3.12.1", "packages": {"numpy": "2.4"}},
     }
     run = load_run(write_run(tmp_path / "run", standard_episodes(), info))
