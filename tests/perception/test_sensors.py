@@ -243,3 +243,15 @@ def test_lidar_merges_a_pedestrian_against_a_wall_but_not_two_pedestrians_togeth
         world([ego_box()], [("a", 20.0, 0.275, 0.25, 1.75, RED), ("b", 20.0, -0.275, 0.25, 1.75, RED)]),
     )
     assert set(det.lidar.ids) == {"a", "b"}
+
+
+def test_empty_worlds_and_missing_ego_are_handled(params):
+    from pedsafe_sumo.perception import PerceptionSystem
+
+    system = PerceptionSystem(make_suite(params, units=[pole()]), link_rng=np.random.default_rng(1))
+    rng = np.random.default_rng(0)
+    for snap in (world(), world([ego_box()]), world(peds=[("p", 31.5, 0.0, 0.25, 1.75, RED)])):
+        det = system.perceive(snap, EgoPose(0.0, 0.0, 0.0, "not-in-snapshot"), rng, 0.0)
+        assert det.sv.ids == det.camera.ids == det.lidar.ids
+        assert set(det.v2i.ids) >= set(det.sv.ids)
+    assert det.sv.ids == ("p",)
