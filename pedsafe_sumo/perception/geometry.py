@@ -40,10 +40,8 @@ def rotation_world_to_camera(yaw_rad: float, pitch_down_rad: float) -> np.ndarra
     """3x3 rotation whose rows are the camera's x (right), y (down) and z (forward) axes in world frame."""
     cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
     cp, sp = math.cos(pitch_down_rad), math.sin(pitch_down_rad)
-    forward = np.array([cp * cy, cp * sy, -sp])
-    right = np.array([sy, -cy, 0.0])
-    down = np.cross(forward, right)
-    return np.stack([right, down, forward])
+    # right = (sin yaw, -cos yaw, 0); forward = (cp cos yaw, cp sin yaw, -sp); down = forward x right.
+    return np.array([[sy, -cy, 0.0], [-sp * cy, -sp * sy, -cp], [cp * cy, cp * sy, -sp]])
 
 
 def world_to_camera_transform(position_m, yaw_rad: float, pitch_down_rad: float) -> np.ndarray:

@@ -7,15 +7,17 @@
     det = perceive(snapshot, ego, suite, rng, snapshot.time_s, link)
     det.sv.ids, det.v2i.ids                        # single-vehicle vs cooperative perception
 
-All sensors are evaluated in every condition so that the draws from ``rng`` (per-frame misses,
-packet loss, noise) are the same under SV and V2I for the same seed; the condition only chooses
-which union the AD stack reads. Draw order per frame: onboard camera misses, LiDAR misses,
-roadside misses (each ``rng.random(M)``, only when its miss probability is > 0), then per
-roadside unit one loss draw and, unless lost, two noise draws per detected pedestrian.
+All sensors are evaluated in every condition; the condition only chooses which union the AD stack
+reads. Draw order per frame: onboard camera misses, LiDAR misses, roadside misses (each
+``rng.random(M)``, only when its miss probability is > 0), then, when there is a link, per roadside
+unit one loss draw and, unless lost, two noise draws per detected pedestrian, from the link's own
+generator when it has one (recommended: then the onboard draws are the same with or without a
+link, so SV and V2I episodes of one seed stay paired), else from ``rng``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -103,6 +105,10 @@ class SensorSuite:
     def roadside_pose(self, unit: RoadsideUnit) -> SensorPose:
         return SensorPose(np.array([unit.x_m, unit.y_m, unit.height_m]), unit.yaw_rad, unit.pitch_down_rad)
 
+    @functools.cached_property
+    def roadside_poses(self) -> tuple:
+        return tuple(self.roadside_pose(u) for u in self.roadside_units)
+
 
 @dataclass(frozen=True)
 class SensorDetections:
@@ -122,6 +128,9 @@ class SensorDetections:
 
     def __len__(self) -> int:
         return len(self.ids)
+
+
+_EMPTY = SensorDetections.empty()
 
 
 @dataclass(frozen=True)
@@ -145,11 +154,20 @@ class Detections:
     ego_camera_px: np.ndarray
     diagnostics: dict = field(default_factory=dict, repr=False)
 
+    def by_source(self) -> dict[str, SensorDetections]:
+        """Detections under the AD interface's sensor names (``pedsafe_sumo.control.agent.KNOWN_SENSORS``):
+        the condition grants ``"v2i"`` (roadside detections delivered this frame) or not."""
+        return {"onboard_camera": self.camera, "onboard_lidar": self.lidar, "v2i": self.v2i_received}
+
 
 def _select(world: WorldSnapshot, ego: EgoPose, mask: np.ndarray) -> SensorDetections:
+    if not mask.any():
+        return _EMPTY
     idx = np.nonzero(mask)[0]
     peds = world.pedestrians
-    xy = np.stack([peds.x_m[idx], peds.y_m[idx]], axis=1)
+    xy = np.empty((idx.size, 2))
+    xy[:, 0] = peds.x_m[idx]
+    xy[:, 1] = peds.y_m[idx]
     dist = np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)
     return SensorDetections(tuple(peds.ids[i] for i in idx), xy, dist)
 
@@ -171,14 +189,25 @@ def _union(first: SensorDetections, second: SensorDetections) -> SensorDetection
     )
 
 
-def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle: int):
-    """Cast the rays of all plans in one pass; return each plan's slice of hits."""
+def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle, onboard=None):
+    """Cast the rays of all plans in one pass; return each plan's slice of hits.
+
+    ``skip_vehicle``: the ego's vehicle index (-1 none), ignored by the rays of the plans flagged in
+    ``onboard`` (default: all plans)."""
     from .raycast import RayHits
 
     live = [p for p in plans if p.group_count.size]
     if not live:
         return [None] * len(plans)
+    flags = [True] * len(plans) if onboard is None else list(onboard)
     counts = np.concatenate([p.group_count for p in live])
+    group_skip = np.concatenate(
+        [
+            np.full(p.group_count.size, skip_vehicle if f else -1)
+            for p, f in zip(plans, flags, strict=True)
+            if p.group_count.size
+        ]
+    )
     starts = np.cumsum(counts) - counts
     hits = cast_rays(
         world,
@@ -188,7 +217,7 @@ def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle: int):
         starts,
         counts,
         np.concatenate([p.skip_ped for p in live]),
-        skip_vehicle,
+        group_skip,
     )
     out, pos = [], 0
     for p in plans:
@@ -220,10 +249,10 @@ def perceive(
 
     cam_pose = sensors.camera_mount.pose(ego)
     lidar_pose = sensors.lidar_mount.pose(ego)
-    rsu_poses = [sensors.roadside_pose(u) for u in sensors.roadside_units]
+    rsu_poses = sensors.roadside_poses
     plans = [plan_camera(sensors.camera, cam_pose, peds), plan_lidar(sensors.lidar, lidar_pose, peds)]
     plans += [plan_camera(sensors.roadside, pose, peds) for pose in rsu_poses]
-    hit_list = _cast_all(snapshot, plans, skip_vehicle)
+    hit_list = _cast_all(snapshot, plans, skip_vehicle, onboard=[True, True] + [False] * len(rsu_poses))
 
     def cam_result(spec, plan, hits) -> CameraResult:
         if hits is None:
@@ -251,8 +280,9 @@ def perceive(
     if link is not None:
         for unit, pose, det in zip(sensors.roadside_units, rsu_poses, rsu_dets, strict=True):
             idx = np.nonzero(det)[0]
-            xy = np.stack([peds.x_m[idx], peds.y_m[idx]], axis=1)
-            link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, rng)
+            xy = np.column_stack([peds.x_m[idx], peds.y_m[idx]])
+            link_rng = link.rng if link.rng is not None else rng
+            link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, link_rng)
         ids, xys, pxs = [], [], []
         for msg in link.receive(time_s):
             if not msg.ped_ids:
@@ -284,11 +314,12 @@ def perceive(
 
 
 class PerceptionSystem:
-    """Per-episode convenience: a sensor suite plus its own V2I link."""
+    """Per-episode convenience: a sensor suite plus its own V2I link (with its own generator when
+    ``link_rng`` is given, see :class:`V2ILink`)."""
 
-    def __init__(self, sensors: SensorSuite):
+    def __init__(self, sensors: SensorSuite, link_rng: np.random.Generator | None = None):
         self.sensors = sensors
-        self.link = V2ILink(sensors.v2i)
+        self.link = V2ILink(sensors.v2i, link_rng)
 
     def perceive(
         self, snapshot: WorldSnapshot, ego: EgoPose, rng: np.random.Generator, time_s: float | None = None

@@ -64,24 +64,24 @@ def _circle_overlap(gbox: np.ndarray, x, y, radius) -> np.ndarray:
     )
 
 
-def _cylinder_t(ox, oy, oz, dx, dy, dz, cx, cy, r, z0, z1):
-    fx = ox - cx
-    fy = oy - cy
+def _cylinder_t(rr, cx, cy, r, z0, z1):
+    """Entry distance of rays ``rr`` (K, 6: origin, unit direction) into vertical cylinders."""
+    dx, dy = rr[:, 3], rr[:, 4]
+    fx = rr[:, 0] - cx
+    fy = rr[:, 1] - cy
     a = dx * dx + dy * dy
     b = fx * dx + fy * dy
     c = fx * fx + fy * fy - r * r
     disc = b * b - a * c
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        t0 = np.where(a > 1e-12, (-b - sq) / a, -np.inf)
-        t1 = np.where(a > 1e-12, (-b + sq) / a, np.inf)
-        hit2d = np.where(a > 1e-12, disc >= 0.0, c <= 0.0)
-        inv = 1.0 / dz
-        zn, zf = _slab(oz, inv, z0, z1)
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    vertical = a <= 1e-12
+    t0 = np.where(vertical, -np.inf, (-b - sq) / a)
+    t1 = np.where(vertical, np.inf, (-b + sq) / a)
+    hit2d = np.where(vertical, c <= 0.0, disc >= 0.0)
+    zn, zf = _slab(rr[:, 2], 1.0 / rr[:, 5], z0, z1)
     tn = np.maximum(t0, zn)
     tf = np.minimum(t1, zf)
-    hit = hit2d & (tn <= tf) & (tf >= 0.0)
-    return np.where(hit, np.maximum(tn, 0.0), np.inf)
+    return np.where(hit2d & (tn <= tf) & (tf >= 0.0), np.maximum(tn, 0.0), np.inf)
 
 
 def cast_rays(
@@ -92,49 +92,67 @@ def cast_rays(
     group_start: np.ndarray,
     group_count: np.ndarray,
     skip_pedestrian: np.ndarray,
-    skip_vehicle: int = -1,
+    skip_vehicle=-1,
 ) -> RayHits:
     """First hit of each ray.
 
     origin, direction: (R, 3) world frame, unit directions; t_max: (R,) metres. Rays are sorted by
     group: group g owns rays ``group_start[g] : group_start[g] + group_count[g]`` (count >= 1).
     skip_pedestrian: (R,) pedestrian index each ray passes through (-1: none); skip_vehicle: index of
-    a vehicle box ignored by every ray (the ego's own body), -1 for none.
+    a vehicle box ignored by every ray (the ego's own body), -1 for none, or a (G,) array of such
+    indices, one per group (the ego hides nothing from its own sensors but does hide from the
+    roadside camera).
     """
     n_rays = origin.shape[0]
-    t_best = t_max.astype(float).copy()
     kind = np.zeros(n_rays, dtype=np.int8)
     index = np.full(n_rays, -1, dtype=np.int64)
     if n_rays == 0:
         return RayHits(np.full(0, np.inf), kind, index)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return _cast(world, origin, direction, t_max, group_start, group_count, skip_pedestrian, skip_vehicle,
+                     kind, index)  # fmt: skip
+
+
+def _static_tables(st) -> dict:
+    """Per-site arrays gathered by the wall and tree tests, built once and kept on the occluders."""
+    tables = st._grid.get("cast")
+    if tables is None:
+        tables = {
+            "walls": np.column_stack([st.ax, st.ay, st.bx - st.ax, st.by - st.ay, st.z_base_m, st.z_top_m]),
+            "trees": np.column_stack([st.cyl_x_m, st.cyl_y_m, st.cyl_radius_m, st.cyl_z0_m, st.cyl_z1_m]),
+        }
+        st._grid["cast"] = tables
+    return tables
+
+
+def _cast(
+    world, origin, direction, t_max, group_start, group_count, skip_pedestrian, skip_vehicle, kind, index
+):
+    rays = np.concatenate([origin, direction], axis=1)  # (R, 6): one gather per surface type
+    t_best = t_max.astype(float)
     ox, oy, oz = origin[:, 0], origin[:, 1], origin[:, 2]
     dx, dy, dz = direction[:, 0], direction[:, 1], direction[:, 2]
 
     # Ground plane z = 0.
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tg = np.where(dz < -1e-12, -oz / dz, np.inf)
-    g_hit = (tg >= 0.0) & (tg <= t_best)
+    tg = np.where(dz < -1e-12, -oz / dz, np.inf)
+    g_hit = tg <= t_best
     t_best = np.where(g_hit, tg, t_best)
     kind[g_hit] = KIND_GROUND
 
     # Corridor box of each group: 2D bounding box of its segments.
     ex = ox + dx * t_max
     ey = oy + dy * t_max
-    gbox = np.stack(
-        [
-            np.minimum.reduceat(np.minimum(ox, ex), group_start),
-            np.minimum.reduceat(np.minimum(oy, ey), group_start),
-            np.maximum.reduceat(np.maximum(ox, ex), group_start),
-            np.maximum.reduceat(np.maximum(oy, ey), group_start),
-        ],
-        axis=1,
-    )
+    gbox = np.empty((group_start.shape[0], 4))
+    gbox[:, 0] = np.minimum.reduceat(np.minimum(ox, ex), group_start)
+    gbox[:, 1] = np.minimum.reduceat(np.minimum(oy, ey), group_start)
+    gbox[:, 2] = np.maximum.reduceat(np.maximum(ox, ex), group_start)
+    gbox[:, 3] = np.maximum.reduceat(np.maximum(oy, ey), group_start)
 
     parts_t, parts_ray, parts_kind, parts_idx = [], [], [], []
 
     def collect(t, ray, kind_code, idx):
         ok = t <= t_best[ray]
-        if np.any(ok):
+        if ok.any():
             parts_t.append(t[ok])
             parts_ray.append(ray[ok])
             parts_kind.append(np.full(int(ok.sum()), kind_code, dtype=np.int8))
@@ -143,27 +161,24 @@ def cast_rays(
     # Vehicles: oriented boxes, slab test in each box frame.
     veh = world.vehicles
     if len(veh):
-        half_diag = 0.5 * np.hypot(veh.length_m, veh.width_m)
-        cand = _circle_overlap(gbox, veh.x_m, veh.y_m, half_diag)
-        if skip_vehicle >= 0:
-            cand[:, skip_vehicle] = False
+        cand = _circle_overlap(gbox, veh.x_m, veh.y_m, 0.5 * np.hypot(veh.length_m, veh.width_m))
+        skip = np.broadcast_to(np.asarray(skip_vehicle, dtype=np.int64), (gbox.shape[0],))
+        own = skip >= 0
+        if own.any():
+            cand[np.nonzero(own)[0], skip[own]] = False
         gi, vi = np.nonzero(cand)
         if gi.size:
             ray, vi = _expand(gi, vi, group_start, group_count)
-            c = np.cos(veh.yaw_rad)[vi]
-            s = np.sin(veh.yaw_rad)[vi]
-            rx = ox[ray] - veh.x_m[vi]
-            ry = oy[ray] - veh.y_m[vi]
-            lx = rx * c + ry * s
-            ly = ry * c - rx * s
-            ldx = dx[ray] * c + dy[ray] * s
-            ldy = dy[ray] * c - dx[ray] * s
-            hl = 0.5 * veh.length_m[vi]
-            hw = 0.5 * veh.width_m[vi]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                xn, xf = _slab(lx, 1.0 / ldx, -hl, hl)
-                yn, yf = _slab(ly, 1.0 / ldy, -hw, hw)
-                zn, zf = _slab(oz[ray], 1.0 / dz[ray], 0.0, veh.height_m[vi])
+            yaw = veh.yaw_rad
+            table = np.column_stack([veh.x_m, veh.y_m, np.cos(yaw), np.sin(yaw), 0.5 * veh.length_m,
+                                     0.5 * veh.width_m, veh.height_m])[vi]  # fmt: skip
+            rr = rays[ray]
+            c, s, hl, hw = table[:, 2], table[:, 3], table[:, 4], table[:, 5]
+            rx = rr[:, 0] - table[:, 0]
+            ry = rr[:, 1] - table[:, 1]
+            xn, xf = _slab(rx * c + ry * s, 1.0 / (rr[:, 3] * c + rr[:, 4] * s), -hl, hl)
+            yn, yf = _slab(ry * c - rx * s, 1.0 / (rr[:, 4] * c - rr[:, 3] * s), -hw, hw)
+            zn, zf = _slab(rr[:, 2], 1.0 / rr[:, 5], 0.0, table[:, 6])
             tn = np.maximum(np.maximum(xn, yn), zn)
             tf = np.minimum(np.minimum(xf, yf), zf)
             t = np.where((tn <= tf) & (tf >= 0.0), np.maximum(tn, 0.0), np.inf)
@@ -177,10 +192,8 @@ def cast_rays(
             ray, pi = _expand(gi, pi, group_start, group_count)
             keep = skip_pedestrian[ray] != pi
             ray, pi = ray[keep], pi[keep]
-            t = _cylinder_t(
-                ox[ray], oy[ray], oz[ray], dx[ray], dy[ray], dz[ray],
-                ped.x_m[pi], ped.y_m[pi], ped.radius_m[pi], 0.0, ped.height_m[pi],
-            )  # fmt: skip
+            rr = rays[ray]
+            t = _cylinder_t(rr, ped.x_m[pi], ped.y_m[pi], ped.radius_m[pi], 0.0, ped.height_m[pi])
             collect(t, ray, KIND_PEDESTRIAN, pi)
 
     st = world.static
@@ -189,35 +202,27 @@ def cast_rays(
         gi, ci = np.nonzero(_circle_overlap(gbox, st.cyl_x_m, st.cyl_y_m, st.cyl_radius_m))
         if gi.size:
             ray, ci = _expand(gi, ci, group_start, group_count)
-            t = _cylinder_t(
-                ox[ray], oy[ray], oz[ray], dx[ray], dy[ray], dz[ray],
-                st.cyl_x_m[ci], st.cyl_y_m[ci], st.cyl_radius_m[ci], st.cyl_z0_m[ci], st.cyl_z1_m[ci],
-            )  # fmt: skip
+            tt = _static_tables(st)["trees"][ci]
+            t = _cylinder_t(rays[ray], tt[:, 0], tt[:, 1], tt[:, 2], tt[:, 3], tt[:, 4])
             collect(t, ray, KIND_CYLINDER, ci)
 
     # Prism walls: 2D segment intersection plus a height check at the crossing.
     if st.n_edges:
-        gis, eis = [], []
-        for g in range(gbox.shape[0]):
-            e = st.edges_in_box(*gbox[g])
-            if e.size:
-                gis.append(np.full(e.shape[0], g))
-                eis.append(e)
-        if gis:
-            ray, ei = _expand(np.concatenate(gis), np.concatenate(eis), group_start, group_count)
-            ex_ = st.bx[ei] - st.ax[ei]
-            ey_ = st.by[ei] - st.ay[ei]
-            wx = st.ax[ei] - ox[ray]
-            wy = st.ay[ei] - oy[ray]
-            rdx, rdy = dx[ray], dy[ray]
-            den = rdx * ey_ - rdy * ex_
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = (wx * ey_ - wy * ex_) / den
-                u = (wx * rdy - wy * rdx) / den
-            z = oz[ray] + t * dz[ray]
-            hit = (u >= 0.0) & (u <= 1.0) & (t >= 0.0) & (z >= st.z_base_m[ei]) & (z <= st.z_top_m[ei])
-            t = np.where(hit, t, np.inf)
-            collect(t, ray, KIND_PRISM, st.edge_poly[ei])
+        gi, ei = st.edges_in_boxes(gbox)
+        if gi.size:
+            ray, ei = _expand(gi, ei, group_start, group_count)
+            w = _static_tables(st)["walls"][ei]
+            rr = rays[ray]
+            ex_, ey_ = w[:, 2], w[:, 3]
+            wx = w[:, 0] - rr[:, 0]
+            wy = w[:, 1] - rr[:, 1]
+            rdx, rdy = rr[:, 3], rr[:, 4]
+            inv = 1.0 / (rdx * ey_ - rdy * ex_)
+            t = (wx * ey_ - wy * ex_) * inv
+            u = (wx * rdy - wy * rdx) * inv
+            z = rr[:, 2] + t * rr[:, 5]
+            hit = (u >= 0.0) & (u <= 1.0) & (t >= 0.0) & (z >= w[:, 4]) & (z <= w[:, 5])
+            collect(np.where(hit, t, np.inf), ray, KIND_PRISM, st.edge_poly[ei])
 
     if parts_t:
         t_all = np.concatenate(parts_t)

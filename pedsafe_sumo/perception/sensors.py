@@ -14,7 +14,7 @@ least ``min_visible_fraction``, the projected height (axis top to bottom, pixels
 ``min_height_px``, and the median over visible samples of the CIE76 delta E (OpenCV sRGB -> CIELAB)
 between clothing and the first surface behind the sample (the ray continued past the pedestrian up
 to ``background_max_distance_m``: a vehicle, pedestrian, wall, tree, else the ground colour, else
-the sky colour) is at least ``delta_e_threshold``.
+the sky colour) is at least ``delta_e_threshold``, i.e. at least half of the visible samples reach it.
 
 LiDAR rule: beams on a regular grid (``channels`` elevations evenly spaced from
 ``elevation_min_deg`` to ``elevation_max_deg``, azimuths every ``horizontal_resolution_deg`` from
@@ -29,6 +29,7 @@ pedestrians stays a pedestrian cluster).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -57,9 +58,16 @@ class CameraSpec:
     height_fractions: tuple
     miss_probability: float
 
-    @property
+    @functools.cached_property
     def intrinsics(self) -> np.ndarray:
         return intrinsic_matrix(self.width_px, self.height_px, self.hfov_deg)
+
+    @functools.cached_property
+    def sample_pattern(self) -> tuple:
+        """(lateral (S,), depth (S,), height (S,)) fractions of the sample points, lateral-major."""
+        lat = np.repeat(np.asarray(self.lateral_fractions, dtype=float), len(self.height_fractions))
+        hf = np.tile(np.asarray(self.height_fractions, dtype=float), len(self.lateral_fractions))
+        return lat, np.sqrt(np.clip(1.0 - lat**2, 0.0, 1.0)), hf
 
     @classmethod
     def from_params(cls, p: dict) -> CameraSpec:
@@ -88,7 +96,7 @@ class LidarSpec:
     cluster_tolerance_m: float
     miss_probability: float
 
-    @property
+    @functools.cached_property
     def elevations_rad(self) -> np.ndarray:
         return np.deg2rad(np.linspace(self.elevation_min_deg, self.elevation_max_deg, self.channels))
 
@@ -114,7 +122,7 @@ class SensorPose:
     yaw_rad: float
     pitch_down_rad: float = 0.0
 
-    @property
+    @functools.cached_property
     def world_to_sensor(self) -> np.ndarray:
         """4x4 world-to-camera transform (OpenCV camera axes), the paper's R_I / R_V."""
         return world_to_camera_transform(self.position_m, self.yaw_rad, self.pitch_down_rad)
@@ -144,6 +152,11 @@ def _empty_plan(extra: dict) -> RayPlan:
 
 def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     """Cull pedestrians and emit one ray per sample point of each remaining pedestrian."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _plan_camera(spec, pose, peds)
+
+
+def _plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     m = len(peds)
     height_px = np.zeros(m)
     extra = {"height_px": height_px, "candidates": np.zeros(0, dtype=np.int64)}
@@ -154,14 +167,15 @@ def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPla
     k = spec.intrinsics
     f, cx, cy = k[0, 0], k[0, 2], k[1, 2]
     # Camera-frame coordinates of each pedestrian's axis bottom and top.
-    base = np.stack([peds.x_m, peds.y_m, np.zeros(m)], axis=1) @ rot.T + trans
-    top = base + np.outer(peds.height_m, rot[:, 2])
+    base = peds.x_m[:, None] * rot[:, 0] + peds.y_m[:, None] * rot[:, 1] + trans
+    top = base + peds.height_m[:, None] * rot[:, 2]
     zb, zt = base[:, 2], top[:, 2]
-    front = (zb > _NEAR_CLIP_M + peds.radius_m) & (zt > _NEAR_CLIP_M + peds.radius_m)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ub, vb = f * base[:, 0] / zb + cx, f * base[:, 1] / zb + cy
-        ut, vt = f * top[:, 0] / zt + cx, f * top[:, 1] / zt + cy
-        half_w = f * peds.radius_m / np.minimum(zb, zt)
+    front = np.minimum(zb, zt) > _NEAR_CLIP_M + peds.radius_m
+    if not front.any():
+        return _empty_plan(extra)
+    ub, vb = f * base[:, 0] / zb + cx, f * base[:, 1] / zb + cy
+    ut, vt = f * top[:, 0] / zt + cx, f * top[:, 1] / zt + cy
+    half_w = f * peds.radius_m / np.minimum(zb, zt)
     height_px[front] = np.hypot(ub - ut, vb - vt)[front]
     umin = np.minimum(ub, ut) - half_w
     umax = np.maximum(ub, ut) + half_w
@@ -173,33 +187,33 @@ def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPla
     if cand.size == 0:
         return _empty_plan(extra)
 
-    lat = np.asarray(spec.lateral_fractions)
-    hf = np.asarray(spec.height_fractions)
-    n_s = lat.size * hf.size
-    lat_s = np.repeat(lat, hf.size)  # (S,)
-    hf_s = np.tile(hf, lat.size)
+    lat_s, depth, hf_s = spec.sample_pattern
+    n_s = lat_s.size
     cam = pose.position_m
     pcx, pcy, r, h = peds.x_m[cand], peds.y_m[cand], peds.radius_m[cand], peds.height_m[cand]
     vx, vy = pcx - cam[0], pcy - cam[1]
     norm = np.maximum(np.hypot(vx, vy), 1e-9)
     vx, vy = vx / norm, vy / norm
-    depth = np.sqrt(np.clip(1.0 - lat_s**2, 0.0, 1.0))
     px = pcx[:, None] + r[:, None] * (-vy[:, None] * lat_s[None, :] - vx[:, None] * depth[None, :])
     py = pcy[:, None] + r[:, None] * (vx[:, None] * lat_s[None, :] - vy[:, None] * depth[None, :])
     pz = h[:, None] * hf_s[None, :]
-    pts = np.stack([px.ravel(), py.ravel(), pz.ravel()], axis=1)  # (G*S, 3)
+    pts = np.empty((px.size, 3))  # (G*S, 3)
+    pts[:, 0] = px.ravel()
+    pts[:, 1] = py.ravel()
+    pts[:, 2] = pz.ravel()
     pc = pts @ rot.T + trans
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = f * pc[:, 0] / pc[:, 2] + cx
-        v = f * pc[:, 1] / pc[:, 2] + cy
+    u = f * pc[:, 0] / pc[:, 2] + cx
+    v = f * pc[:, 1] / pc[:, 2] + cy
     in_image = (pc[:, 2] > _NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
     vec = pts - cam
-    dist = np.linalg.norm(vec, axis=1)
+    dist = np.sqrt((vec * vec).sum(axis=1))
     direction = vec / dist[:, None]
     extra.update(dist=dist, in_image=in_image, n_samples=n_s)
+    origin = np.empty_like(pts)
+    origin[:] = cam
     return RayPlan(
         ped=cand,
-        origin=np.broadcast_to(cam, pts.shape),
+        origin=origin,
         direction=direction,
         t_max=dist + spec.background_max_distance_m,
         skip_ped=np.repeat(cand, n_s),
@@ -211,6 +225,8 @@ def plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPla
 def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
     """(K, 3) sRGB 0-255 -> (K, 3) CIELAB (L 0-100) through OpenCV (D65)."""
     arr = (np.asarray(rgb, dtype=np.float32).reshape(1, -1, 3)) / np.float32(255.0)
+    if arr.shape[1] == 0:
+        return np.zeros((0, 3))
     return cv2.cvtColor(arr, cv2.COLOR_RGB2Lab).reshape(-1, 3).astype(float)
 
 
@@ -221,30 +237,55 @@ def delta_e_cie76(rgb_a: np.ndarray, rgb_b: np.ndarray) -> np.ndarray:
     return np.linalg.norm(lab[: a.shape[0]] - lab[a.shape[0] :], axis=1)
 
 
-def surface_rgb(world: WorldSnapshot, hits: RayHits, ground_rgb, sky_rgb) -> np.ndarray:
-    """(R, 3) colour of what each ray hit first (sky colour when nothing)."""
-    out = np.tile(np.asarray(sky_rgb, dtype=float), (hits.kind.shape[0], 1))
-    for kind_code, table in (
-        (KIND_VEHICLE, world.vehicles.rgb),
-        (KIND_PEDESTRIAN, world.pedestrians.rgb),
-        (KIND_PRISM, world.static.poly_rgb),
-        (KIND_CYLINDER, world.static.cyl_rgb),
-    ):
+def _lab_tables(world: WorldSnapshot, ground_rgb, sky_rgb) -> dict:
+    """CIELAB of every colour in the snapshot, per surface kind (static tables converted once)."""
+    key = (tuple(ground_rgb), tuple(sky_rgb))
+    cached = world.__dict__.get("_lab_tables")
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    st = world.static
+    static_lab = st._grid.get("lab")
+    if static_lab is None:
+        static_lab = (rgb_to_lab(st.poly_rgb), rgb_to_lab(st.cyl_rgb))
+        st._grid["lab"] = static_lab
+    n_v = len(world.vehicles)
+    dyn = rgb_to_lab(np.vstack([world.vehicles.rgb, world.pedestrians.rgb, [ground_rgb, sky_rgb]]))
+    tables = {
+        KIND_VEHICLE: dyn[:n_v],
+        KIND_PEDESTRIAN: dyn[n_v:-2],
+        KIND_PRISM: static_lab[0],
+        KIND_CYLINDER: static_lab[1],
+        KIND_GROUND: dyn[-2],
+        "sky": dyn[-1],
+    }
+    object.__setattr__(world, "_lab_tables", (key, tables))  # converted once per snapshot
+    return tables
+
+
+def surface_lab(hits: RayHits, tables: dict) -> np.ndarray:
+    """(R, 3) CIELAB colour of what each ray hit first (the sky colour when nothing)."""
+    out = np.empty((hits.kind.shape[0], 3))
+    out[:] = tables["sky"]
+    for kind_code in (KIND_VEHICLE, KIND_PEDESTRIAN, KIND_PRISM, KIND_CYLINDER):
         sel = hits.kind == kind_code
-        if np.any(sel):
-            out[sel] = table[hits.index[sel]]
-    out[hits.kind == KIND_GROUND] = ground_rgb
+        if sel.any():
+            out[sel] = tables[kind_code][hits.index[sel]]
+    out[hits.kind == KIND_GROUND] = tables[KIND_GROUND]
     return out
 
 
 @dataclass(frozen=True)
 class CameraResult:
-    """Per pedestrian (all M of the snapshot): the rule's inputs and the verdict."""
+    """Per pedestrian (all M of the snapshot): the rule's inputs and the verdict.
+
+    ``contrast_fraction``: share of the visible samples whose delta E reaches the threshold (the
+    median delta E reaches it exactly when this share is at least one half).
+    """
 
     detected: np.ndarray
     visible_fraction: np.ndarray
     height_px: np.ndarray
-    delta_e: np.ndarray
+    contrast_fraction: np.ndarray
 
 
 def finish_camera(
@@ -252,30 +293,24 @@ def finish_camera(
 ) -> CameraResult:
     m = len(world.pedestrians)
     vis_frac = np.zeros(m)
-    delta = np.zeros(m)
+    contrast = np.zeros(m)
     cand = plan.extra["candidates"]
     if cand.size:
         n_s = plan.extra["n_samples"]
         visible = plan.extra["in_image"] & ~(hits.t_m < plan.extra["dist"] - 1e-6)
-        vis2 = visible.reshape(cand.size, n_s)
-        vis_frac[cand] = vis2.mean(axis=1)
-        background = surface_rgb(world, hits, ground_rgb, sky_rgb)
-        clothing = np.repeat(world.pedestrians.rgb[cand], n_s, axis=0)
-        de = delta_e_cie76(clothing, background).reshape(cand.size, n_s)
-        de = np.where(vis2, de, np.nan)
-        with np.errstate(all="ignore"):
-            any_vis = vis2.any(axis=1)
-            med = np.zeros(cand.size)
-            if np.any(any_vis):
-                med[any_vis] = np.nanmedian(de[any_vis], axis=1)
-        delta[cand] = med
+        n_vis = visible.reshape(cand.size, n_s).sum(axis=1)
+        vis_frac[cand] = n_vis / n_s
+        if visible.any():
+            tables = _lab_tables(world, ground_rgb, sky_rgb)
+            background = surface_lab(hits, tables)[visible]
+            owner = np.repeat(np.arange(cand.size), n_s)[visible]
+            clothing = tables[KIND_PEDESTRIAN][cand[owner]]
+            diff = clothing - background
+            strong = (diff * diff).sum(axis=1) >= spec.delta_e_threshold**2  # CIE76
+            contrast[cand] = np.bincount(owner[strong], minlength=cand.size) / np.maximum(n_vis, 1)
     height_px = plan.extra["height_px"]
-    detected = (
-        (vis_frac >= spec.min_visible_fraction)
-        & (height_px >= spec.min_height_px)
-        & (delta >= spec.delta_e_threshold)
-    )
-    return CameraResult(detected, vis_frac, height_px, delta)
+    detected = (vis_frac >= spec.min_visible_fraction) & (height_px >= spec.min_height_px) & (contrast >= 0.5)
+    return CameraResult(detected, vis_frac, height_px, contrast)
 
 
 # --------------------------------------------------------------------------------------------- LiDAR
@@ -301,17 +336,16 @@ def plan_lidar(spec: LidarSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     az_c = np.arctan2(peds.y_m[cand] - o[1], peds.x_m[cand] - o[0]) - pose.yaw_rad
     d_near = np.maximum(d - r - tol, 0.05)
     d_far = d + r + tol
-    half = np.arcsin(np.minimum((r + tol) / d, 1.0)) + np.arctan2(tol, d_near)
+    half = np.arcsin(np.minimum(r / d, 1.0)) + np.arctan2(tol, d_near)
     half = np.minimum(half, math.pi - res)
     k0 = np.ceil((az_c - half) / res).astype(np.int64)
     k1 = np.floor((az_c + half) / res).astype(np.int64)
     elev = spec.elevations_rad
-    z_lo, z_hi = -tol - zs, h + tol - zs
-    e_candidates = np.stack(
-        [np.arctan2(z_lo, d_near), np.arctan2(z_lo, d_far), np.arctan2(z_hi, d_near), np.arctan2(z_hi, d_far)]
-    )
-    c0 = np.searchsorted(elev, e_candidates.min(axis=0), side="left")
-    c1 = np.searchsorted(elev, e_candidates.max(axis=0), side="right") - 1
+    z_lo, z_hi = -zs, h + tol - zs  # nothing returns from below the ground
+    e_near_lo, e_far_lo = np.arctan2(z_lo, d_near), np.arctan2(z_lo, d_far)
+    e_near_hi, e_far_hi = np.arctan2(z_hi, d_near), np.arctan2(z_hi, d_far)
+    c0 = np.searchsorted(elev, np.minimum(e_near_lo, e_far_lo), side="left")
+    c1 = np.searchsorted(elev, np.maximum(e_near_hi, e_far_hi), side="right") - 1
     n_az = np.maximum(k1 - k0 + 1, 0)
     n_ch = np.maximum(c1 - c0 + 1, 0)
     count = n_az * n_ch
@@ -334,13 +368,18 @@ def plan_lidar(spec: LidarSpec, pose: SensorPose, peds: Pedestrians) -> RayPlan:
     az = (k0[gidx] + local // n_ch[gidx]) * res + pose.yaw_rad
     el = elev[c0[gidx] + local % n_ch[gidx]]
     ce = np.cos(el)
-    direction = np.stack([ce * np.cos(az), ce * np.sin(az), np.sin(el)], axis=1)
+    direction = np.empty((total, 3))
+    direction[:, 0] = ce * np.cos(az)
+    direction[:, 1] = ce * np.sin(az)
+    direction[:, 2] = np.sin(el)
     reach = np.hypot(d_far, np.maximum(h - zs, zs) + tol)
     t_max = np.minimum(spec.range_m, reach)[gidx]
     extra["group_of_ray"] = gidx
+    origin = np.empty_like(direction)
+    origin[:] = o
     return RayPlan(
         ped=cand,
-        origin=np.broadcast_to(o, direction.shape),
+        origin=origin,
         direction=direction,
         t_max=t_max,
         skip_ped=np.full(total, -1, dtype=np.int64),

@@ -52,10 +52,17 @@ class V2IMessage:
 
 
 class V2ILink:
-    """The per-episode message queue between roadside units and the ego (stateful, FIFO)."""
+    """The per-episode message queue between roadside units and the ego (stateful, FIFO).
 
-    def __init__(self, spec: V2ISpec):
+    ``rng``: an optional generator of the link's own (loss and noise draws). Give the link its own
+    stream (e.g. ``SeedSequence(seed).spawn(...)``) and the generator passed to ``perceive`` is used
+    for the onboard draws only, so they are identical whether or not the episode has a link (SV and
+    V2I stay paired even with per-frame misses). Without one, ``perceive``'s generator is used.
+    """
+
+    def __init__(self, spec: V2ISpec, rng: np.random.Generator | None = None):
         self.spec = spec
+        self.rng = rng
         self._queue: deque[V2IMessage] = deque()
         self.sent = 0
         self.lost = 0

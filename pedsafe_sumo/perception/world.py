@@ -40,6 +40,8 @@ EDGE_GRID_CELL_M = 16.0
 
 def _f(values, n=None) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
+    if n is not None and arr.shape[0] == 1 and n != 1:
+        arr = np.full(n, arr[0])
     if n is not None and arr.shape[0] != n:
         raise ValueError(f"expected {n} values, got {arr.shape[0]}")
     return arr
@@ -111,8 +113,7 @@ class Pedestrians:
     @classmethod
     def build(cls, ids, x_m, y_m, radius_m, height_m, rgb) -> Pedestrians:
         n = len(ids)
-        radius = _f(np.broadcast_to(np.asarray(radius_m, dtype=float), (n,)), n)
-        return cls(tuple(ids), _f(x_m, n), _f(y_m, n), radius, _f(height_m, n), _rgb(rgb, n))
+        return cls(tuple(ids), _f(x_m, n), _f(y_m, n), _f(radius_m, n), _f(height_m, n), _rgb(rgb, n))
 
     @classmethod
     def empty(cls) -> Pedestrians:
@@ -251,6 +252,28 @@ class StaticOccluders:
             ymax=ymax,
         )
 
+    def edges_in_boxes(self, boxes: np.ndarray):
+        """(group, edge) index pairs for every edge whose bounding box overlaps one of the (G, 4) boxes
+        ``[xmin, ymin, xmax, ymax]`` (world frame, m): one grid query for the union, then a
+        vectorised box test."""
+        if self.n_edges == 0 or boxes.shape[0] == 0:
+            empty = np.zeros(0, dtype=np.int64)
+            return empty, empty
+        lo = boxes.min(axis=0)
+        hi = boxes.max(axis=0)
+        cand = self.edges_in_box(lo[0], lo[1], hi[2], hi[3])
+        if cand.size == 0:
+            return cand, cand
+        g = self._grid
+        ok = (
+            (g["xmin"][cand][None, :] <= boxes[:, 2:3])
+            & (g["xmax"][cand][None, :] >= boxes[:, 0:1])
+            & (g["ymin"][cand][None, :] <= boxes[:, 3:4])
+            & (g["ymax"][cand][None, :] >= boxes[:, 1:2])
+        )
+        gi, k = np.nonzero(ok)
+        return gi, cand[k]
+
     def edges_in_box(self, xmin: float, ymin: float, xmax: float, ymax: float) -> np.ndarray:
         """Indices of the edges whose bounding box overlaps the axis-aligned box (world frame, m)."""
         g = self._grid
@@ -265,7 +288,10 @@ class StaticOccluders:
             return np.zeros(0, dtype=np.int64)
         start, edges, ny = g["start"], g["edges"], g["ny"]
         parts = [edges[start[ix * ny + iy0] : start[ix * ny + iy1 + 1]] for ix in range(ix0, ix1 + 1)]
-        cand = np.unique(np.concatenate(parts)) if len(parts) > 1 else np.unique(parts[0])
+        seen = np.zeros(g["n"], dtype=bool)
+        for part in parts:
+            seen[part] = True
+        cand = np.flatnonzero(seen)
         keep = (
             (g["xmin"][cand] <= xmax)
             & (g["xmax"][cand] >= xmin)
