@@ -290,7 +290,11 @@ class EpisodeRunner:
         if condition not in CONDITIONS:
             raise ValueError(f"unknown condition '{condition}' (known: {', '.join(CONDITIONS)})")
         setup = setup or self.draw_setup(spec, seed)
-        perception_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
+        # Streams of the episode seed: 0 world, 1 onboard/roadside misses, 2 background traffic, 3 the
+        # V2I link (loss, noise): the link draws only under V2I, so it must not share the sensors' stream
+        # or SV and V2I would see different onboard misses for the same seed.
+        streams = np.random.SeedSequence(seed).spawn(4)
+        perception_rng = np.random.default_rng(streams[1])
         timings = dict.fromkeys(("sumo_s", "snapshot_s", "perception_s", "agent_s", "logging_s"), 0.0)
         clock = time.perf_counter
 
@@ -347,7 +351,7 @@ class EpisodeRunner:
             }
         )
         wanted = set(agent.sensors()) & granted
-        link = V2ILink(self.sensors.v2i) if "v2i" in wanted else None
+        link = V2ILink(self.sensors.v2i, np.random.default_rng(streams[3])) if "v2i" in wanted else None
         ped_heights = np.array([ped.height_m])
         ped_rgb = np.array([ped.clothing_rgb], dtype=float)
 
