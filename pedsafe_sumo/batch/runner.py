@@ -18,16 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-#: episodes.parquet columns, in DESIGN section 3 order.
-COLUMNS = (
-    "scenario", "condition", "episode", "seed", "ped_age", "ped_gender", "ped_risk", "ped_speed_mps",
-    "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
-    "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
-    "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
-)  # fmt: skip
-BOOL_COLUMNS = ("collision", "conflict", "sumo_collision")
-STRING_COLUMNS = ("scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error")
-INT_COLUMNS = ("episode", "seed")
+from pedsafe_sumo.io.episodes import EPISODE_COLUMNS, to_table
 
 
 def episode_seed(run_seed: int, episode: int) -> int:
@@ -69,7 +60,7 @@ def init_worker(config: WorkerConfig) -> None:
 
 
 def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
-    row: dict[str, Any] = {c: np.nan for c in COLUMNS}
+    row: dict[str, Any] = {c: np.nan for c in EPISODE_COLUMNS}
     row.update(
         scenario=task.scenario,
         condition=condition,
@@ -149,23 +140,3 @@ def run_tasks(tasks: list[Task], config: WorkerConfig, workers: int, progress=No
                 if progress:
                     progress(len(task_rows))
     return to_table(rows)
-
-
-def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Rows in a fixed order and fixed dtypes, whatever order the workers finished in."""
-    table = pd.DataFrame(rows, columns=list(COLUMNS))
-    for column in BOOL_COLUMNS:
-        table[column] = table[column].astype(bool)
-    for column in INT_COLUMNS:
-        table[column] = table[column].astype("int64")
-    for column in STRING_COLUMNS:
-        table[column] = table[column].fillna("").astype(str)
-    numeric = [c for c in COLUMNS if c not in (*BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)]
-    for column in numeric:
-        table[column] = table[column].astype(float)
-    condition_order = {"sv": 0, "v2i": 1}
-    table = table.sort_values(
-        ["scenario", "episode", "condition"],
-        key=lambda s: s.map(condition_order) if s.name == "condition" else s,
-    )
-    return table.reset_index(drop=True)

@@ -12,7 +12,8 @@ import pandas as pd
 import pytest
 
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.batch.runner import COLUMNS, episode_seed
+from pedsafe_sumo.batch.runner import episode_seed
+from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 
 MUST_EXIST = [
     "scenario",
@@ -56,7 +57,7 @@ def two_worker_run(tmp_path_factory):
 def test_small_paired_batch_writes_every_column_with_the_right_types(two_worker_run):
     out, proc = two_worker_run
     table = pd.read_parquet(out / "episodes.parquet")
-    assert list(table.columns) == list(COLUMNS)
+    assert list(table.columns) == list(EPISODE_COLUMNS)
     assert len(table) == 8 and sorted(table["condition"].unique()) == ["sv", "v2i"]
     assert table[MUST_EXIST].notna().all().all()
     assert (table["status"] == "ok").all() and (table["error"] == "").all()

@@ -28,33 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-EPISODE_COLUMNS = (
-    "scenario",
-    "condition",
-    "episode",
-    "seed",
-    "ped_age",
-    "ped_gender",
-    "ped_risk",
-    "ped_speed_mps",
-    "ego_initial_speed_mps",
-    "collision",
-    "impact_speed_mps",
-    "injury_probability",
-    "conflict",
-    "md_m",
-    "tmd_s",
-    "cs_mps",
-    "conflict_probability",
-    "min_ttc_s",
-    "pet_s",
-    "first_detection_distance_m",
-    "first_detection_time_s",
-    "detected_by",
-    "sumo_collision",
-    "status",
-    "error",
-)
+from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
+
 STEP_S = 0.05  # [s]
 
 

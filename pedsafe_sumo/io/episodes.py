@@ -1,0 +1,41 @@
+"""The episodes.parquet contract (DESIGN section 3): one row per episode and condition.
+
+Written by the batch runner, read by the report; both take the column names and types from here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pandas as pd
+
+#: Columns, in DESIGN section 3 order.
+EPISODE_COLUMNS = (
+    "scenario", "condition", "episode", "seed", "ped_age", "ped_gender", "ped_risk", "ped_speed_mps",
+    "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
+    "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
+    "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
+)  # fmt: skip
+BOOL_COLUMNS = ("collision", "conflict", "sumo_collision")
+STRING_COLUMNS = ("scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error")
+INT_COLUMNS = ("episode", "seed")
+FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in (*BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS))
+CONDITION_ORDER = {"sv": 0, "v2i": 1}
+
+
+def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in."""
+    table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
+    for column in BOOL_COLUMNS:
+        table[column] = table[column].astype(bool)
+    for column in INT_COLUMNS:
+        table[column] = table[column].astype("int64")
+    for column in STRING_COLUMNS:
+        table[column] = table[column].fillna("").astype(str)
+    for column in FLOAT_COLUMNS:
+        table[column] = table[column].astype(float)
+    table = table.sort_values(
+        ["scenario", "episode", "condition"],
+        key=lambda s: s.map(CONDITION_ORDER) if s.name == "condition" else s,
+    )
+    return table.reset_index(drop=True)
