@@ -16,22 +16,35 @@ kernels compile once per process instead.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numba
 import numpy as np
 
-from .world import EDGE_GRID_CELL_M
 from .raycast import KIND_CYLINDER, KIND_GROUND, KIND_NONE, KIND_PEDESTRIAN, KIND_PRISM, KIND_VEHICLE
+from .world import EDGE_GRID_CELL_M
 
 NEAR_CLIP_M = 0.05  # camera near plane (m), as sensors._NEAR_CLIP_M
 _INF = np.inf
 
 
+_warned_no_cache = False
+
+
 def _jit(fn):
     # error_model="numpy": division by zero gives inf/nan as in numpy (the slab tests rely on it).
+    global _warned_no_cache
     try:
         return numba.njit(cache=True, error_model="numpy")(fn)
     except RuntimeError:  # no writable cache location: compile in every process instead
+        if not _warned_no_cache:
+            _warned_no_cache = True
+            warnings.warn(
+                "no writable numba cache directory (set NUMBA_CACHE_DIR): the perception kernels are "
+                "compiled again in every process (about 10 s)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         return numba.njit(error_model="numpy")(fn)
 
 

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .raycast import RayHits, cast_rays_numpy
 from .kernels import frame_kernel, static_tables
+from .raycast import RayHits, cast_rays_numpy
 from .sensors import (
     CameraResult,
     CameraSpec,
@@ -200,16 +200,33 @@ class Detections:
         return {"onboard_camera": self.camera, "onboard_lidar": self.lidar, "v2i": self.v2i_received}
 
 
-def _select(world: WorldSnapshot, ego: EgoPose, mask: np.ndarray) -> SensorDetections:
-    if not mask.any():
-        return _EMPTY
-    idx = np.nonzero(mask)[0]
-    peds = world.pedestrians
-    xy = np.empty((idx.size, 2))
-    xy[:, 0] = peds.x_m[idx]
-    xy[:, 1] = peds.y_m[idx]
-    dist = np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)
-    return SensorDetections(tuple(peds.ids[i] for i in idx), xy, dist)
+class _Selector:
+    """``_select`` for one frame: the positions and distances of all pedestrians are computed once,
+    on the first non-empty selection, and a selection of everyone is that one object."""
+
+    def __init__(self, peds, ego: EgoPose):
+        self.peds = peds
+        self.ego = ego
+        self.everyone = None
+
+    def __call__(self, mask: np.ndarray) -> SensorDetections:
+        n = np.count_nonzero(mask)
+        if n == 0:
+            return _EMPTY
+        if self.everyone is None:
+            peds, m = self.peds, len(self.peds)
+            xy = np.empty((m, 2))
+            xy[:, 0] = peds.x_m
+            xy[:, 1] = peds.y_m
+            dist = np.hypot(xy[:, 0] - self.ego.x_m, xy[:, 1] - self.ego.y_m)
+            self.everyone = SensorDetections(tuple(peds.ids), xy, dist)
+        if n == mask.shape[0]:
+            return self.everyone
+        idx = np.flatnonzero(mask)
+        ids = self.everyone.ids
+        return SensorDetections(
+            tuple(ids[i] for i in idx), self.everyone.xy_m[idx], self.everyone.distance_m[idx]
+        )
 
 
 def _miss(detected: np.ndarray, probability: float, rng: np.random.Generator) -> np.ndarray:
@@ -364,9 +381,6 @@ def perceive_reference(
     return _perceive(snapshot, ego, sensors, rng, time_s, link, _sensors_numpy)
 
 
-_NO_XY = np.zeros((0, 2))
-
-
 def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detections:
     time_s = snapshot.time_s if time_s is None else float(time_s)
     peds = snapshot.pedestrians
@@ -388,9 +402,10 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detecti
         for d in rsu_dets:
             rsu_any |= d
 
-    camera = _select(snapshot, ego, cam_det)
-    lidar = _select(snapshot, ego, lid_det)
-    roadside = _select(snapshot, ego, rsu_any)
+    select = _Selector(peds, ego)
+    camera = select(cam_det)
+    lidar = select(lid_det)
+    roadside = select(rsu_any)
     sv = _union(camera, lidar)
 
     received = _EMPTY
@@ -398,21 +413,16 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detecti
     if link is not None:
         link_rng = link.rng if link.rng is not None else rng
         for unit, pose, det in zip(sensors.roadside_units, sensors.roadside_poses, rsu_dets, strict=True):
-            if np.count_nonzero(det):
-                idx = np.flatnonzero(det)
-                xy = np.column_stack([peds.x_m[idx], peds.y_m[idx]])
-                ids = tuple(peds.ids[i] for i in idx)
-            else:
-                xy, ids = _NO_XY, ()
-            link.send(time_s, unit.id, pose.world_to_sensor, ids, xy, link_rng)
+            sent = select(det)
+            link.send(time_s, unit.id, pose.world_to_sensor, sent.ids, sent.xy_m, link_rng)
         ids, xys, pxs = [], [], []
-        cam_to_world = None
+        world_to_cam = None
         for msg in link.receive(time_s):
             if not msg.ped_ids:
                 continue
-            if cam_to_world is None:
-                cam_to_world = sensors.camera_mount.pose(ego).world_to_sensor
-            _, px, _, world_pts = message_to_vehicle(msg, cam_to_world, sensors.camera.intrinsics)
+            if world_to_cam is None:
+                world_to_cam = sensors.camera_mount.pose(ego).world_to_sensor
+            _, px, _, world_pts = message_to_vehicle(msg, world_to_cam, sensors.camera.intrinsics)
             for k, pid in enumerate(msg.ped_ids):
                 if pid in ids:  # a later message (or another pole) supersedes an earlier one
                     j = ids.index(pid)

@@ -12,10 +12,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 from perception_scenes import make_suite
 
-from pedsafe_sumo.perception import EgoPose, Pedestrians, StaticOccluders, V2ILink, VehicleBoxes, WorldSnapshot
+from pedsafe_sumo.perception import (
+    EgoPose,
+    Pedestrians,
+    StaticOccluders,
+    V2ILink,
+    VehicleBoxes,
+    WorldSnapshot,
+)
 from pedsafe_sumo.perception.pipeline import perceive, perceive_reference
 from pedsafe_sumo.perception.raycast import cast_rays, cast_rays_numpy
 from pedsafe_sumo.perception.world import RoadsideUnit
@@ -41,9 +47,9 @@ def random_scene(rng: np.random.Generator):
     for k in range(int(rng.integers(0, 14))):
         along, across = rng.uniform(-10, 60), rng.uniform(-15, 15)
         x, y = np.array([ex, ey]) + along * fwd + across * left
-        length = float(rng.uniform(3.5, 12))
-        vehicles.append((f"v{k}", float(x), float(y), float(rng.uniform(-math.pi, math.pi)), length,
-                         float(rng.uniform(1.6, 2.6)), float(rng.uniform(1.3, 3.5)), _colour(rng, palette)))  # fmt: skip
+        yaw, length = float(rng.uniform(-math.pi, math.pi)), float(rng.uniform(3.5, 12))
+        width, height = float(rng.uniform(1.6, 2.6)), float(rng.uniform(1.3, 3.5))
+        vehicles.append((f"v{k}", float(x), float(y), yaw, length, width, height, _colour(rng, palette)))
     peds = []
     for k in range(int(rng.integers(1, 7))):
         mode = rng.random()
@@ -139,11 +145,10 @@ def test_compiled_perception_matches_the_numpy_reference_on_random_scenes(params
     assert totals["camera"] < totals["pedestrians"] and totals["lidar"] < totals["pedestrians"], totals
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
-def test_compiled_cast_matches_the_numpy_reference_on_random_rays(seed):
-    rng = np.random.default_rng(seed)
+def test_compiled_cast_matches_the_numpy_reference_on_random_rays():
+    rng = np.random.default_rng(7)
     hits_seen = set()
-    for _ in range(30):
+    for _ in range(100):
         snap, ego, _ = random_scene(rng)
         n_groups = int(rng.integers(1, 8))
         counts = rng.integers(1, 40, n_groups)
