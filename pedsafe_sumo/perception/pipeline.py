@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .geometry import invert_transform, project_points
 from .kernels import frame_kernel, static_tables
 from .raycast import RayHits, cast_rays_numpy
 from .sensors import (
@@ -38,7 +39,7 @@ from .sensors import (
     plan_lidar,
     rgb_to_lab,
 )
-from .v2i import V2ILink, V2ISpec, message_to_vehicle
+from .v2i import V2ILink, V2ISpec
 from .world import EgoPose, RoadsideUnit, WorldSnapshot
 
 
@@ -408,33 +409,13 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detecti
     roadside = select(rsu_any)
     sv = _union(camera, lidar)
 
-    received = _EMPTY
-    pixels = _NO_PIXELS
+    received, pixels = _EMPTY, _NO_PIXELS
     if link is not None:
         link_rng = link.rng if link.rng is not None else rng
         for unit, pose, det in zip(sensors.roadside_units, sensors.roadside_poses, rsu_dets, strict=True):
             sent = select(det)
             link.send(time_s, unit.id, pose.world_to_sensor, sent.ids, sent.xy_m, link_rng)
-        ids, xys, pxs = [], [], []
-        world_to_cam = None
-        for msg in link.receive(time_s):
-            if not msg.ped_ids:
-                continue
-            if world_to_cam is None:
-                world_to_cam = sensors.camera_mount.pose(ego).world_to_sensor
-            _, px, _, world_pts = message_to_vehicle(msg, world_to_cam, sensors.camera.intrinsics)
-            for k, pid in enumerate(msg.ped_ids):
-                if pid in ids:  # a later message (or another pole) supersedes an earlier one
-                    j = ids.index(pid)
-                    xys[j], pxs[j] = world_pts[k, :2], px[k]
-                else:
-                    ids.append(pid)
-                    xys.append(world_pts[k, :2])
-                    pxs.append(px[k])
-        if ids:
-            xy = np.asarray(xys)
-            received = SensorDetections(tuple(ids), xy, np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m))
-            pixels = np.asarray(pxs)
+        received, pixels = _receive(link.receive(time_s), ego, sensors)
     return Detections(
         time_s=time_s,
         camera=camera,
@@ -446,6 +427,54 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detecti
         ego_camera_px=pixels,
         diagnostics={"camera": cam, "lidar": lid, "roadside": rsu_results},
     )
+
+
+_INVERSES: dict = {}
+
+
+def _roadside_to_world(world_to_roadside: np.ndarray) -> np.ndarray:
+    """``invert_transform`` of a roadside camera's transform, remembered (the poles do not move)."""
+    key = world_to_roadside.tobytes()
+    inv = _INVERSES.get(key)
+    if inv is None:
+        if len(_INVERSES) >= 64:
+            _INVERSES.clear()
+        inv = _INVERSES[key] = invert_transform(world_to_roadside)
+    return inv
+
+
+def _receive(messages, ego: EgoPose, sensors: SensorSuite):
+    """Delivered roadside detections in the ego's frame: :func:`message_to_vehicle` (eqs. 5-6) per
+    message, a later message (or another pole) superseding an earlier one for the same pedestrian.
+    Returns (detections, pixels (K, 2))."""
+    messages = [m for m in messages if m.ped_ids]
+    if not messages:
+        return _EMPTY, _NO_PIXELS
+    world_to_cam = sensors.camera_mount.pose(ego).world_to_sensor
+    cam_to_world = invert_transform(world_to_cam)
+    intrinsics = sensors.camera.intrinsics
+    converted = []
+    for msg in messages:  # as message_to_vehicle, with the inverses computed once
+        chain = world_to_cam @ _roadside_to_world(msg.world_to_roadside)
+        p_v = msg.points_roadside_m @ chain[:3, :3].T + chain[:3, 3]
+        px, _ = project_points(intrinsics, p_v)
+        converted.append((msg.ped_ids, px, p_v @ cam_to_world[:3, :3].T + cam_to_world[:3, 3]))
+    ped_ids, px, world_pts = converted[0]
+    if len(converted) == 1 and len(set(ped_ids)) == len(ped_ids):
+        ids, xy, pixels = ped_ids, np.ascontiguousarray(world_pts[:, :2]), px
+    else:
+        ids, xys, pxs = [], [], []
+        for ped_ids, px, world_pts in converted:
+            for k, pid in enumerate(ped_ids):
+                if pid in ids:
+                    j = ids.index(pid)
+                    xys[j], pxs[j] = world_pts[k, :2], px[k]
+                else:
+                    ids.append(pid)
+                    xys.append(world_pts[k, :2])
+                    pxs.append(px[k])
+        xy, pixels = np.asarray(xys), np.asarray(pxs)
+    return SensorDetections(tuple(ids), xy, np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)), pixels
 
 
 class PerceptionSystem:

@@ -86,8 +86,9 @@ class V2ILink:
         if xy.shape[0]:
             if self.spec.position_noise_sigma_m > 0:
                 xy = xy + rng.normal(0.0, self.spec.position_noise_sigma_m, size=xy.shape)
-            world_pts = np.hstack([xy, np.zeros((xy.shape[0], 1))])
-            points = transform_points(world_to_roadside, world_pts)
+            world_pts = np.zeros((xy.shape[0], 3))
+            world_pts[:, :2] = xy
+            points = world_pts @ world_to_roadside[:3, :3].T + world_to_roadside[:3, 3]  # transform_points
         else:
             points = _NO_POINTS  # an empty message (most frames): no arrays to build
         msg = V2IMessage(
