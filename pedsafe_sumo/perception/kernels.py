@@ -114,6 +114,26 @@ def _cylinder_t(ox, oy, oz, dx, dy, dz, cx, cy, r, z0, z1):
     return _INF
 
 
+#: Safety margin (m) of the exact-test skips in cast_group: far above rounding errors, so a skip never
+#: drops a hit (which would make the compiled cast differ from the reference).
+REJECT_MARGIN_M = 1e-6
+
+
+@_jit
+def _misses_circle(fx, fy, dx, dy, a2, t_end, radius):
+    """Does the 2D track f + (dx, dy) t, 0 <= t <= t_end, stay farther than radius + margin from the
+    origin? (f: ray origin minus circle centre; a2 = dx^2 + dy^2 > 0.)"""
+    tc = -(fx * dx + fy * dy) / a2
+    if tc < 0.0:
+        tc = 0.0
+    elif tc > t_end:
+        tc = t_end
+    qx = fx + dx * tc
+    qy = fy + dy * tc
+    lim = radius + REJECT_MARGIN_M
+    return qx * qx + qy * qy > lim * lim
+
+
 @_jit
 def _overlap(x, y, r, b0, b1, b2, b3):
     return x + r >= b0 and x - r <= b2 and y + r >= b1 and y - r <= b3
@@ -206,8 +226,15 @@ def cast_group(
                 best = tg
                 kind = KIND_GROUND
         # Running minimum with ties to the later candidate = the reference's "last entry at the minimum".
+        # Objects whose footprint circle the ray's 2D track up to the current best distance misses (by
+        # more than REJECT_MARGIN_M) cannot be hit at or before it and are skipped without the exact
+        # test; what is tested is tested exactly as the reference does.
+        a2 = dx * dx + dy * dy
+        track = a2 > 1e-12
         for q in range(nv):
             i = vc_idx[q]
+            if track and _misses_circle(ox - vx[i], oy - vy[i], dx, dy, a2, best, vrad[i]):
+                continue
             t = _box_t(ox, oy, oz, dx, dy, dz, vx[i], vy[i], vc[i], vs[i], vhl[i], vhw[i], vh[i])
             if t <= best:
                 best = t
@@ -218,6 +245,8 @@ def cast_group(
             i = pc_idx[q]
             if i == sp:
                 continue
+            if track and _misses_circle(ox - px[i], oy - py[i], dx, dy, a2, best, pr[i]):
+                continue
             t = _cylinder_t(ox, oy, oz, dx, dy, dz, px[i], py[i], pr[i], 0.0, ph[i])
             if t <= best:
                 best = t
@@ -225,14 +254,22 @@ def cast_group(
                 idx = i
         for q in range(nc):
             i = cc_idx[q]
+            if track and _misses_circle(ox - trees[i, 0], oy - trees[i, 1], dx, dy, a2, best, trees[i, 2]):
+                continue
             t = _cylinder_t(ox, oy, oz, dx, dy, dz, trees[i, 0], trees[i, 1], trees[i, 2], trees[i, 3],
                             trees[i, 4])  # fmt: skip
             if t <= best:
                 best = t
                 kind = KIND_CYLINDER
                 idx = i
+        rx1 = ox + dx * best
+        ry1 = oy + dy * best
+        rx_lo, rx_hi = min(ox, rx1) - REJECT_MARGIN_M, max(ox, rx1) + REJECT_MARGIN_M
+        ry_lo, ry_hi = min(oy, ry1) - REJECT_MARGIN_M, max(oy, ry1) + REJECT_MARGIN_M
         for q in range(ec_sorted.shape[0]):
             e = ec_sorted[q]
+            if ebox[e, 0] > rx_hi or ebox[e, 2] < rx_lo or ebox[e, 1] > ry_hi or ebox[e, 3] < ry_lo:
+                continue  # the wall's box and the ray's 2D track up to the best distance are apart
             ex_ = walls[e, 2]
             ey_ = walls[e, 3]
             wx = walls[e, 0] - ox
