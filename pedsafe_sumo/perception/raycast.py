@@ -1,4 +1,8 @@
-"""First-hit ray casting against the world snapshot, vectorised over rays and candidate objects.
+"""First-hit ray casting against the world snapshot.
+
+:func:`cast_rays` runs the compiled kernel (:mod:`pedsafe_sumo.perception.kernels`);
+:func:`cast_rays_numpy` is the vectorised numpy reference it is tested against (over rays and
+candidate objects at once). Both give the same hits.
 
 Rays come in *groups* (one group = one sensor looking at one pedestrian): every ray of a group is
 tested only against the objects whose footprint overlaps the group's corridor (the 2D bounding box
