@@ -202,8 +202,9 @@ class Detections:
 
 
 class _Selector:
-    """``_select`` for one frame: the positions and distances of all pedestrians are computed once,
-    on the first non-empty selection, and a selection of everyone is that one object."""
+    """The pedestrians a boolean mask selects, as :class:`SensorDetections`, for one frame: positions
+    and distances of all pedestrians are computed once, on the first non-empty selection, and a
+    selection of everyone is that one object (shared, as ``_union`` shares its first argument)."""
 
     def __init__(self, peds, ego: EgoPose):
         self.peds = peds
