@@ -10,7 +10,9 @@ test_compiled_equivalence.py`` checks both paths against each other on random sc
 
 Compiled on first use and cached on disk (``cache=True``: beside this file in ``__pycache__``, else
 numba's user-wide cache directory, or ``NUMBA_CACHE_DIR``); where no cache location is writable the
-kernels compile once per process instead.
+kernels compile once per process instead. Numba's cache is keyed on this file: module constants used
+here (``NEAR_CLIP_M``, the ``KIND_*`` codes of :mod:`.raycast`) are frozen into the cached code, so
+change them here (or touch this file) rather than behind its back.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 from .raycast import KIND_CYLINDER, KIND_GROUND, KIND_NONE, KIND_PEDESTRIAN, KIND_PRISM, KIND_VEHICLE
 from .world import EDGE_GRID_CELL_M
 
-NEAR_CLIP_M = 0.05  # camera near plane (m), as sensors._NEAR_CLIP_M
+NEAR_CLIP_M = 0.05  #: camera near plane (m): nothing is imaged closer than this
 _INF = np.inf
 
 
