@@ -652,3 +652,57 @@ def static_tables(st) -> tuple:
         tables = (cast, lab)
         st._grid["kernel"] = tables
     return tables
+
+
+@_jit
+def v2i_to_vehicle(points_roadside, roadside_to_world, ego_x, ego_y, ego_yaw, cam_mount, intrinsics):
+    """Eqs. 5-6 for one V2I message (as :func:`v2i.message_to_vehicle`): roadside-camera points (K, 3)
+    -> pixels (K, 2) in the ego camera (NaN behind it) and world ground positions (K, 2). The ego
+    camera's pose comes from the ego pose and the mount [forward_m, left_m, height_m, yaw_offset_rad,
+    pitch_down_rad]; roadside_to_world is the inverse of the message's world_to_roadside."""
+    c, s = math.cos(ego_yaw), math.sin(ego_yaw)
+    pos = np.empty(3)
+    pos[0] = ego_x + c * cam_mount[0] - s * cam_mount[1]
+    pos[1] = ego_y + s * cam_mount[0] + c * cam_mount[1]
+    pos[2] = cam_mount[2]
+    rot = rotation(ego_yaw + cam_mount[3], cam_mount[4])
+    trans = np.empty(3)  # world_to_camera_transform: -rot @ pos
+    for i in range(3):
+        trans[i] = -rot[i, 0] * pos[0] + -rot[i, 1] * pos[1] + -rot[i, 2] * pos[2]
+    back = np.empty(3)  # invert_transform: -rot.T @ trans
+    for i in range(3):
+        back[i] = -rot[0, i] * trans[0] + -rot[1, i] * trans[1] + -rot[2, i] * trans[2]
+    chain = np.empty((3, 4))  # world_to_camera @ roadside_to_world (rows 0-2)
+    for i in range(3):
+        for j in range(4):
+            v = rot[i, 0] * roadside_to_world[0, j] + rot[i, 1] * roadside_to_world[1, j]
+            v = v + rot[i, 2] * roadside_to_world[2, j]
+            if j == 3:
+                v = v + trans[i]
+            chain[i, j] = v
+    k = points_roadside.shape[0]
+    pixels = np.empty((k, 2))
+    xy = np.empty((k, 2))
+    pv = np.empty(3)
+    for n in range(k):
+        for i in range(3):
+            pv[i] = (
+                points_roadside[n, 0] * chain[i, 0]
+                + points_roadside[n, 1] * chain[i, 1]
+                + points_roadside[n, 2] * chain[i, 2]
+                + chain[i, 3]
+            )
+        if pv[2] > 1e-9:
+            w = intrinsics[2, 0] * pv[0] + intrinsics[2, 1] * pv[1] + intrinsics[2, 2] * pv[2]
+            pixels[n, 0] = (
+                intrinsics[0, 0] * pv[0] + intrinsics[0, 1] * pv[1] + intrinsics[0, 2] * pv[2]
+            ) / w
+            pixels[n, 1] = (
+                intrinsics[1, 0] * pv[0] + intrinsics[1, 1] * pv[1] + intrinsics[1, 2] * pv[2]
+            ) / w
+        else:
+            pixels[n, 0] = np.nan
+            pixels[n, 1] = np.nan
+        for i in range(2):
+            xy[n, i] = rot[0, i] * pv[0] + rot[1, i] * pv[1] + rot[2, i] * pv[2] + back[i]
+    return pixels, xy

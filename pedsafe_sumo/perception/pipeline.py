@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .geometry import invert_transform, project_points
-from .kernels import frame_kernel, static_tables
+from .geometry import invert_transform
+from .kernels import frame_kernel, static_tables, v2i_to_vehicle
 from .raycast import RayHits, cast_rays_numpy
 from .sensors import (
     CameraResult,
@@ -39,7 +39,7 @@ from .sensors import (
     plan_lidar,
     rgb_to_lab,
 )
-from .v2i import V2ILink, V2ISpec
+from .v2i import V2ILink, V2ISpec, message_to_vehicle
 from .world import EgoPose, RoadsideUnit, WorldSnapshot
 
 
@@ -367,7 +367,7 @@ def perceive(
 
     The sensors run as compiled kernels (:mod:`pedsafe_sumo.perception.kernels`);
     :func:`perceive_reference` is the same frame through the vectorised numpy reference."""
-    return _perceive(snapshot, ego, sensors, rng, time_s, link, _sensors_compiled)
+    return _perceive(snapshot, ego, sensors, rng, time_s, link, compiled=True)
 
 
 def perceive_reference(
@@ -380,10 +380,10 @@ def perceive_reference(
 ) -> Detections:
     """:func:`perceive` through the numpy reference implementation (plans, ``cast_rays_numpy``,
     rules of :mod:`~pedsafe_sumo.perception.sensors`); the tests check both give the same detections."""
-    return _perceive(snapshot, ego, sensors, rng, time_s, link, _sensors_numpy)
+    return _perceive(snapshot, ego, sensors, rng, time_s, link, compiled=False)
 
 
-def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detections:
+def _perceive(snapshot, ego, sensors, rng, time_s, link, compiled: bool) -> Detections:
     time_s = snapshot.time_s if time_s is None else float(time_s)
     peds = snapshot.pedestrians
     skip_vehicle = -1
@@ -392,6 +392,7 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detecti
         if ego.vehicle_id in vids:
             skip_vehicle = vids.index(ego.vehicle_id)
 
+    run_sensors = _sensors_compiled if compiled else _sensors_numpy
     cam, lid, rsu_results = run_sensors(snapshot, ego, sensors, skip_vehicle)
 
     cam_det = _miss(cam.detected, sensors.camera.miss_probability, rng)
@@ -416,7 +417,7 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, run_sensors) -> Detecti
         for unit, pose, det in zip(sensors.roadside_units, sensors.roadside_poses, rsu_dets, strict=True):
             sent = select(det)
             link.send(time_s, unit.id, pose.world_to_sensor, sent.ids, sent.xy_m, link_rng)
-        received, pixels = _receive(link.receive(time_s), ego, sensors)
+        received, pixels = _receive(link.receive(time_s), ego, sensors, compiled)
     return Detections(
         time_s=time_s,
         camera=camera,
@@ -444,35 +445,43 @@ def _roadside_to_world(world_to_roadside: np.ndarray) -> np.ndarray:
     return inv
 
 
-def _receive(messages, ego: EgoPose, sensors: SensorSuite):
-    """Delivered roadside detections in the ego's frame: :func:`message_to_vehicle` (eqs. 5-6) per
-    message, a later message (or another pole) superseding an earlier one for the same pedestrian.
-    Returns (detections, pixels (K, 2))."""
+def _receive(messages, ego: EgoPose, sensors: SensorSuite, compiled: bool):
+    """Delivered roadside detections in the ego's frame (eqs. 5-6), a later message (or another pole)
+    superseding an earlier one for the same pedestrian. Returns (detections, pixels (K, 2)).
+
+    ``compiled``: through :func:`kernels.v2i_to_vehicle` (with the roadside inverse remembered per
+    pole), else :func:`message_to_vehicle` (numpy reference)."""
     messages = [m for m in messages if m.ped_ids]
     if not messages:
         return _EMPTY, _NO_PIXELS
-    world_to_cam = sensors.camera_mount.pose(ego).world_to_sensor
-    cam_to_world = invert_transform(world_to_cam)
-    intrinsics = sensors.camera.intrinsics
     converted = []
-    for msg in messages:  # as message_to_vehicle, with the inverses computed once
-        chain = world_to_cam @ _roadside_to_world(msg.world_to_roadside)
-        p_v = msg.points_roadside_m @ chain[:3, :3].T + chain[:3, 3]
-        px, _ = project_points(intrinsics, p_v)
-        converted.append((msg.ped_ids, px, p_v @ cam_to_world[:3, :3].T + cam_to_world[:3, 3]))
-    ped_ids, px, world_pts = converted[0]
+    if compiled:
+        mount = sensors._kernel_args[2]
+        intrinsics = sensors.camera.intrinsics
+        for msg in messages:
+            px, xy = v2i_to_vehicle(
+                msg.points_roadside_m, _roadside_to_world(msg.world_to_roadside), float(ego.x_m),
+                float(ego.y_m), float(ego.yaw_rad), mount, intrinsics,
+            )  # fmt: skip
+            converted.append((msg.ped_ids, px, xy))
+    else:
+        world_to_cam = sensors.camera_mount.pose(ego).world_to_sensor
+        for msg in messages:
+            _, px, _, world_pts = message_to_vehicle(msg, world_to_cam, sensors.camera.intrinsics)
+            converted.append((msg.ped_ids, px, np.ascontiguousarray(world_pts[:, :2])))
+    ped_ids, px, xy = converted[0]
     if len(converted) == 1 and len(set(ped_ids)) == len(ped_ids):
-        ids, xy, pixels = ped_ids, np.ascontiguousarray(world_pts[:, :2]), px
+        ids, pixels = ped_ids, px
     else:
         ids, xys, pxs = [], [], []
-        for ped_ids, px, world_pts in converted:
+        for ped_ids, px, world_xy in converted:
             for k, pid in enumerate(ped_ids):
                 if pid in ids:
                     j = ids.index(pid)
-                    xys[j], pxs[j] = world_pts[k, :2], px[k]
+                    xys[j], pxs[j] = world_xy[k], px[k]
                 else:
                     ids.append(pid)
-                    xys.append(world_pts[k, :2])
+                    xys.append(world_xy[k])
                     pxs.append(px[k])
         xy, pixels = np.asarray(xys), np.asarray(pxs)
     return SensorDetections(tuple(ids), xy, np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)), pixels
