@@ -14,9 +14,13 @@
    * scene "dense": the same vehicles, but the 5 pedestrians moved 8-40 m in front of the ego,
      inside the onboard camera's field of view (the expensive case for the onboard sensors);
    * scene "roadside_view": the 5 pedestrians moved 8-40 m in front of the roadside camera (the
-     expensive case for the roadside camera).
+     expensive case for the roadside camera);
+   * scene "dense_one": as "dense" with a single pedestrian (what the episode engine passes).
    Per frame: each sensor alone (plan + cast + rule) and the whole layer (``perceive`` with the V2I
-   link), in microseconds.
+   link), in microseconds. ``--reference`` times the numpy reference path instead of the compiled
+   kernels.
+3. The start-up cost of the compiled kernels in a fresh process (what each batch worker pays):
+   import plus the first ``perceive`` with an empty numba cache (JIT compile) and with a warm one.
 
 The benchmark may import libsumo; the perception package never does.
 """
@@ -25,10 +29,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import random
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -52,7 +59,7 @@ from pedsafe_sumo.perception import (  # noqa: E402
     sumo_angle_to_yaw_rad,
     sumo_front_to_centre,
 )
-from pedsafe_sumo.perception.pipeline import _cast_all  # noqa: E402
+from pedsafe_sumo.perception.pipeline import _cast_all, _sensors_compiled, perceive_reference  # noqa: E402
 from pedsafe_sumo.perception.sensors import (  # noqa: E402
     finish_camera,
     finish_lidar,
@@ -155,9 +162,8 @@ def choose_ego(world: WorldSnapshot, junction_xy) -> EgoPose:
     return EgoPose(float(veh.x_m[i]), float(veh.y_m[i]), float(veh.yaw_rad[i]), veh.ids[i])
 
 
-def densify(world: WorldSnapshot, x_m, y_m, yaw_rad, rng: np.random.Generator) -> WorldSnapshot:
+def densify(world: WorldSnapshot, x_m, y_m, yaw_rad, rng: np.random.Generator, m=N_PERSONS) -> WorldSnapshot:
     """Move the pedestrians 8-40 m ahead of (x_m, y_m), within +-35 deg of the heading yaw_rad."""
-    m = N_PERSONS
     dist = rng.uniform(8, 40, m)
     bearing = yaw_rad + np.radians(rng.uniform(-35, 35, m))
     peds = Pedestrians.build(
@@ -181,7 +187,25 @@ def time_frames(fn, frames, repeat: int) -> list[float]:
     return out
 
 
+def sensor_fns_compiled(suite: SensorSuite):
+    def skip(world, ego):
+        return world.vehicles.ids.index(ego.vehicle_id) if ego.vehicle_id in world.vehicles.ids else -1
+
+    def camera(world, ego):
+        _sensors_compiled(world, ego, suite, skip(world, ego), True, False, False)
+
+    def lidar(world, ego):
+        _sensors_compiled(world, ego, suite, skip(world, ego), False, True, False)
+
+    def roadside(world, ego):
+        _sensors_compiled(world, ego, suite, skip(world, ego), False, False, True)
+
+    return {"onboard_camera": camera, "onboard_lidar": lidar, "roadside_camera": roadside}
+
+
 def sensor_fns(suite: SensorSuite):
+    """Per sensor through the numpy reference (plan, cast, rule)."""
+
     def skip(world, ego):
         return world.vehicles.ids.index(ego.vehicle_id) if ego.vehicle_id in world.vehicles.ids else -1
 
@@ -216,13 +240,49 @@ def summary_us(samples: list[float]) -> dict:
     }
 
 
+_START_SCRIPT = """
+import sys, time
+t0 = time.perf_counter()
+import numpy as np
+from pedsafe_sumo.params import load_params
+from pedsafe_sumo.perception import EgoPose, Pedestrians, SensorSuite, StaticOccluders, VehicleBoxes
+from pedsafe_sumo.perception import WorldSnapshot, perceive
+t1 = time.perf_counter()
+suite = SensorSuite.from_params(load_params()["perception"])
+snap = WorldSnapshot(0.0, VehicleBoxes.build(["ego"], [0.0], [0.0], [0.0], [4.5], [1.8], [1.5], [(9, 9, 9)]),
+                     Pedestrians.build(["p"], [31.5], [0.0], [0.25], [1.75], [(200, 30, 30)]),
+                     StaticOccluders.build([("b", "building", [(20, 5), (30, 5), (30, 15), (20, 15)], 0, 9,
+                                             (90, 90, 90))]))
+t2 = time.perf_counter()
+perceive(snap, EgoPose(0.0, 0.0, 0.0, "ego"), suite, np.random.default_rng(0))
+t3 = time.perf_counter()
+print(t1 - t0, t3 - t2)
+"""
+
+
+def jit_start_s() -> dict:
+    """Import time and first-frame time in fresh processes, with an empty then a warm numba cache."""
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
+        for label in ("cold_cache", "warm_cache"):
+            res = subprocess.run([sys.executable, "-c", _START_SCRIPT], env=env, cwd=ROOT, check=True,
+                                 capture_output=True, text=True)  # fmt: skip
+            imp, first = (float(v) for v in res.stdout.split())
+            out[label] = {"import_s": round(imp, 3), "first_frame_s": round(first, 3)}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--steps", type=int, default=400)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", type=Path, help="also write the numbers to this file")
+    ap.add_argument("--reference", action="store_true", help="time the numpy reference path instead")
+    ap.add_argument("--no-jit-start", action="store_true", help="skip the fresh-process start-up timing")
     args = ap.parse_args(argv)
+    layer = perceive_reference if args.reference else perceive
 
     params = load_params()["perception"]
     t0 = time.perf_counter()
@@ -249,10 +309,14 @@ def main(argv=None) -> int:
         scenes["roadside_view"] = [
             (densify(w, u.x_m, u.y_m, u.yaw_rad, rng), e) for w, e in zip(worlds, egos, strict=True)
         ]
+    scenes["dense_one"] = [
+        (densify(w, e.x_m, e.y_m, e.yaw_rad, rng, m=1), e) for w, e in zip(worlds, egos, strict=True)
+    ]
     results = {
         "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, 2 cores shared",
         "python": platform.python_version(),
         "numpy": np.__version__,
+        "path": "numpy reference" if args.reference else "compiled (numba)",
         "static": {
             "buildings_and_blocks": len(static.poly_ids),
             "wall_edges": static.n_edges,
@@ -264,32 +328,41 @@ def main(argv=None) -> int:
         "mean_vehicles": statistics.fmean(len(w.vehicles) for w in worlds),
         "mean_persons": statistics.fmean(len(w.pedestrians) for w in worlds),
     }
-    fns = sensor_fns(suite)
+    fns = sensor_fns(suite) if args.reference else sensor_fns_compiled(suite)
+    for w, e in scenes["dense"][:3]:  # compile (or load the cached kernels) outside the timings
+        perceive(w, e, suite, np.random.default_rng(0), w.time_s, V2ILink(suite.v2i))
+        for fn in fns.values():
+            fn(w, e)
     for name, frames in scenes.items():
         per = {}
         for sensor, fn in fns.items():
             per[sensor] = summary_us(time_frames(fn, frames, args.repeat))
 
-        link = V2ILink(suite.v2i)
-        gen = np.random.default_rng(args.seed)
-
-        def whole(world, ego, link=link, gen=gen):
-            perceive(world, ego, suite, gen, world.time_s, link)
-
-        per["whole_layer"] = summary_us(time_frames(whole, frames, args.repeat))
+        samples = []
+        for _ in range(args.repeat):  # a fresh link per pass: its queue must see time move forward
+            link = V2ILink(suite.v2i)
+            gen = np.random.default_rng(args.seed)
+            for w, e in frames:
+                t0 = time.perf_counter()
+                layer(w, e, suite, gen, w.time_s, link)
+                samples.append(time.perf_counter() - t0)
+        per["whole_layer"] = summary_us(samples)
         # Medians: the machine is shared, and a preempted frame would dominate a mean.
         per["whole_over_sumo_step_median"] = round(
             per["whole_layer"]["median_us"] / results["sumo_step"]["median_us"], 2
         )
         link = V2ILink(suite.v2i)
         gen = np.random.default_rng(args.seed)
-        dets = [perceive(w, e, suite, gen, w.time_s, link) for w, e in frames]
+        dets = [layer(w, e, suite, gen, w.time_s, link) for w, e in frames]
         per["mean_detected"] = {
             "onboard_camera": statistics.fmean(len(d.camera) for d in dets),
             "onboard_lidar": statistics.fmean(len(d.lidar) for d in dets),
             "roadside_camera": statistics.fmean(len(d.roadside) for d in dets),
+            "v2i_received": statistics.fmean(len(d.v2i_received) for d in dets),
         }
         results[f"scene_{name}"] = per
+    if not args.reference and not args.no_jit_start:
+        results["jit_start"] = jit_start_s()
     text = json.dumps(results, indent=2)
     print(text)
     if args.json:

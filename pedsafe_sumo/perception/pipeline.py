@@ -23,7 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .raycast import cast_rays
+from .geometry import invert_transform
+from .kernels import frame_kernel, static_tables, v2i_to_vehicle
+from .raycast import RayHits, cast_rays_numpy
 from .sensors import (
     CameraResult,
     CameraSpec,
@@ -35,6 +37,7 @@ from .sensors import (
     finish_lidar,
     plan_camera,
     plan_lidar,
+    rgb_to_lab,
 )
 from .v2i import V2ILink, V2ISpec, message_to_vehicle
 from .world import EgoPose, RoadsideUnit, WorldSnapshot
@@ -109,6 +112,44 @@ class SensorSuite:
     def roadside_poses(self) -> tuple:
         return tuple(self.roadside_pose(u) for u in self.roadside_units)
 
+    @functools.cached_property
+    def _kernel_args(self) -> tuple:
+        """The suite packed as :func:`kernels.frame_kernel` reads it (built once)."""
+
+        def camera(spec: CameraSpec):
+            k = spec.intrinsics
+            p = [k[0, 0], k[0, 2], k[1, 2], spec.width_px, spec.height_px, spec.min_visible_fraction,
+                 spec.min_height_px, spec.delta_e_threshold**2, spec.background_max_distance_m]  # fmt: skip
+            return np.array(p, dtype=float), np.ascontiguousarray(np.array(spec.sample_pattern, dtype=float))
+
+        def mount(m: Mount):
+            return np.array([m.forward_m, m.left_m, m.height_m, m.yaw_offset_rad, m.pitch_down_rad])
+
+        lid = self.lidar
+        res = math.radians(lid.horizontal_resolution_deg)
+        lid_p = np.array([lid.cluster_tolerance_m, lid.range_m, res, lid.min_returns, math.pi - res])
+        poses = self.roadside_poses
+        rsu_rot = np.array([p.world_to_sensor[:3, :3] for p in poses], dtype=float).reshape(-1, 3, 3)
+        rsu_trans = np.array([p.world_to_sensor[:3, 3] for p in poses], dtype=float).reshape(-1, 3)
+        rsu_pos = np.array([p.position_m for p in poses], dtype=float).reshape(-1, 3)
+        return (
+            *camera(self.camera),
+            mount(self.camera_mount),
+            lid_p,
+            np.ascontiguousarray(lid.elevations_rad, dtype=float),
+            mount(self.lidar_mount),
+            *camera(self.roadside),
+            rsu_rot,
+            rsu_trans,
+            rsu_pos,
+        )
+
+    @functools.cached_property
+    def _kernel_lab(self) -> tuple:
+        """CIELAB of the ground and sky colours."""
+        lab = rgb_to_lab(np.array([self.ground_rgb, self.sky_rgb], dtype=float))
+        return lab[0].copy(), lab[1].copy()
+
 
 @dataclass(frozen=True)
 class SensorDetections:
@@ -160,16 +201,34 @@ class Detections:
         return {"onboard_camera": self.camera, "onboard_lidar": self.lidar, "v2i": self.v2i_received}
 
 
-def _select(world: WorldSnapshot, ego: EgoPose, mask: np.ndarray) -> SensorDetections:
-    if not mask.any():
-        return _EMPTY
-    idx = np.nonzero(mask)[0]
-    peds = world.pedestrians
-    xy = np.empty((idx.size, 2))
-    xy[:, 0] = peds.x_m[idx]
-    xy[:, 1] = peds.y_m[idx]
-    dist = np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)
-    return SensorDetections(tuple(peds.ids[i] for i in idx), xy, dist)
+class _Selector:
+    """The pedestrians a boolean mask selects, as :class:`SensorDetections`, for one frame: positions
+    and distances of all pedestrians are computed once, on the first non-empty selection, and a
+    selection of everyone is that one object (shared, as ``_union`` shares its first argument)."""
+
+    def __init__(self, peds, ego: EgoPose):
+        self.peds = peds
+        self.ego = ego
+        self.everyone = None
+
+    def __call__(self, mask: np.ndarray) -> SensorDetections:
+        n = np.count_nonzero(mask)
+        if n == 0:
+            return _EMPTY
+        if self.everyone is None:
+            peds, m = self.peds, len(self.peds)
+            xy = np.empty((m, 2))
+            xy[:, 0] = peds.x_m
+            xy[:, 1] = peds.y_m
+            dist = np.hypot(xy[:, 0] - self.ego.x_m, xy[:, 1] - self.ego.y_m)
+            self.everyone = SensorDetections(tuple(peds.ids), xy, dist)
+        if n == mask.shape[0]:
+            return self.everyone
+        idx = np.flatnonzero(mask)
+        ids = self.everyone.ids
+        return SensorDetections(
+            tuple(ids[i] for i in idx), self.everyone.xy_m[idx], self.everyone.distance_m[idx]
+        )
 
 
 def _miss(detected: np.ndarray, probability: float, rng: np.random.Generator) -> np.ndarray:
@@ -190,12 +249,10 @@ def _union(first: SensorDetections, second: SensorDetections) -> SensorDetection
 
 
 def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle, onboard=None):
-    """Cast the rays of all plans in one pass; return each plan's slice of hits.
+    """Cast the rays of all plans in one pass (numpy reference); return each plan's slice of hits.
 
     ``skip_vehicle``: the ego's vehicle index (-1 none), ignored by the rays of the plans flagged in
     ``onboard`` (default: all plans)."""
-    from .raycast import RayHits
-
     live = [p for p in plans if p.group_count.size]
     if not live:
         return [None] * len(plans)
@@ -209,7 +266,7 @@ def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle, onboard=
         ]
     )
     starts = np.cumsum(counts) - counts
-    hits = cast_rays(
+    hits = cast_rays_numpy(
         world,
         np.concatenate([p.origin for p in live]),
         np.concatenate([p.direction for p in live]),
@@ -231,6 +288,72 @@ def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle, onboard=
     return out
 
 
+def _sensors_numpy(snapshot: WorldSnapshot, ego: EgoPose, sensors: SensorSuite, skip_vehicle: int):
+    """Every sensor through the vectorised numpy reference: plans, one cast of all rays, rules."""
+    peds = snapshot.pedestrians
+    rsu_poses = sensors.roadside_poses
+    plans = [
+        plan_camera(sensors.camera, sensors.camera_mount.pose(ego), peds),
+        plan_lidar(sensors.lidar, sensors.lidar_mount.pose(ego), peds),
+    ]
+    plans += [plan_camera(sensors.roadside, pose, peds) for pose in rsu_poses]
+    hit_list = _cast_all(snapshot, plans, skip_vehicle, onboard=[True, True] + [False] * len(rsu_poses))
+
+    def cam_result(spec, plan, hits) -> CameraResult:
+        return finish_camera(spec, plan, hits or _NO_HITS, snapshot, sensors.ground_rgb, sensors.sky_rgb)
+
+    cam = cam_result(sensors.camera, plans[0], hit_list[0])
+    lid = finish_lidar(sensors.lidar, plans[1], hit_list[1] or _NO_HITS, snapshot)
+    rsu = [cam_result(sensors.roadside, p, h) for p, h in zip(plans[2:], hit_list[2:], strict=True)]
+    return cam, lid, rsu
+
+
+_LAB_CACHE: dict = {}
+_LAB_CACHE_SIZE = 512
+
+
+def _lab_rows(rgb: np.ndarray) -> np.ndarray:
+    """CIELAB of (K, 3) sRGB rows, remembered across frames (vehicles keep their colours). OpenCV
+    converts each pixel on its own, so this equals the reference's one conversion of the snapshot."""
+    key = rgb.tobytes()
+    lab = _LAB_CACHE.get(key)
+    if lab is None:
+        if len(_LAB_CACHE) >= _LAB_CACHE_SIZE:
+            _LAB_CACHE.clear()
+        lab = np.ascontiguousarray(rgb_to_lab(rgb)).reshape(-1, 3)
+        _LAB_CACHE[key] = lab
+    return lab
+
+
+def _sensors_compiled(
+    snapshot: WorldSnapshot,
+    ego: EgoPose,
+    sensors: SensorSuite,
+    skip_vehicle: int,
+    camera: bool = True,
+    lidar: bool = True,
+    roadside: bool = True,
+):
+    """Every sensor (or the ones flagged) through the compiled frame kernel; same results as
+    :func:`_sensors_numpy` (sensors not run report nothing)."""
+    veh, peds = snapshot.vehicles, snapshot.pedestrians
+    cast, static_lab = static_tables(snapshot.static)
+    out_f, n_ret, out_b = frame_kernel(
+        float(ego.x_m), float(ego.y_m), float(ego.yaw_rad), skip_vehicle, camera, lidar, roadside,
+        *sensors._kernel_args,
+        veh.x_m, veh.y_m, veh.yaw_rad, veh.length_m, veh.width_m, veh.height_m, _lab_rows(veh.rgb),
+        peds.x_m, peds.y_m, peds.radius_m, peds.height_m, _lab_rows(peds.rgb),
+        *cast, *static_lab, *sensors._kernel_lab,
+    )  # fmt: skip
+    cam = CameraResult(out_b[0], out_f[0], out_f[1], out_f[2])
+    lid = LidarResult(out_b[1], n_ret, out_b[2])
+    rsu = [
+        CameraResult(out_b[3 + u], out_f[3 + 3 * u], out_f[4 + 3 * u], out_f[5 + 3 * u])
+        for u in range(len(sensors.roadside_units))
+    ]
+    return cam, lid, rsu
+
+
 def perceive(
     snapshot: WorldSnapshot,
     ego: EgoPose,
@@ -240,66 +363,61 @@ def perceive(
     link: V2ILink | None = None,
 ) -> Detections:
     """Run every sensor on one snapshot (see module docstring). ``link`` carries the roadside
-    detections to the ego; without one, ``v2i_received`` is empty and ``v2i`` equals ``sv``."""
+    detections to the ego; without one, ``v2i_received`` is empty and ``v2i`` equals ``sv``.
+
+    The sensors run as compiled kernels (:mod:`pedsafe_sumo.perception.kernels`);
+    :func:`perceive_reference` is the same frame through the vectorised numpy reference."""
+    return _perceive(snapshot, ego, sensors, rng, time_s, link, compiled=True)
+
+
+def perceive_reference(
+    snapshot: WorldSnapshot,
+    ego: EgoPose,
+    sensors: SensorSuite,
+    rng: np.random.Generator,
+    time_s: float | None = None,
+    link: V2ILink | None = None,
+) -> Detections:
+    """:func:`perceive` through the numpy reference implementation (plans, ``cast_rays_numpy``,
+    rules of :mod:`~pedsafe_sumo.perception.sensors`); the tests check both give the same detections."""
+    return _perceive(snapshot, ego, sensors, rng, time_s, link, compiled=False)
+
+
+def _perceive(snapshot, ego, sensors, rng, time_s, link, compiled: bool) -> Detections:
     time_s = snapshot.time_s if time_s is None else float(time_s)
     peds = snapshot.pedestrians
     skip_vehicle = -1
-    if ego.vehicle_id is not None and ego.vehicle_id in snapshot.vehicles.ids:
-        skip_vehicle = snapshot.vehicles.ids.index(ego.vehicle_id)
+    if ego.vehicle_id is not None:
+        vids = snapshot.vehicles.ids
+        if ego.vehicle_id in vids:
+            skip_vehicle = vids.index(ego.vehicle_id)
 
-    cam_pose = sensors.camera_mount.pose(ego)
-    lidar_pose = sensors.lidar_mount.pose(ego)
-    rsu_poses = sensors.roadside_poses
-    plans = [plan_camera(sensors.camera, cam_pose, peds), plan_lidar(sensors.lidar, lidar_pose, peds)]
-    plans += [plan_camera(sensors.roadside, pose, peds) for pose in rsu_poses]
-    hit_list = _cast_all(snapshot, plans, skip_vehicle, onboard=[True, True] + [False] * len(rsu_poses))
-
-    def cam_result(spec, plan, hits) -> CameraResult:
-        if hits is None:
-            return finish_camera(spec, plan, _NO_HITS, snapshot, sensors.ground_rgb, sensors.sky_rgb)
-        return finish_camera(spec, plan, hits, snapshot, sensors.ground_rgb, sensors.sky_rgb)
-
-    cam = cam_result(sensors.camera, plans[0], hit_list[0])
-    lid: LidarResult = finish_lidar(sensors.lidar, plans[1], hit_list[1] or _NO_HITS, snapshot)
-    rsu_results = [cam_result(sensors.roadside, p, h) for p, h in zip(plans[2:], hit_list[2:], strict=True)]
+    run_sensors = _sensors_compiled if compiled else _sensors_numpy
+    cam, lid, rsu_results = run_sensors(snapshot, ego, sensors, skip_vehicle)
 
     cam_det = _miss(cam.detected, sensors.camera.miss_probability, rng)
     lid_det = _miss(lid.detected, sensors.lidar.miss_probability, rng)
     rsu_dets = [_miss(r.detected, sensors.roadside.miss_probability, rng) for r in rsu_results]
-    rsu_any = np.zeros(len(peds), dtype=bool)
-    for d in rsu_dets:
-        rsu_any |= d
+    if len(rsu_dets) == 1:
+        rsu_any = rsu_dets[0]
+    else:
+        rsu_any = np.zeros(len(peds), dtype=bool)
+        for d in rsu_dets:
+            rsu_any |= d
 
-    camera = _select(snapshot, ego, cam_det)
-    lidar = _select(snapshot, ego, lid_det)
-    roadside = _select(snapshot, ego, rsu_any)
+    select = _Selector(peds, ego)
+    camera = select(cam_det)
+    lidar = select(lid_det)
+    roadside = select(rsu_any)
     sv = _union(camera, lidar)
 
-    received = SensorDetections.empty()
-    pixels = np.zeros((0, 2))
+    received, pixels = _EMPTY, _NO_PIXELS
     if link is not None:
-        for unit, pose, det in zip(sensors.roadside_units, rsu_poses, rsu_dets, strict=True):
-            idx = np.nonzero(det)[0]
-            xy = np.column_stack([peds.x_m[idx], peds.y_m[idx]])
-            link_rng = link.rng if link.rng is not None else rng
-            link.send(time_s, unit.id, pose.world_to_sensor, tuple(peds.ids[i] for i in idx), xy, link_rng)
-        ids, xys, pxs = [], [], []
-        for msg in link.receive(time_s):
-            if not msg.ped_ids:
-                continue
-            _, px, _, world_pts = message_to_vehicle(msg, cam_pose.world_to_sensor, sensors.camera.intrinsics)
-            for k, pid in enumerate(msg.ped_ids):
-                if pid in ids:  # a later message (or another pole) supersedes an earlier one
-                    j = ids.index(pid)
-                    xys[j], pxs[j] = world_pts[k, :2], px[k]
-                else:
-                    ids.append(pid)
-                    xys.append(world_pts[k, :2])
-                    pxs.append(px[k])
-        if ids:
-            xy = np.asarray(xys)
-            received = SensorDetections(tuple(ids), xy, np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m))
-            pixels = np.asarray(pxs)
+        link_rng = link.rng if link.rng is not None else rng
+        for unit, pose, det in zip(sensors.roadside_units, sensors.roadside_poses, rsu_dets, strict=True):
+            sent = select(det)
+            link.send(time_s, unit.id, pose.world_to_sensor, sent.ids, sent.xy_m, link_rng)
+        received, pixels = _receive(link.receive(time_s), ego, sensors, compiled)
     return Detections(
         time_s=time_s,
         camera=camera,
@@ -311,6 +429,62 @@ def perceive(
         ego_camera_px=pixels,
         diagnostics={"camera": cam, "lidar": lid, "roadside": rsu_results},
     )
+
+
+_INVERSES: dict = {}
+
+
+def _roadside_to_world(world_to_roadside: np.ndarray) -> np.ndarray:
+    """``invert_transform`` of a roadside camera's transform, remembered (the poles do not move)."""
+    key = world_to_roadside.tobytes()
+    inv = _INVERSES.get(key)
+    if inv is None:
+        if len(_INVERSES) >= 64:
+            _INVERSES.clear()
+        inv = _INVERSES[key] = invert_transform(world_to_roadside)
+    return inv
+
+
+def _receive(messages, ego: EgoPose, sensors: SensorSuite, compiled: bool):
+    """Delivered roadside detections in the ego's frame (eqs. 5-6), a later message (or another pole)
+    superseding an earlier one for the same pedestrian. Returns (detections, pixels (K, 2)).
+
+    ``compiled``: through :func:`kernels.v2i_to_vehicle` (with the roadside inverse remembered per
+    pole), else :func:`message_to_vehicle` (numpy reference)."""
+    messages = [m for m in messages if m.ped_ids]
+    if not messages:
+        return _EMPTY, _NO_PIXELS
+    converted = []
+    if compiled:
+        mount = sensors._kernel_args[2]
+        intrinsics = sensors.camera.intrinsics
+        for msg in messages:
+            px, xy = v2i_to_vehicle(
+                msg.points_roadside_m, _roadside_to_world(msg.world_to_roadside), float(ego.x_m),
+                float(ego.y_m), float(ego.yaw_rad), mount, intrinsics,
+            )  # fmt: skip
+            converted.append((msg.ped_ids, px, xy))
+    else:
+        world_to_cam = sensors.camera_mount.pose(ego).world_to_sensor
+        for msg in messages:
+            _, px, _, world_pts = message_to_vehicle(msg, world_to_cam, sensors.camera.intrinsics)
+            converted.append((msg.ped_ids, px, np.ascontiguousarray(world_pts[:, :2])))
+    ped_ids, px, xy = converted[0]
+    if len(converted) == 1 and len(set(ped_ids)) == len(ped_ids):
+        ids, pixels = ped_ids, px
+    else:
+        ids, xys, pxs = [], [], []
+        for ped_ids, px, world_xy in converted:
+            for k, pid in enumerate(ped_ids):
+                if pid in ids:
+                    j = ids.index(pid)
+                    xys[j], pxs[j] = world_xy[k], px[k]
+                else:
+                    ids.append(pid)
+                    xys.append(world_xy[k])
+                    pxs.append(px[k])
+        xy, pixels = np.asarray(xys), np.asarray(pxs)
+    return SensorDetections(tuple(ids), xy, np.hypot(xy[:, 0] - ego.x_m, xy[:, 1] - ego.y_m)), pixels
 
 
 class PerceptionSystem:
@@ -328,9 +502,8 @@ class PerceptionSystem:
 
 
 def _no_hits():
-    from .raycast import RayHits
-
     return RayHits(np.zeros(0), np.zeros(0, dtype=np.int8), np.zeros(0, dtype=np.int64))
 
 
 _NO_HITS = _no_hits()
+_NO_PIXELS = np.zeros((0, 2))

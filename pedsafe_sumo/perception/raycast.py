@@ -1,4 +1,8 @@
-"""First-hit ray casting against the world snapshot, vectorised over rays and candidate objects.
+"""First-hit ray casting against the world snapshot.
+
+:func:`cast_rays` runs the compiled kernel (:mod:`pedsafe_sumo.perception.kernels`);
+:func:`cast_rays_numpy` is the vectorised numpy reference it is tested against (over rays and
+candidate objects at once). Both give the same hits.
 
 Rays come in *groups* (one group = one sensor looking at one pedestrian): every ray of a group is
 tested only against the objects whose footprint overlaps the group's corridor (the 2D bounding box
@@ -94,7 +98,38 @@ def cast_rays(
     skip_pedestrian: np.ndarray,
     skip_vehicle=-1,
 ) -> RayHits:
-    """First hit of each ray.
+    """First hit of each ray (compiled kernel; same arguments and results as :func:`cast_rays_numpy`)."""
+    from .kernels import cast_rays_kernel, static_tables
+
+    n_groups = np.asarray(group_start).shape[0]
+    skip = np.ascontiguousarray(np.broadcast_to(np.asarray(skip_vehicle, dtype=np.int64), (n_groups,)))
+    veh, ped = world.vehicles, world.pedestrians
+    t, kind, index = cast_rays_kernel(
+        np.ascontiguousarray(origin, dtype=float).reshape(-1, 3),
+        np.ascontiguousarray(direction, dtype=float).reshape(-1, 3),
+        np.ascontiguousarray(t_max, dtype=float),
+        np.ascontiguousarray(group_start, dtype=np.int64),
+        np.ascontiguousarray(group_count, dtype=np.int64),
+        np.ascontiguousarray(skip_pedestrian, dtype=np.int64),
+        skip,
+        veh.x_m, veh.y_m, veh.yaw_rad, veh.length_m, veh.width_m, veh.height_m,
+        ped.x_m, ped.y_m, ped.radius_m, ped.height_m,
+        *static_tables(world.static)[0],
+    )  # fmt: skip
+    return RayHits(t, kind, index)
+
+
+def cast_rays_numpy(
+    world: WorldSnapshot,
+    origin: np.ndarray,
+    direction: np.ndarray,
+    t_max: np.ndarray,
+    group_start: np.ndarray,
+    group_count: np.ndarray,
+    skip_pedestrian: np.ndarray,
+    skip_vehicle=-1,
+) -> RayHits:
+    """First hit of each ray: the vectorised numpy reference of the compiled :func:`cast_rays`.
 
     origin, direction: (R, 3) world frame, unit directions; t_max: (R,) metres. Rays are sorted by
     group: group g owns rays ``group_start[g] : group_start[g] + group_count[g]`` (count >= 1).

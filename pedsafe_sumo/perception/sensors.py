@@ -37,10 +37,11 @@ import cv2
 import numpy as np
 
 from .geometry import intrinsic_matrix, world_to_camera_transform
+from .kernels import NEAR_CLIP_M
 from .raycast import KIND_CYLINDER, KIND_GROUND, KIND_PEDESTRIAN, KIND_PRISM, KIND_VEHICLE, RayHits
 from .world import Pedestrians, WorldSnapshot
 
-_NEAR_CLIP_M = 0.05  # camera near plane (m): nothing is imaged closer than this
+_NEAR_CLIP_M = NEAR_CLIP_M  # camera near plane (m): nothing is imaged closer than this
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import numpy as np
 from .geometry import invert_transform, project_points, transform_points
 
 _TIME_EPS_S = 1e-9
+_NO_POINTS = np.zeros((0, 3))
 
 
 @dataclass(frozen=True)
@@ -82,15 +83,20 @@ class V2ILink:
             self.lost += 1
             return None
         xy = np.asarray(ground_xy_m, dtype=float).reshape(-1, 2)
-        if xy.shape[0] and self.spec.position_noise_sigma_m > 0:
-            xy = xy + rng.normal(0.0, self.spec.position_noise_sigma_m, size=xy.shape)
-        world_pts = np.hstack([xy, np.zeros((xy.shape[0], 1))])
+        if xy.shape[0]:
+            if self.spec.position_noise_sigma_m > 0:
+                xy = xy + rng.normal(0.0, self.spec.position_noise_sigma_m, size=xy.shape)
+            world_pts = np.zeros((xy.shape[0], 3))
+            world_pts[:, :2] = xy
+            points = world_pts @ world_to_roadside[:3, :3].T + world_to_roadside[:3, 3]  # transform_points
+        else:
+            points = _NO_POINTS  # an empty message (most frames): no arrays to build
         msg = V2IMessage(
             rsu_id=rsu_id,
             sent_time_s=float(time_s),
             deliver_time_s=float(time_s) + self.spec.latency_s,
             ped_ids=tuple(ped_ids),
-            points_roadside_m=transform_points(world_to_roadside, world_pts),
+            points_roadside_m=points,
             world_to_roadside=world_to_roadside,
         )
         self._queue.append(msg)
