@@ -150,3 +150,21 @@ def test_blending_pedestrian_passes_within_the_lidar_cluster_tolerance_of_the_ve
         gap = dist_to_line - setup.pedestrian.radius_m
         assert 0.05 <= gap < 0.5
         assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
+
+
+def test_blending_pedestrian_starts_in_front_of_the_vehicle_rear_as_seen_from_the_ego(approach):
+    """The sight line from the ego's front to the pedestrian's start, continued 1 m past them, ends
+    inside the waiting vehicle's footprint: its rear is what stands behind them in the image."""
+    for seed in range(20):
+        setup = draw("background_blending", seed, approach)
+        waiting = setup.parked[0]
+        corners = _footprint(
+            approach, waiting.lane_id, waiting.front_pos_m, waiting.size.length_m, waiting.size.width_m
+        )
+        ego_index = approach.lane_ids.index(setup.ego.lane_id)
+        camera = approach.pose(ego_index, setup.ego.front_pos_m)[:2]
+        start = setup.pedestrian.path_xy[0]
+        d = math.dist(camera, start)
+        beyond = (start[0] + (start[0] - camera[0]) / d * 1.0, start[1] + (start[1] - camera[1]) / d * 1.0)
+        edges = list(zip(corners, corners[1:] + corners[:1]))
+        assert any(_segments_intersect(start, beyond, a, b) for a, b in edges), f"seed {seed}"
