@@ -459,12 +459,9 @@ class EpisodeRunner:
                         "ego_width_m": ego_width,
                         "ped_x_m": pose.x_m,
                         "ped_y_m": pose.y_m,
-                        "ped_vx_mps": pose.speed_mps * math.cos(pose.heading_rad)
-                        if pose.speed_mps >= 0
-                        else -pose.speed_mps * math.cos(pose.heading_rad),
-                        "ped_vy_mps": pose.speed_mps * math.sin(pose.heading_rad)
-                        if pose.speed_mps >= 0
-                        else -pose.speed_mps * math.sin(pose.heading_rad),
+                        # The pose's heading is the direction of motion (flipped when stepping back).
+                        "ped_vx_mps": abs(pose.speed_mps) * math.cos(pose.heading_rad),
+                        "ped_vy_mps": abs(pose.speed_mps) * math.sin(pose.heading_rad),
                         "ped_radius_m": ped.radius_m,
                         "detected_onboard_camera": PED_ID in detections.camera,
                         "detected_onboard_lidar": PED_ID in detections.lidar,
