@@ -30,6 +30,7 @@ import sumolib
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.network.attribution import add_attribution_comment
 from pedsafe_sumo.network.clip import ClipError, clip_osm, read_osm
+from pedsafe_sumo.network.sites import compass_sector
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
 HERE = Path(__file__).resolve().parent
@@ -111,8 +112,7 @@ def _arm_axis(junction, arm: str) -> tuple[float, float]:
         if edge.getFunction():
             continue
         dx, dy = far_end[0] - jx, far_end[1] - jy
-        bearing = math.degrees(math.atan2(dx, dy)) % 360.0
-        if "NESW"[int(((bearing + 45.0) % 360.0) // 90.0)] == arm:
+        if compass_sector((jx, jy), far_end) == arm:
             norm = math.hypot(dx, dy) or 1.0
             sums[0] += dx / norm
             sums[1] += dy / norm

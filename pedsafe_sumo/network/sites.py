@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,3 +63,10 @@ def get_site(name: str) -> Site:
         return SITES[name]
     except KeyError:
         raise UnknownSiteError(name) from None
+
+
+def compass_sector(centre_xy: tuple[float, float], point_xy: tuple[float, float]) -> str:
+    """ "N", "E", "S" or "W": the 90-degree sector of `point_xy` seen from `centre_xy` (network frame,
+    y north). How the arms of a junction are named everywhere in the package."""
+    bearing_deg = math.degrees(math.atan2(point_xy[0] - centre_xy[0], point_xy[1] - centre_xy[1])) % 360.0
+    return "NESW"[int(((bearing_deg + 45.0) % 360.0) // 90.0)]

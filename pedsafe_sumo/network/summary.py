@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import xml.etree.ElementTree as ET
 from collections import Counter
 from dataclasses import dataclass, field
@@ -11,7 +10,7 @@ from pathlib import Path
 
 import sumolib
 
-from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.network.sites import Site, compass_sector
 
 
 @dataclass
@@ -80,9 +79,7 @@ def summarise(site: Site) -> SiteSummary:
     signalised = {c.get("to") for c in root.iter("connection") if c.get("to") in crossings and c.get("tl")}
 
     def direction(edge, incoming: bool) -> str:
-        x, y = edge.getShape()[0] if incoming else edge.getShape()[-1]
-        bearing = math.degrees(math.atan2(x - jx, y - jy)) % 360.0
-        return "NESW"[int(((bearing + 45.0) % 360.0) // 90.0)]
+        return compass_sector((jx, jy), edge.getShape()[0] if incoming else edge.getShape()[-1])
 
     arms: dict[str, Arm] = {}
     edge_dir: dict[str, str] = {}

@@ -18,7 +18,7 @@ from functools import lru_cache
 
 import sumolib
 
-from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.network.sites import Site, compass_sector
 
 
 @dataclass(frozen=True)
@@ -67,8 +67,7 @@ def load_approach(site: Site) -> Approach:
     arm = info["roadside_unit"]["watched_arm"]
 
     def sector(x: float, y: float) -> str:
-        bearing = math.degrees(math.atan2(x - jx, y - jy)) % 360.0
-        return "NESW"[int(((bearing + 45.0) % 360.0) // 90.0)]
+        return compass_sector((jx, jy), (x, y))
 
     candidates = [
         e
