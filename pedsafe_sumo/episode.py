@@ -22,7 +22,7 @@ from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
-from pedsafe_sumo.settings import UsageError, configure
+from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeResult, EpisodeRunner
 
@@ -121,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
         site = get_site(args.site)
         specs, params = configure([args.scenario], args.params, args.set)
+        check_roadside_units(specs, site)
         spec = specs[args.scenario]
         agent_class = load_agent_class(args.algorithm)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:

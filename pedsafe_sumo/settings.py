@@ -54,3 +54,15 @@ def configure(
         params = with_overrides(params, param_overrides)
     specs = {name: get_scenario(name).with_overrides(scenario_overrides) for name in scenario_names}
     return specs, params
+
+
+def check_roadside_units(specs: dict[str, ScenarioSpec], site) -> None:
+    """Every roadside pole a scenario names must exist at the site (else one clear line, before any work)."""
+    known = site.roadside_unit_ids()
+    for spec in specs.values():
+        unknown = [unit for unit in spec.roadside_unit_ids if unit not in known]
+        if unknown:
+            raise UsageError(
+                f"scenario '{spec.name}': roadside_units names {', '.join(unknown)}, which site "
+                f"{site.name} does not have (known: {', '.join(known)})"
+            )

@@ -29,7 +29,7 @@ from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
-from pedsafe_sumo.settings import UsageError, configure, parse_set
+from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
 DEFAULT_EPISODES = 100
@@ -103,8 +103,9 @@ def validate(args) -> tuple[list[str], list[str], dict, dict]:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
     if args.seed < 0:
         raise UsageError(f"--seed must not be negative, got {args.seed}")
-    get_site(args.site)
+    site = get_site(args.site)
     specs, params = configure(scenarios, args.params, args.set)
+    check_roadside_units(specs, site)
     load_agent_class(args.algorithm)
     if (
         args.out is not None

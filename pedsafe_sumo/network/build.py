@@ -168,22 +168,105 @@ def place_roadside_unit(
     }
 
 
-def _write_rsu(path: Path, rsu: dict) -> None:
-    params = "\n".join(
-        f'        <param key="{key}" value="{rsu[key]}"/>'
-        for key in ("height_m", "yaw_deg", "pitch_deg", "fov_deg", "corner", "watched_arm")
-    )
+#: The far-side pole (see place_roadside_unit_across): it stands abreast of the point this far before the
+#: watched approach's stop line, and aims at the kerb lane this far before it, where a vehicle waiting
+#: at the stop line ends (car lengths 4.6-5.0 m) and a pedestrian standing behind it is.
+RSU_ACROSS_ABREAST_M = 10.0
+RSU_ACROSS_AIM_M = 6.0
+#: How far beyond the outer edge of the far sidewalk's centre line the far-side pole stands [m].
+RSU_ACROSS_SETBACK_M = 1.0
+
+
+def place_roadside_unit_across(
+    net: sumolib.net.Net,
+    junction,
+    watch_arm: str = "N",
+    abreast_m: float = RSU_ACROSS_ABREAST_M,
+    aim_m: float = RSU_ACROSS_AIM_M,
+) -> dict:
+    """Pole on the far sidewalk of one arm, looking across at the approach's stop-line queue.
+
+    The approach is the arm's incoming carriageway with the most vehicle lanes; the far sidewalk is
+    the outermost pedestrian lane of the arm's leaving carriageway. The pole stands on that
+    sidewalk, RSU_ACROSS_SETBACK_M beyond it, abreast of the point `abreast_m` before the stop line
+    of the approach's kerb lane, and aims at the kerb lane `aim_m` before the stop line. Seen from
+    there, a pedestrian standing right behind a vehicle that waits at the stop line is in side view
+    with the road and pavement behind them, not the vehicle: the corner pole of
+    place_roadside_unit looks at them over the vehicle's front and sees only the vehicle.
+    """
+    jx, jy = junction.getCoord()
+
+    def in_arm(edge, far_end) -> bool:
+        return edge.getFunction() == "" and compass_sector((jx, jy), far_end) == watch_arm
+
+    def vehicle_lanes(edge) -> list:
+        return [lane for lane in edge.getLanes() if lane.allows("passenger")]
+
+    incoming = [e for e in junction.getIncoming() if in_arm(e, e.getShape()[0]) and vehicle_lanes(e)]
+    outgoing = [e for e in junction.getOutgoing() if in_arm(e, e.getShape()[-1]) and vehicle_lanes(e)]
+    if not incoming or not outgoing:
+        raise BuildError(f"the main junction's {watch_arm} arm has no incoming and leaving carriageway")
+    approach = max(incoming, key=lambda e: len(vehicle_lanes(e)))
+    kerb_lane = vehicle_lanes(approach)[0]
+    leaving = min(outgoing, key=lambda e: _distance_to_shape(kerb_lane.getShape()[-1], e.getShape()))
+    sidewalks = [lane for lane in leaving.getLanes() if lane.getPermissions() == {"pedestrian"}]
+    if not sidewalks:
+        raise BuildError(f"the leaving carriageway {leaving.getID()} of the {watch_arm} arm has no sidewalk")
+    sidewalk = sidewalks[0]  # lane 0: the outermost
+
+    def before_stop_line(distance_m: float) -> tuple[float, float]:
+        return sumolib.geomhelper.positionAtShapeOffset(
+            kerb_lane.getShape(), max(kerb_lane.getLength() - distance_m, 0.0)
+        )
+
+    abreast = before_stop_line(abreast_m)
+    aim_x, aim_y = before_stop_line(aim_m)
+    offset = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(abreast, sidewalk.getShape())
+    sx, sy = sumolib.geomhelper.positionAtShapeOffset(sidewalk.getShape(), offset)
+    dx, dy = sx - abreast[0], sy - abreast[1]
+    dist = math.hypot(dx, dy) or 1.0
+    px = sx + (sidewalk.getWidth() / 2 + RSU_ACROSS_SETBACK_M) * dx / dist
+    py = sy + (sidewalk.getWidth() / 2 + RSU_ACROSS_SETBACK_M) * dy / dist
+    yaw_deg = math.degrees(math.atan2(aim_x - px, aim_y - py)) % 360.0
+    pitch_deg = math.degrees(math.atan2(RSU_HEIGHT_M, math.hypot(aim_x - px, aim_y - py)))
+    return {
+        "x": round(px, 2),
+        "y": round(py, 2),
+        "height_m": RSU_HEIGHT_M,
+        "yaw_deg": round(yaw_deg, 2),
+        "pitch_deg": round(pitch_deg, 2),
+        "fov_deg": RSU_FOV_DEG,
+        "corner": "across",
+        "watched_arm": watch_arm,
+    }
+
+
+def _distance_to_shape(point, shape) -> float:
+    offset = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(point, shape)
+    return math.dist(point, sumolib.geomhelper.positionAtShapeOffset(shape, offset))
+
+
+def _write_rsu(path: Path, units: list[dict]) -> None:
+    """All roadside camera poles of the site as POIs of one additional file."""
+    pois = []
+    for rsu in units:
+        params = "\n".join(
+            f'        <param key="{key}" value="{rsu[key]}"/>'
+            for key in ("height_m", "yaw_deg", "pitch_deg", "fov_deg", "corner", "watched_arm")
+        )
+        pois.append(
+            f'    <poi id="{rsu["id"]}" type="roadside_camera" color="0,90,255" layer="100" '
+            f'x="{rsu["x"]:.2f}" y="{rsu["y"]:.2f}" width="2.00" height="2.00" '
+            f'angle="{rsu["yaw_deg"]:.2f}">\n'
+            f"{params}\n"
+            "    </poi>\n"
+        )
     path.write_text(
         '<?xml version="1.0" encoding="UTF-8"?>\n'
-        "<!-- Roadside unit of the study site: the camera pole of the V2I condition. Position in network\n"
+        "<!-- Roadside units of the study site: the camera poles of the V2I condition. Position in network\n"
         "     coordinates (m); yaw in degrees clockwise from north (SUMO's angle convention), pitch in\n"
         "     degrees below the horizon. Written by tools/build_network.py. -->\n"
-        "<additional>\n"
-        f'    <poi id="rsu_camera_0" type="roadside_camera" color="0,90,255" layer="100" '
-        f'x="{rsu["x"]:.2f}" y="{rsu["y"]:.2f}" width="2.00" height="2.00" angle="{rsu["yaw_deg"]:.2f}">\n'
-        f"{params}\n"
-        "    </poi>\n"
-        "</additional>\n",
+        "<additional>\n" + "".join(pois) + "</additional>\n",
         encoding="utf-8",
     )
 
@@ -345,8 +428,13 @@ def build_site(
         net = sumolib.net.readNet(str(stage / net_file), withInternal=True)
         center_xy = net.convertLonLat2XY(center_lon, center_lat)
         junction = find_main_junction(net, center_xy)
-        rsu = place_roadside_unit(net, junction, rsu_corner, rsu_watch_arm)
-        _write_rsu(stage / f"{name}.rsu.add.xml", rsu)
+        # Two poles: the corner pole watches the approach and its crosswalk (crossing, jaywalking); the
+        # far-side pole looks across at the approach's stop-line queue (background blending).
+        rsu_units = [
+            {"id": "rsu_camera_0", **place_roadside_unit(net, junction, rsu_corner, rsu_watch_arm)},
+            {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, rsu_watch_arm)},
+        ]
+        _write_rsu(stage / f"{name}.rsu.add.xml", rsu_units)
         _write_view(stage / f"{name}.view.xml", junction.getCoord())
         _write_sumocfg(stage / f"{name}.sumocfg", name)
         site_info = {
@@ -356,7 +444,9 @@ def build_site(
             "radius_m": radius_m,
             "main_junction": junction.getID(),
             "main_junction_xy": [round(c, 2) for c in junction.getCoord()],
-            "roadside_unit": {"id": "rsu_camera_0", **rsu},
+            # "roadside_unit": the corner pole, whose watched arm is the scenarios' approach.
+            "roadside_unit": rsu_units[0],
+            "roadside_units": rsu_units,
             "sumo_version": sumolib.version.gitDescribe(),
             "attribution": OSM_ATTRIBUTION,
         }

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,11 @@ class Site:
     def file(self, suffix: str) -> Path:
         """A file of the built site, e.g. file('net.xml') -> networks/xueqing/xueqing.net.xml."""
         return self.network_dir / f"{self.name}.{suffix}"
+
+    def roadside_unit_ids(self) -> tuple[str, ...]:
+        """Ids of the roadside camera poles the build placed (from site.json)."""
+        info = json.loads(self.file("site.json").read_text(encoding="utf-8"))
+        return tuple(unit["id"] for unit in info.get("roadside_units", [info["roadside_unit"]]))
 
 
 SITES: dict[str, Site] = {

@@ -35,7 +35,7 @@ class SiteSummary:
     road_length_m: float
     sidewalk_length_m: float
     polygons: Counter = field(default_factory=Counter)
-    rsu: dict = field(default_factory=dict)
+    roadside_units: list[dict] = field(default_factory=list)
 
     def lines(self) -> list[str]:
         out = [
@@ -52,9 +52,12 @@ class SiteSummary:
             f"  {self.crosswalks_signalised} signalised crosswalks; {self.road_edges} road edges, "
             f"{self.road_length_m / 1000:.2f} km of road, {self.sidewalk_length_m / 1000:.2f} km of sidewalk",
             "  occluders: " + (", ".join(f"{n} {t}" for t, n in sorted(self.polygons.items())) or "none"),
-            f"  roadside camera {self.rsu.get('id')}: x {self.rsu.get('x')} m, y {self.rsu.get('y')} m, "
-            f"{self.rsu.get('height_m')} m high, yaw {self.rsu.get('yaw_deg')} deg, "
-            f"pitch {self.rsu.get('pitch_deg')} deg down",
+        ]
+        out += [
+            f"  roadside camera {rsu.get('id')} ({rsu.get('corner')}, watching {rsu.get('watched_arm')}): "
+            f"x {rsu.get('x')} m, y {rsu.get('y')} m, {rsu.get('height_m')} m high, "
+            f"yaw {rsu.get('yaw_deg')} deg, pitch {rsu.get('pitch_deg')} deg down"
+            for rsu in self.roadside_units
         ]
         return out
 
@@ -124,7 +127,7 @@ def summarise(site: Site) -> SiteSummary:
             and not e.getLane(0).allows("passenger")
         ),
         polygons=polygons,
-        rsu=info["roadside_unit"],
+        roadside_units=info.get("roadside_units", [info["roadside_unit"]]),
     )
 
 

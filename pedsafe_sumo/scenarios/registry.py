@@ -104,10 +104,13 @@ class ScenarioSpec:
     #: Bumper-to-bumper gaps inside the queue [m].
     queue_gap_min_m: float = 1.5
     queue_gap_max_m: float = 3.0
-    #: Gap between the blending pedestrian's body and the waiting vehicle's rear [m]; below the LiDAR
-    #: cluster tolerance (0.5 m) so the two merge.
-    blend_gap_min_m: float = 0.1
-    blend_gap_max_m: float = 0.4
+    #: Gap between the blending pedestrian's body and the waiting vehicle's rear [m]. The LiDAR merges
+    #: them only when a return on the pedestrian lies within the cluster tolerance (0.5 m) of one on
+    #: the vehicle; the returns it gets on a 0.3 m-radius body face the ego, 0.3-0.5 m in front of the
+    #: body's back. Measured over 200 starts (seed 2026): with 0.1-0.4 m the LiDAR separated the
+    #: standing pedestrian within 0.25 s in 96%, with 0-0.1 m ("leaning on the boot") in 45%.
+    blend_gap_min_m: float = 0.0
+    blend_gap_max_m: float = 0.1
     #: Ego initial speeds outside this range are clipped (the lognormal tails reach 1.5 and 25 m/s) [m/s].
     ego_speed_min_mps: float = 2.0
     ego_speed_max_mps: float = 20.0
@@ -119,6 +122,15 @@ class ScenarioSpec:
     #: vehicles that would have entered up to `background_warmup_s` before the start already on the road.
     background_traffic: float = 1
     background_warmup_s: float = 60.0
+    #: Roadside camera poles (POI ids of the site's rsu.add.xml, comma-separated) whose detections the
+    #: V2I condition receives. As in the paper's scenario diagrams, each scenario has the pole that
+    #: watches it: the corner pole for crossing and jaywalking; for background blending also the
+    #: far-side pole, because from the corner the waiting vehicle hides the pedestrian behind it.
+    roadside_units: str = "rsu_camera_0"
+
+    @property
+    def roadside_unit_ids(self) -> tuple[str, ...]:
+        return tuple(part.strip() for part in self.roadside_units.split(","))
 
     def __post_init__(self) -> None:
         checks = [
@@ -148,6 +160,7 @@ class ScenarioSpec:
             (self.time_limit_s > 0, "time_limit_s > 0"),
             (self.background_traffic in (0, 1), "background_traffic is 0 or 1"),
             (self.background_warmup_s >= 0, "background_warmup_s >= 0"),
+            (all(self.roadside_unit_ids), "roadside_units is a comma-separated list of POI ids"),
         ]
         for ok, rule in checks:
             if not ok:
@@ -160,7 +173,7 @@ class ScenarioSpec:
         for key, value in overrides.items():
             if key not in names:
                 raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
-            if key in ("placement", "ego_speed_fit", "occluder_class"):
+            if key in ("placement", "ego_speed_fit", "occluder_class", "roadside_units"):
                 changes[key] = str(value)
                 continue
             try:
@@ -196,6 +209,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             "closer to it than the LiDAR cluster tolerance",
             placement="behind_waiting_vehicle",
             ego_speed_fit="intersection",
+            roadside_units="rsu_camera_0,rsu_camera_1",
         ),
     )
 }

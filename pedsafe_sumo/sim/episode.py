@@ -104,7 +104,8 @@ class EpisodeRunner:
         units = load_roadside_units(
             site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
         )
-        self.sensors = SensorSuite.from_params(perception, units)
+        self.roadside_units = {unit.id: unit for unit in units}
+        self._suites: dict[tuple[str, ...], SensorSuite] = {}
         # Background traffic enters on every entering lane except the scenario's own approach.
         demand_site = load_demand_site(site.name, net_file=site.file("net.xml"))
         self.background_lanes = [
@@ -115,6 +116,20 @@ class EpisodeRunner:
 
     def close(self) -> None:
         self.session.close()
+
+    def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
+        """The onboard sensors and the roadside poles the scenario names (built once per set of poles)."""
+        ids = spec.roadside_unit_ids
+        if ids not in self._suites:
+            unknown = [i for i in ids if i not in self.roadside_units]
+            if unknown:
+                raise ValueError(
+                    f"scenario '{spec.name}' names roadside unit(s) {', '.join(unknown)} that site "
+                    f"{self.site.name} does not have (known: {', '.join(self.roadside_units)})"
+                )
+            units = [self.roadside_units[i] for i in ids]
+            self._suites[ids] = SensorSuite.from_params(self.params["perception"], units)
+        return self._suites[ids]
 
     # ------------------------------------------------------------------ setup
     def draw_setup(self, spec: ScenarioSpec, seed: int) -> EpisodeSetup:
@@ -353,7 +368,8 @@ class EpisodeRunner:
             }
         )
         wanted = set(agent.sensors()) & granted
-        link = V2ILink(self.sensors.v2i, np.random.default_rng(streams[3])) if "v2i" in wanted else None
+        sensors = self.sensors_for(spec)
+        link = V2ILink(sensors.v2i, np.random.default_rng(streams[3])) if "v2i" in wanted else None
         ped_heights = np.array([ped.height_m])
         ped_rgb = np.array([ped.clothing_rgb], dtype=float)
 
@@ -413,7 +429,7 @@ class EpisodeRunner:
                 detections = perceive(
                     snapshot,
                     EgoPose(ego_x, ego_y, ego_yaw, EGO_ID),
-                    self.sensors,
+                    sensors,
                     perception_rng,
                     time_s,
                     link,

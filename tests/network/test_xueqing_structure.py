@@ -236,3 +236,35 @@ def test_roadside_camera_sees_the_watched_crosswalk_and_approach(net, main_junct
         px, py = sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), lane.getLength() - offset_m)
         assert in_fov(px, py), f"approach {offset_m} m from the stop line outside the view"
     assert math.degrees(math.atan(6.0 / 45.0)) <= pitch_deg <= math.degrees(math.atan(6.0 / 15.0))
+
+
+def test_far_side_pole_stands_on_the_far_sidewalk_and_aims_at_the_stop_line_queue(net, main_junction):
+    """rsu_camera_1: on (1 m behind) a pedestrian-only lane across the median from the watched
+    approach, off every vehicle lane, with the kerb lane's last 3-12 m (where a vehicle waiting at the
+    stop line ends) inside its 90-degree field of view and its optical axis meeting the ground there."""
+    pois = {p.get("id"): p for p in ET.parse(SITE.file("rsu.add.xml")).getroot().iter("poi")}
+    poi = pois["rsu_camera_1"]
+    x, y = float(poi.get("x")), float(poi.get("y"))
+    params = {p.get("key"): float(p.get("value")) for p in poi.iter("param") if p.get("key").endswith("deg")}
+    for lane, dist in net.getNeighboringLanes(x, y, r=6.0):
+        if lane.allows("passenger"):
+            assert dist > lane.getWidth() / 2 + 0.5, f"pole stands on lane {lane.getID()}"
+    sidewalks = [
+        (lane, dist)
+        for lane, dist in net.getNeighboringLanes(x, y, r=3.0)
+        if lane.getPermissions() == {"pedestrian"}
+    ]
+    assert sidewalks and min(d for _, d in sidewalks) <= 1.0 + 1.5 + 0.01
+    kerb_lane = net.getLane("177353854#0_1")  # the scenarios' approach (southbound Xueqing Road), kerb lane
+    stop_x, stop_y = kerb_lane.getShape()[-1]
+    # Across the approach: the pole and the kerb are on opposite sides of the approach's median lane.
+    median_lane = net.getLane("177353854#0_2")
+    assert x > median_lane.getShape()[-1][0] > stop_x
+    for back_m in (3.0, 6.0, 12.0):
+        px, py = sumolib.geomhelper.positionAtShapeOffset(
+            kerb_lane.getShape(), kerb_lane.getLength() - back_m
+        )
+        bearing = math.degrees(math.atan2(px - x, py - y)) % 360.0
+        assert abs((bearing - params["yaw_deg"] + 180.0) % 360.0 - 180.0) <= params["fov_deg"] / 2
+    aim_ground_m = 6.0 / math.tan(math.radians(params["pitch_deg"]))
+    assert aim_ground_m == pytest.approx(math.dist((x, y), (stop_x, stop_y)), rel=0.3)

@@ -113,10 +113,12 @@ def test_xueqing_site_occluders_and_roadside_unit(params):
     st = load_static_occluders(site / "xueqing.poly.xml", p["occluders"])
     assert len(st.poly_ids) >= 20 and set(st.poly_kinds) == {"building"}
     assert np.all(st.z_top_m > 0)
-    (unit,) = load_roadside_units(site / "xueqing.rsu.add.xml", 6.0, 20.0)
-    facts = json.loads((site / "xueqing.site.json").read_text())["roadside_unit"]
-    assert unit.id == facts["id"] and unit.height_m == facts["height_m"]
-    assert (unit.x_m, unit.y_m) == (facts["x"], facts["y"])
-    # yaw_deg is SUMO's (clockwise from north): yaw = 90 - yaw_deg counter-clockwise from east.
-    assert math.degrees(unit.yaw_rad) == pytest.approx(90.0 - facts["yaw_deg"])
-    assert math.degrees(unit.pitch_down_rad) == pytest.approx(facts["pitch_deg"])
+    units = load_roadside_units(site / "xueqing.rsu.add.xml", 6.0, 20.0)
+    all_facts = json.loads((site / "xueqing.site.json").read_text())["roadside_units"]
+    assert [u.id for u in units] == [f["id"] for f in all_facts] == ["rsu_camera_0", "rsu_camera_1"]
+    for unit, facts in zip(units, all_facts):
+        assert unit.height_m == facts["height_m"]
+        assert (unit.x_m, unit.y_m) == (facts["x"], facts["y"])
+        # yaw_deg is SUMO's (clockwise from north): yaw = 90 - yaw_deg counter-clockwise from east.
+        assert math.degrees(unit.yaw_rad) == pytest.approx(90.0 - facts["yaw_deg"])
+        assert math.degrees(unit.pitch_down_rad) == pytest.approx(facts["pitch_deg"])

@@ -148,7 +148,7 @@ def test_blending_pedestrian_passes_within_the_lidar_cluster_tolerance_of_the_ve
             (ax, ay), (bx, by)
         )
         gap = dist_to_line - setup.pedestrian.radius_m
-        assert 0.05 <= gap < 0.5
+        assert -1e-6 <= gap <= 0.1 + 1e-6
         assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
 
 
@@ -168,3 +168,57 @@ def test_blending_pedestrian_starts_in_front_of_the_vehicle_rear_as_seen_from_th
         beyond = (start[0] + (start[0] - camera[0]) / d * 1.0, start[1] + (start[1] - camera[1]) / d * 1.0)
         edges = list(zip(corners, corners[1:] + corners[:1]))
         assert any(_segments_intersect(start, beyond, a, b) for a, b in edges), f"seed {seed}"
+
+
+def _inside(point, corners):
+    """Point in a convex polygon given counter- or clockwise."""
+    signs = []
+    for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1]):
+        signs.append((bx - ax) * (point[1] - ay) - (by - ay) * (point[0] - ax) > 0)
+    return all(signs) or not any(signs)
+
+
+def _hidden_share(pole_xyz, ped_xy, ped_height_m, corners, vehicle_height_m):
+    """Share of sight lines from the pole to points up the pedestrian's axis (10-90% of their height)
+    that pass through the vehicle's box, sampled every 2 cm."""
+    hidden = 0
+    heights = [f * ped_height_m for f in (0.1, 0.26, 0.42, 0.58, 0.74, 0.9)]
+    for z in heights:
+        n = int(math.dist(pole_xyz[:2], ped_xy) / 0.02)
+        for i in range(1, n):
+            t = i / n
+            x = pole_xyz[0] + t * (ped_xy[0] - pole_xyz[0])
+            y = pole_xyz[1] + t * (ped_xy[1] - pole_xyz[1])
+            if pole_xyz[2] + t * (z - pole_xyz[2]) < vehicle_height_m and _inside((x, y), corners):
+                hidden += 1
+                break
+    return hidden / len(heights)
+
+
+def test_blending_pedestrian_is_hidden_from_the_corner_pole_and_in_side_view_of_the_far_pole(approach):
+    """Why background blending has a second pole: from the corner pole the waiting vehicle stands
+    between the camera and the pedestrian behind it; from the far-side pole no sight line to them
+    crosses the vehicle. Poles from the built site (site.json), geometry by hand."""
+    import json
+
+    info = json.loads(get_site("xueqing").file("site.json").read_text())
+    poles = {u["id"]: (u["x"], u["y"], u["height_m"]) for u in info["roadside_units"]}
+    assert get_scenario("background_blending").roadside_unit_ids == ("rsu_camera_0", "rsu_camera_1")
+    assert (
+        get_scenario("crossing").roadside_unit_ids
+        == get_scenario("jaywalking").roadside_unit_ids
+        == ("rsu_camera_0",)
+    )
+    corner_hidden, far_hidden = [], []
+    for seed in range(20):
+        setup = draw("background_blending", seed, approach)
+        waiting = setup.parked[0]
+        corners = _footprint(
+            approach, waiting.lane_id, waiting.front_pos_m, waiting.size.length_m, waiting.size.width_m
+        )
+        start = setup.pedestrian.path_xy[0]
+        args = (start, setup.pedestrian.height_m, corners, waiting.size.height_m)
+        corner_hidden.append(_hidden_share(poles["rsu_camera_0"], *args))
+        far_hidden.append(_hidden_share(poles["rsu_camera_1"], *args))
+    assert min(corner_hidden) >= 0.5, corner_hidden
+    assert max(far_hidden) == 0.0, far_hidden

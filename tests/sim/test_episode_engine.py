@@ -149,6 +149,7 @@ def test_reference_stack_brakes_for_a_perceived_pedestrian(runner):
         (["--set", "time_limit_s=-3"], "time_limit_s > 0"),
         (["--set", "perception.lidar.range_m=-1"], "perception.lidar.range_m"),
         (["--set", "no_such_field=1"], "unknown scenario parameter 'no_such_field'"),
+        (["--set", "roadside_units=rsu_camera_0,pole_9"], "names pole_9, which site xueqing does not have"),
     ],
 )
 def test_bad_input_to_the_episode_cli_is_one_line_and_exit_2(args, message):
@@ -162,3 +163,22 @@ def test_bad_input_to_the_episode_cli_is_one_line_and_exit_2(args, message):
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and message in proc.stderr and "Traceback" not in proc.stderr
     assert proc.stdout == ""
+
+
+@pytest.mark.slow
+def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_the_far_side_pole(runner):
+    """In SUMO, 1-3 s into the episode the pedestrian walks out from behind the waiting vehicle: from
+    the corner pole the vehicle is between them and the camera, from the far-side pole it is not.
+    Frames with a raw roadside detection, per pole, over 12 seeds."""
+    spec = get_scenario("background_blending").with_overrides({"time_limit_s": "3.0"})
+
+    def frames_seen(units: str, seed: int) -> int:
+        log = runner.run(spec.with_overrides({"roadside_units": units}), "v2i", seed).log
+        return int(log["roadside_raw"].iloc[20:60].sum())
+
+    corner = [frames_seen("rsu_camera_0", seed) for seed in range(12)]
+    far = [frames_seen("rsu_camera_1", seed) for seed in range(12)]
+    default = [frames_seen(spec.roadside_units, seed) for seed in range(12)]
+    assert sum(far) > 3 * sum(corner), (far, corner)
+    # The scenario's default (both poles) sees whenever either pole does.
+    assert all(d >= max(c, f) for d, c, f in zip(default, corner, far))
