@@ -69,7 +69,8 @@ class Agent(ABC):
     """Base class of an AD stack under test."""
 
     def setup(self, config: dict[str, Any]) -> None:  # noqa: B027 - optional hook
-        """Called once per episode with the episode's settings (initial speed, parameters, seed)."""
+        """Called once per episode with its settings: initial_speed_mps, condition, seed, step_length_s,
+        sensors (granted), and every key of the parameter file's [algorithm] section."""
 
     def sensors(self) -> list[str]:
         """Sensors this stack uses, from KNOWN_SENSORS; the condition decides which are granted."""

@@ -21,7 +21,8 @@ from typing import Any
 
 from pedsafe_sumo.control.agent import Agent, Command, Observation
 
-#: Defaults of the reference stack (issue 5); each can be overridden through the episode config.
+#: Defaults of the reference stack (issue 5); each can be overridden through the episode config (the
+#: parameter file's [algorithm] section carries reaction_time_s and max_decel_mps2).
 REACTION_TIME_S = 0.4  # system reaction time between first perceiving a threat and braking [s]
 MAX_DECEL_MPS2 = 6.0  # hardest braking the stack commands [m/s2]
 HORIZON_S = 4.0  # how far ahead the pedestrian's path is predicted [s]

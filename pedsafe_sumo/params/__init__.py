@@ -83,7 +83,11 @@ def validate(params: dict[str, Any]) -> None:
 def _import_validator_modules() -> None:
     import importlib
 
-    for module in ("pedsafe_sumo.demand.params", "pedsafe_sumo.perception.params"):
+    for module in (
+        "pedsafe_sumo.demand.params",
+        "pedsafe_sumo.perception.params",
+        "pedsafe_sumo.control.params",
+    ):
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as exc:

@@ -360,6 +360,8 @@ class EpisodeRunner:
         granted = {"onboard_camera", "onboard_lidar"} | ({"v2i"} if condition == "v2i" else set())
         agent.setup(
             {
+                # The parameter file's [algorithm] settings (older run.json files have none).
+                **self.params.get("algorithm", {}),
                 "initial_speed_mps": setup.ego.speed_mps,
                 "condition": condition,
                 "seed": seed,

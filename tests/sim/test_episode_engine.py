@@ -149,6 +149,8 @@ def test_reference_stack_brakes_for_a_perceived_pedestrian(runner):
         (["--set", "time_limit_s=-3"], "time_limit_s > 0"),
         (["--set", "perception.lidar.range_m=-1"], "perception.lidar.range_m"),
         (["--set", "no_such_field=1"], "unknown scenario parameter 'no_such_field'"),
+        (["--set", "algorithm.reaction_time_s=-0.1"], "algorithm.reaction_time_s must be >= 0"),
+        (["--set", "algorithm.max_decel_mps2=0"], "algorithm.max_decel_mps2 must be > 0"),
         (["--set", "roadside_units=rsu_camera_0,pole_9"], "names pole_9, which site xueqing does not have"),
     ],
 )
@@ -182,3 +184,31 @@ def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_the_far_s
     assert sum(far) > 3 * sum(corner), (far, corner)
     # The scenario's default (both poles) sees whenever either pole does.
     assert all(d >= max(c, f) for d, c, f in zip(default, corner, far))
+
+
+def _braking_delays_s(reaction_time_s: float) -> list[float]:
+    """Per seed (crossing, V2I): first braking step minus first step that perceives the pedestrian."""
+    from pedsafe_sumo.params import with_overrides
+
+    params = with_overrides(load_params(), {"algorithm.reaction_time_s": reaction_time_s})
+    runner = EpisodeRunner(SITE, params, ReferenceStack)
+    delays = []
+    try:
+        for seed in range(6):
+            log = runner.run(get_scenario("crossing"), "v2i", seed).log
+            if log["perceived"].any() and log["braking"].any():
+                first_seen = log.loc[log["perceived"], "time_s"].iloc[0]
+                delays.append(log.loc[log["braking"], "time_s"].iloc[0] - first_seen)
+    finally:
+        runner.close()
+    return delays
+
+
+@pytest.mark.slow
+def test_algorithm_settings_from_the_parameter_file_reach_the_stack():
+    """[algorithm] reaction_time_s reaches the reference stack: no episode brakes sooner than that
+    after first perceiving the pedestrian; with the default 0.4 s some do well before 1.2 s."""
+    default, slow = _braking_delays_s(0.4), _braking_delays_s(1.2)
+    assert len(default) >= 3 and len(slow) >= 3
+    assert min(default) >= 0.4 - 1e-6 and min(default) < 1.2
+    assert min(slow) >= 1.2 - 1e-6
