@@ -1,0 +1,181 @@
+"""python -m pedsafe_sumo.sweep: one paired batch per combination of settings, and Table I across them.
+
+    python -m pedsafe_sumo.sweep --scenario crossing --episodes 500 --out results/sweep \
+        --vary algorithm.reaction_time_s=0.4,1.0,1.5 --vary algorithm.max_decel_mps2=6,4
+
+Each combination of the --vary values (their Cartesian product) is a full batch run
+(`python -m pedsafe_sumo.batch ... --set KEY=VALUE ...`, same seed, so every combination sees the same
+worlds) in its own run directory OUT/<key>=<value>,... ; a combination whose run directory already
+holds episodes.parquet is not run again, so a stopped sweep continues where it stopped. At the end
+OUT/sweep.csv and OUT/sweep.md hold Table I of every combination with its settings, and
+OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key.
+Every --set / --vary key is validated for every combination before anything runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.network.sites import UnknownSiteError, get_site
+from pedsafe_sumo.params import ParameterError
+from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
+from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
+
+
+def parse_vary(text: str) -> tuple[str, list[str]]:
+    key, sep, values = text.partition("=")
+    items = [v.strip() for v in values.split(",") if v.strip()]
+    if not sep or not key or not items:
+        raise UsageError(f"--vary needs KEY=V1,V2,..., got '{text}'")
+    return key, items
+
+
+def combinations(varied: list[tuple[str, list[str]]]) -> list[dict[str, str]]:
+    keys = [key for key, _ in varied]
+    if len(set(keys)) != len(keys):
+        raise UsageError("each --vary key may appear once")
+    return [dict(zip(keys, values)) for values in itertools.product(*(values for _, values in varied))]
+
+
+def label(combination: dict[str, str]) -> str:
+    return ",".join(f"{key}={value}" for key, value in combination.items()) or "defaults"
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.sweep", description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", required=True, help=f"{', '.join(SCENARIOS)} or all")
+    parser.add_argument("--condition", default="both", help="sv, v2i or both [both]")
+    parser.add_argument(
+        "--episodes", type=int, default=200, help="episodes per scenario and combination [200]"
+    )
+    parser.add_argument("--seed", type=int, default=1, help="run seed, the same for every combination [1]")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes per batch [2]")
+    parser.add_argument("--out", type=Path, required=True, help="sweep directory")
+    parser.add_argument(
+        "--vary", action="append", required=True, metavar="KEY=V1,V2", help="a setting and its values"
+    )
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="fixed for all")
+    parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
+    parser.add_argument("--site", default="xueqing", help="study site [xueqing]")
+    return parser.parse_args(argv)
+
+
+def validate(args) -> list[dict[str, str]]:
+    scenarios = list(SCENARIOS) if args.scenario == "all" else [args.scenario]
+    if args.scenario != "all" and args.scenario not in SCENARIOS:
+        raise UsageError(f"unknown scenario '{args.scenario}' (known: {', '.join(SCENARIOS)}, all)")
+    if args.episodes < 1:
+        raise UsageError(f"--episodes must be at least 1, got {args.episodes}")
+    site = get_site(args.site)
+    combos = combinations([parse_vary(text) for text in args.vary])
+    for combo in combos:
+        specs, _ = configure(scenarios, None, [*args.set, *(f"{k}={v}" for k, v in combo.items())])
+        check_roadside_units(specs, site)
+    load_agent_class(args.algorithm)
+    return combos
+
+
+def batch_argv(args, combo: dict[str, str], run_dir: Path) -> list[str]:
+    argv = [
+        "--scenario", args.scenario, "--condition", args.condition, "--episodes", str(args.episodes),
+        "--seed", str(args.seed), "--workers", str(args.workers), "--out", str(run_dir),
+        "--algorithm", args.algorithm, "--site", args.site,
+    ]  # fmt: skip
+    for pair in [*args.set, *(f"{k}={v}" for k, v in combo.items())]:
+        argv += ["--set", pair]
+    return argv
+
+
+def collect(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
+    from pedsafe_sumo.safety.stats import table_one
+
+    frames = []
+    for combo in combos:
+        table = table_one(pd.read_parquet(out / label(combo) / "episodes.parquet"))
+        for key, value in reversed(combo.items()):
+            table.insert(0, key, value)
+        frames.append(table)
+    return pd.concat(frames, ignore_index=True)
+
+
+def plot(table: pd.DataFrame, keys: list[str], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    first = keys[0]
+    others = keys[1:]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    for ax, (metric, title) in zip(axes, [("collision", "collision rate"), ("conflict", "conflict rate")]):
+        group_keys = ["scenario", "condition", *others]
+        for group, rows in table.groupby(group_keys, sort=False):
+            x = pd.to_numeric(rows[first], errors="coerce")
+            x = x if x.notna().all() else rows[first]
+            y = rows[f"{metric}_rate"]
+            # Clipped at 0: at a rate of 0 or 1 the Wilson bound equals it up to rounding.
+            err = [(y - rows[f"{metric}_low"]).clip(lower=0), (rows[f"{metric}_high"] - y).clip(lower=0)]
+            name = " ".join(str(g) for g in (group if isinstance(group, tuple) else (group,)))
+            ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=name)
+        ax.set_xlabel(first)
+        ax.set_ylabel(f"{title} (95% Wilson)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        combos = validate(args)
+    except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    from pedsafe_sumo.batch.__main__ import main as batch_main
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    for number, combo in enumerate(combos, 1):
+        run_dir = args.out / label(combo)
+        if (run_dir / "episodes.parquet").exists():
+            print(f"[{number}/{len(combos)}] {label(combo)}: done before, kept")
+            continue
+        print(f"[{number}/{len(combos)}] {label(combo)}")
+        code = batch_main(batch_argv(args, combo, run_dir))
+        if code != 0:
+            print(f"error: the batch for {label(combo)} failed (exit {code})", file=sys.stderr)
+            return code
+    table = collect(args.out, combos)
+    table.to_csv(args.out / "sweep.csv", index=False)
+    keys = list(combos[0])
+    (args.out / "sweep.md").write_text(_markdown(table, keys) + "\n", encoding="utf-8")
+    plot(table, keys, args.out / "sweep.png")
+    print(_markdown(table, keys))
+    print(f"written: {args.out / 'sweep.csv'}, sweep.md, sweep.png")
+    return 0
+
+
+def _markdown(table: pd.DataFrame, keys: list[str]) -> str:
+    def rate(row, metric):
+        return f"{row[f'{metric}_rate']:.4f} [{row[f'{metric}_low']:.4f}, {row[f'{metric}_high']:.4f}]"
+
+    header = [*keys, "scenario", "condition", "n", "errors", "collision rate", "injury", "conflict rate"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for _, row in table.iterrows():
+        cells = [str(row[k]) for k in keys] + [
+            row["scenario"], row["condition"], str(int(row["n"])), str(int(row["n_error"])),
+            rate(row, "collision"), f"{row['injury_mean']:.4f}", rate(row, "conflict"),
+        ]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
