@@ -150,7 +150,7 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
         ) from None
     if not math.isfinite(time_s) or time_s < times[0] - 1e-9 or time_s > times[-1] + 1e-9:
         raise ReplayError(f"--at {moment}: the episode runs from t={times[0]:.2f} s to t={times[-1]:.2f} s")
-    return int((times >= time_s - 1e-9).nonzero()[0][0]), f"t={time_s:g} s"
+    return int((times >= time_s - 1e-9).nonzero()[0][0]), "the requested time"
 
 
 def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> object:
@@ -355,7 +355,7 @@ def _trajectory_check(
         return TrajectoryCheck(logged.case_log, report)
     if reference is not None:
         say("  checking every step against a headless run of the same episode")
-        return TrajectoryCheck(reference, report)
+        return TrajectoryCheck(reference, report, reference_name="the headless run")
     say(
         "  no case log for this episode (no collision or conflict in its pair): nothing recorded to check "
         "the trajectory against; the outcome is checked against episodes.parquet"

@@ -71,7 +71,10 @@ class TrajectoryCheck:
     `report(line)` is called once, at the first mismatch; `summary()` says how it went.
     """
 
-    def __init__(self, logged: pd.DataFrame, report: Callable[[str], None]) -> None:
+    def __init__(
+        self, logged: pd.DataFrame, report: Callable[[str], None], reference_name: str = "the log"
+    ) -> None:
+        self.reference_name = reference_name
         self.logged = {column: logged[column].to_numpy(dtype=float) for column in CHECKED_COLUMNS}
         self.n_logged = len(logged)
         self.report = report
@@ -114,11 +117,11 @@ class TrajectoryCheck:
     def summary(self) -> str:
         if self.first is None:
             return (
-                f"trajectory matches the log: {self.steps_checked} of {self.n_logged} logged steps checked "
-                f"(time, ego and pedestrian position and speed within {TOLERANCE:g})"
+                f"trajectory matches {self.reference_name}: {self.steps_checked} of {self.n_logged} "
+                f"steps checked (time, ego and pedestrian position and speed within {TOLERANCE:g})"
             )
         return (
-            f"trajectory DIFFERS from the log from t={self.first.time_s:.2f} s on "
+            f"trajectory DIFFERS from {self.reference_name} from t={self.first.time_s:.2f} s on "
             f"({self.steps_differing} of {self.steps_checked} replayed steps differ)"
         )
 

@@ -2,7 +2,7 @@
 
 - The view follows the ego (gui.trackVehicle) at a zoom that shows a chosen width of road.
 - Road users in role colours, so they are told apart at a glance: the ego magenta, the pedestrian
-  orange with a white ring, the vehicles the scenario placed in the kerb lane (occluder, queue,
+  orange inside a white ring, the vehicles the scenario placed in the kerb lane (occluder, queue,
   waiting vehicle) cyan; background traffic keeps its colours and the roadside camera pole its blue
   POI. `scene_colours=True` keeps the colours the sensors saw instead (the background-blending
   pedestrian is dressed like the vehicle behind them), the ring still marks the pedestrian.
@@ -15,7 +15,8 @@
 Timing: sumo-gui draws after each simulation step, and gui.screenshot is taken at the end of the
 step that follows the call. So everything meant for the frame of step k is done in the hook of step
 k-1: markers of step k are added then, the screenshot of step k is requested then, and the
-field-of-view polygons are moved by SUMO itself within the step. Step 0 is never rendered with the
+onboard field-of-view polygons are moved by SUMO itself within the step (polygon dynamics tracking
+the ego). Step 0 is never rendered with the
 replay's decorations; the first frame that can be is step 1.
 """
 
@@ -52,7 +53,9 @@ ROADSIDE_DETECTION_RGBA = (60, 170, 255, 255)
 FOV_LAYER = 50
 MARKER_LAYER = 110
 FOV_LINE_WIDTH_M = 0.25
+PEDESTRIAN_RING_ID = "pedestrian ring"
 RING_RADIUS_M = 1.2
+RING_SEGMENTS = 32
 #: Distance of a detection's label from its dot, as a share of the view's width.
 LABEL_OFFSET_SHARE = 0.03
 
@@ -226,6 +229,13 @@ class ReplayScene:
         self.step_index += 1
         if k == 0:
             self._start(api, row)
+        else:
+            # Moved by hand: SUMO 1.28 crashes (segmentation fault) in the step after a collision when a
+            # polygon tracks the person with addDynamics. Drawn in the next frame, the ring trails the
+            # pedestrian by one step (under 0.15 m), well inside its 1.2 m radius.
+            api.polygon.setShape(
+                PEDESTRIAN_RING_ID, circle_xy((row["ped_x_m"], row["ped_y_m"]), RING_RADIUS_M, RING_SEGMENTS)
+            )
         for marker in self.markers:
             # Drawn in the hook before their step so that they are in that step's frame.
             if marker.step_index == k + 1 or (marker.step_index == 0 and k == 0):
@@ -251,16 +261,14 @@ class ReplayScene:
                 api.vehicle.setColor(vehicle.vehicle_id, KERB_LANE_VEHICLE_RGBA)
             api.person.setColor(PED_ID, PEDESTRIAN_RGBA)
         self._draw_sensors(api, row)
-        # The ring follows the pedestrian (centred on SUMO's position of them now, kept relative).
         api.polygon.add(
-            "pedestrian ring",
-            circle_xy(api.person.getPosition(PED_ID), RING_RADIUS_M, 32),
+            PEDESTRIAN_RING_ID,
+            circle_xy((row["ped_x_m"], row["ped_y_m"]), RING_RADIUS_M, RING_SEGMENTS),
             PEDESTRIAN_RING_RGBA,
             fill=False,
             layer=MARKER_LAYER,
             lineWidth=0.15,
         )
-        api.polygon.addDynamics("pedestrian ring", PED_ID, rotate=False)
 
     @staticmethod
     def _frame(api, centre_xy: tuple[float, float], width_m: float, height_m: float) -> None:
