@@ -148,8 +148,8 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
         raise ReplayError(
             f"--at must be first-detection, collision or a time in seconds, got '{moment}'"
         ) from None
-    if not math.isfinite(time_s) or time_s < times[0] - 1e-9 or time_s > times[-1] + 1e-9:
-        raise ReplayError(f"--at {moment}: the episode runs from t={times[0]:.2f} s to t={times[-1]:.2f} s")
+    if not math.isfinite(time_s) or time_s < 0.0 or time_s > times[-1] + 1e-9:
+        raise ReplayError(f"--at {moment}: the episode runs from t=0 to t={times[-1]:.2f} s")
     return int((times >= time_s - 1e-9).nonzero()[0][0]), "the requested time"
 
 
@@ -196,18 +196,36 @@ def main(argv: list[str] | None = None) -> int:
         logged = load_logged_episode(args.run_dir, args.episode, args.condition, args.scenario)
     except (UsageError, ReplayError) as exc:
         return error(str(exc))
-    wants_gui = args.export_fcd is None
-    if wants_gui and not os.environ.get("DISPLAY"):
-        if args.screenshot is not None and shutil.which("xvfb-run") and not os.environ.get(UNDER_XVFB_ENV):
-            return rerun_under_xvfb(argv, size_px)
+    if args.export_fcd is not None:
+        say_header(logged, print)
+        return export_fcd(logged, args.export_fcd, print)
+
+    has_display = bool(os.environ.get("DISPLAY"))
+    can_start_xvfb = (
+        args.screenshot is not None and shutil.which("xvfb-run") and not os.environ.get(UNDER_XVFB_ENV)
+    )
+    if not has_display and not can_start_xvfb:
         hint = (
             "use --screenshot (it starts Xvfb itself when xvfb-run is installed)"
             if args.screenshot is None
             else "install xvfb (apt-get install xvfb)"
         )
         return error(f"sumo-gui needs a display and there is none: {hint}")
+    # Without a display the checks below run silently and the run under Xvfb tells the story.
+    say = print if has_display else _silent
+    say_header(logged, say)
+    try:
+        plan = plan_replay(logged, args, size_px, say)
+    except ReplayError as exc:
+        return error(str(exc))
+    except SimulatorError as exc:
+        return error(str(exc), 1)
+    if not has_display:
+        return rerun_under_xvfb(argv, size_px)
+    return replay_in_gui(logged, args, plan, say)
 
-    say = print
+
+def say_header(logged: LoggedEpisode, say) -> None:
     say(f"replaying {logged.describe()} of run {logged.run_dir}")
     say(
         f"  settings from run.json: scenario '{logged.spec.name}', algorithm {logged.algorithm}, "
@@ -215,9 +233,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     for note in logged.notes:
         say(f"  note: {note}")
-    if args.export_fcd is not None:
-        return export_fcd(logged, args.export_fcd, say)
-    return replay_in_gui(logged, args, size_px, say)
+
+
+def _silent(*_args, **_kwargs) -> None:
+    pass
 
 
 def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
@@ -244,7 +263,17 @@ def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
     return _verdict(logged, check, result, say)
 
 
-def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, size_px: tuple[int, int], say) -> int:
+@dataclasses.dataclass(frozen=True)
+class ReplayPlan:
+    setup: object
+    #: The episode's course known in advance (markers, framing): the case log, else a headless run.
+    reference: pd.DataFrame
+    screenshot: ScreenshotRequest | None
+
+
+def plan_replay(logged: LoggedEpisode, args: argparse.Namespace, size_px: tuple[int, int], say) -> ReplayPlan:
+    """The world to replay, the episode's course, and the screenshot's step (ReplayError when the
+    requested moment never happened)."""
     headless = EpisodeRunner(
         logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
     )
@@ -258,17 +287,11 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, size_px: tupl
                 "check the trajectory against; the outcome is checked against episodes.parquet"
             )
             reference = headless.run(logged.spec, logged.condition, logged.seed, setup=setup).log
-    except SimulatorError as exc:
-        return error(str(exc), 1)
     finally:
         headless.close()
-
     screenshot = None
     if args.screenshot is not None:
-        try:
-            step_index, what = moment_step(reference, args.at, logged)
-        except ReplayError as exc:
-            return error(str(exc))
+        step_index, what = moment_step(reference, args.at, logged)
         if step_index == 0:
             step_index = 1
             say(
@@ -276,8 +299,14 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, size_px: tupl
                 "rendering the next one"
             )
         screenshot = ScreenshotRequest(args.screenshot.resolve(), step_index, *size_px)
-        args.screenshot.resolve().parent.mkdir(parents=True, exist_ok=True)
         say(f"  rendering {what}: t={reference['time_s'].iloc[step_index]:.2f} s")
+    return ReplayPlan(setup, reference, screenshot)
+
+
+def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, plan: ReplayPlan, say) -> int:
+    setup, reference, screenshot = plan.setup, plan.reference, plan.screenshot
+    if screenshot is not None:
+        screenshot.path.parent.mkdir(parents=True, exist_ok=True)
     delay_ms = args.delay if args.delay is not None else (0.0 if screenshot else DEFAULT_DELAY_MS)
     if screenshot is None:
         say("  colours: " + _legend(args.scene_colours))
@@ -289,7 +318,7 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, size_px: tupl
         if screenshot is not None:
             options = [
                 "--window-size",
-                f"{size_px[0] + WINDOW_CHROME_PX[0]},{size_px[1] + WINDOW_CHROME_PX[1]}",
+                f"{screenshot.width_px + WINDOW_CHROME_PX[0]},{screenshot.height_px + WINDOW_CHROME_PX[1]}",
             ]
         runner = EpisodeRunner(
             logged.site,
@@ -320,6 +349,7 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, size_px: tupl
         except ScreenshotTaken as taken:
             say(f"wrote {taken}")
         except SimulatorError as exc:
+            _close_quietly(runner)
             return error(str(exc), 1)
         except runner.session.connection_lost:
             say(f"sumo-gui was closed after {check.steps_checked} steps, before the episode ended")
