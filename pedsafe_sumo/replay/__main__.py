@@ -38,7 +38,7 @@ from pedsafe_sumo.replay.scene import (
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
-#: Playback: sumo-gui waits this long per 0.05 s step by default, i.e. real time.
+#: Playback: wall-clock milliseconds per simulation step; 50 plays the 0.05 s steps in real time.
 DEFAULT_DELAY_MS = 50.0
 DEFAULT_SCREENSHOT_SIZE = (1000, 800)
 #: Road shown across the view [m]; a screenshot widens it to keep the pedestrian in the picture.
@@ -69,8 +69,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--delay",
         type=float,
-        help=f"sumo-gui's wait per simulation step in ms (playback speed) [{DEFAULT_DELAY_MS:g}: real time; "
-        "0 with --screenshot]",
+        help=f"playback speed: milliseconds per simulation step [{DEFAULT_DELAY_MS:g}: real time with 0.05 s "
+        "steps; 0 with --screenshot]",
     )
     parser.add_argument("--screenshot", type=Path, metavar="FILE", help="render one moment to a PNG and exit")
     parser.add_argument(
@@ -307,13 +307,13 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, plan: ReplayP
     setup, reference, screenshot = plan.setup, plan.reference, plan.screenshot
     if screenshot is not None:
         screenshot.path.parent.mkdir(parents=True, exist_ok=True)
-    delay_ms = args.delay if args.delay is not None else (0.0 if screenshot else DEFAULT_DELAY_MS)
+    delay_ms_per_step = args.delay if args.delay is not None else (0.0 if screenshot else DEFAULT_DELAY_MS)
     if screenshot is None:
         say("  colours: " + _legend(args.scene_colours))
 
     with tempfile.TemporaryDirectory(prefix="pedsafe-replay-") as tmp:
         settings = Path(tmp) / "replay.view.xml"
-        settings.write_text(gui_settings(delay_ms), encoding="utf-8")
+        settings.write_text(gui_settings(delay_ms_per_step, logged.step_length_s), encoding="utf-8")
         options = []
         if screenshot is not None:
             options = [
@@ -335,7 +335,6 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, plan: ReplayP
             runner.sensors,
             reference,
             logged.condition,
-            delay_ms=delay_ms,
             view_width_m=args.view_width,
             scene_colours=args.scene_colours,
             screenshot=screenshot,
@@ -427,15 +426,20 @@ def _legend(scene_colours: bool) -> str:
     )
 
 
-def gui_settings(delay_ms: float) -> str:
-    """sumo-gui view settings of the replay: the site's real-world colours, POI labels, the delay."""
+def gui_settings(delay_ms_per_step: float, step_length_s: float) -> str:
+    """sumo-gui view settings of the replay: the site's real-world colours, POI labels, the delay.
+
+    sumo-gui 1.28 counts its delay in milliseconds per simulated second (it scales the value by the
+    step length, whatever its help text says): 1000 plays in real time. --delay is per step.
+    """
+    gui_delay = delay_ms_per_step / step_length_s
     return (
         "<viewsettings>\n"
         '    <scheme name="real world">\n'
         '        <pois poiType_show="1" poiType_size="50" poiType_color="255,255,255"\n'
         '              poiType_constantSize="1"/>\n'
         "    </scheme>\n"
-        f'    <delay value="{delay_ms:g}"/>\n'
+        f'    <delay value="{gui_delay:g}"/>\n'
         "</viewsettings>\n"
     )
 

@@ -200,7 +200,6 @@ class ReplayScene:
         reference: pd.DataFrame,
         condition: str,
         *,
-        delay_ms: float,
         view_width_m: float,
         scene_colours: bool = False,
         screenshot: ScreenshotRequest | None = None,
@@ -209,7 +208,6 @@ class ReplayScene:
         self.setup = setup
         self.sensors = sensors
         self.condition = condition
-        self.delay_ms = delay_ms
         self.view_width_m = view_width_m
         self.scene_colours = scene_colours
         self.screenshot = screenshot
