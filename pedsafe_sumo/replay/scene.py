@@ -191,7 +191,7 @@ def screenshot_frame(
 
 
 class ReplayScene:
-    """The replay's per-step hook in sumo-gui: decorations, view, playback speed, screenshot."""
+    """The replay's per-step hook in sumo-gui: colours, view, fields of view, markers, screenshot."""
 
     def __init__(
         self,
