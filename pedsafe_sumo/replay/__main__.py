@@ -35,6 +35,8 @@ from pedsafe_sumo.replay.scene import (
     ScreenshotRequest,
     ScreenshotTaken,
 )
+from pedsafe_sumo.scenarios.registry import EpisodeSetup
+from pedsafe_sumo.settings import UsageError
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
@@ -48,10 +50,6 @@ DEFAULT_VIEW_WIDTH_M = 60.0
 WINDOW_CHROME_PX = (60, 320)
 #: Set when the replay restarted itself under xvfb-run, so that it does not try again.
 UNDER_XVFB_ENV = "PEDSAFE_REPLAY_UNDER_XVFB"
-
-
-class UsageError(ValueError):
-    pass
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -153,7 +151,7 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
     return int((times >= time_s - 1e-9).nonzero()[0][0]), "the requested time"
 
 
-def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> object:
+def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> EpisodeSetup:
     """The episode's initial world drawn from its seed as the batch did; the recorded one when the case
     recorded a different one (then the drawing code changed since the run)."""
     drawn = runner.draw_setup(logged.spec, logged.seed)
@@ -167,7 +165,7 @@ def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> object:
             if getattr(recorded, f.name) != getattr(drawn, f.name)
         ]
         say(
-            f"note: the world drawn from seed {logged.seed} today differs from the recorded one "
+            f"  note: the world drawn from seed {logged.seed} today differs from the recorded one "
             f"({', '.join(differing)}): replaying the recorded world"
         )
         return recorded
@@ -265,7 +263,7 @@ def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
 
 @dataclasses.dataclass(frozen=True)
 class ReplayPlan:
-    setup: object
+    setup: EpisodeSetup
     #: The episode's course known in advance (markers, framing): the case log, else a headless run.
     reference: pd.DataFrame
     screenshot: ScreenshotRequest | None
