@@ -7,6 +7,8 @@ tests/sim/test_gui_equals_headless.py holds sumo-gui to the headless log.
 
 from __future__ import annotations
 
+import json
+
 import pandas as pd
 import pytest
 from replay_runs import case_files, edit_run_json, episode_row, run_cli
@@ -109,3 +111,25 @@ def test_an_episode_without_case_log_is_replayed_from_the_recorded_scenario(run_
     proc = export(run_dir, 0, "sv", tmp_path / "case.fcd.xml")
     assert proc.returncode == 1
     assert "MISMATCH in the outcome" in proc.stderr
+
+
+@pytest.mark.slow
+def test_a_recorded_world_that_differs_from_todays_draw_is_the_one_replayed(run_copy, tmp_path):
+    run_dir = run_copy()
+    _, meta_path = case_files(run_dir, 2, "sv")
+    meta = json.loads(meta_path.read_text())
+    # A field the loop does not use: the replay says the worlds differ and still matches the log.
+    meta["setup"]["conflict_offset_s"] += 0.1
+    meta_path.write_text(json.dumps(meta))
+    proc = export(run_dir, 2, "sv", tmp_path / "case.fcd.xml")
+    assert proc.returncode == 0, proc.stderr
+    assert "differs from the recorded one (conflict_offset_s): replaying the recorded world" in proc.stdout
+    # The ego's recorded initial speed: the replay starts from it, so its first step differs from the log.
+    logged_speed_mps = meta["setup"]["ego"]["speed_mps"]
+    meta["setup"]["ego"]["speed_mps"] = logged_speed_mps + 1.0
+    meta_path.write_text(json.dumps(meta))
+    proc = export(run_dir, 2, "sv", tmp_path / "case.fcd.xml")
+    assert proc.returncode == 1
+    first_line = proc.stderr.strip().splitlines()[0]
+    assert first_line.startswith("MISMATCH at t=0.05 s: ego_speed_mps logged")
+    assert f"replayed {logged_speed_mps + 1.0:.6f}" in first_line
