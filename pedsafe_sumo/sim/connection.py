@@ -23,6 +23,10 @@ class SimulatorError(RuntimeError):
     """SUMO refused the configuration or failed while running."""
 
 
+class _NeverRaisedError(Exception):
+    """Stands for an exception the API in use never raises."""
+
+
 class SumoSession:
     """A SUMO instance for one worker: libsumo headless, or traci + sumo-gui when `gui` is set."""
 
@@ -36,16 +40,23 @@ class SumoSession:
 
             self.api = traci
             self._exception = traci.TraCIException
+            self._lost: type[Exception] = traci.FatalTraCIError
         else:
             import libsumo
 
             self.api = libsumo
             self._exception = libsumo.TraCIException
+            self._lost = _NeverRaisedError
 
     @property
     def exception(self) -> type[Exception]:
         """The exception class SUMO raises for a refused command (libsumo's or traci's)."""
         return self._exception
+
+    @property
+    def connection_lost(self) -> type[Exception]:
+        """The exception traci raises when sumo-gui has gone away (its window closed); libsumo has none."""
+        return self._lost
 
     def run(self, args: Sequence[str]) -> None:
         """Start SUMO with `args` (options only, no binary) or reload the running instance with them."""

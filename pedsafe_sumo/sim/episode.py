@@ -20,7 +20,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -70,6 +72,10 @@ EGO_ID = "ego"
 #: gave identical logs with 100 m and 10 m.
 PED_MATCH_RADIUS_M = 10.0
 
+#: A per-step observer for replay: `on_step(api, row)` gets SUMO's API handle, in the state of the step
+#: just logged, and that step's log row (a dict of the log columns).
+StepHook = Callable[[Any, dict[str, Any]], None]
+
 
 @dataclass
 class EpisodeResult:
@@ -96,8 +102,14 @@ class EpisodeRunner:
         gui: bool = False,
         step_length_s: float = STEP_LENGTH_S,
         injury_model: str = "saade2020",
+        gui_settings_file: Path | None = None,
+        gui_options: Sequence[str] = (),
     ) -> None:
+        """`gui_settings_file` replaces the site's sumo-gui view settings and `gui_options` are added to
+        the sumo-gui command line (replay: window size, labels); both are ignored headless."""
         self.site = site
+        self.gui_settings_file = gui_settings_file or site.file("view.xml")
+        self.gui_options = tuple(gui_options)
         self.params = params
         self.agent_class = agent_class
         self.step_length_s = step_length_s
@@ -230,12 +242,13 @@ class EpisodeRunner:
                 "-a",
                 f"{self.site.file('poly.xml')},{self.site.file('rsu.add.xml')}",
                 "--gui-settings-file",
-                str(self.site.file("view.xml")),
+                str(self.gui_settings_file),
                 "--start",
                 "true",
                 # Close the window when the episode's TraCI connection closes.
                 "--quit-on-end",
                 "true",
+                *self.gui_options,
             ]
         return args
 
@@ -308,8 +321,18 @@ class EpisodeRunner:
 
     # ------------------------------------------------------------------ run
     def run(
-        self, spec: ScenarioSpec, condition: str, seed: int, setup: EpisodeSetup | None = None
+        self,
+        spec: ScenarioSpec,
+        condition: str,
+        seed: int,
+        setup: EpisodeSetup | None = None,
+        on_step: StepHook | None = None,
     ) -> EpisodeResult:
+        """Run one episode. `on_step`, when given, is called once per step right after the step is
+        logged (the last step included), before SUMO advances; it must leave the simulation as it is
+        (read state, colour, draw). An exception raised in it ends the episode and propagates, after
+        the agent is closed. Without it the loop pays one `is None` test per step.
+        """
         if condition not in CONDITIONS:
             raise ValueError(f"unknown condition '{condition}' (known: {', '.join(CONDITIONS)})")
         setup = setup or self.draw_setup(spec, seed)
@@ -510,6 +533,8 @@ class EpisodeRunner:
                     }
                 )
                 timings["logging_s"] += clock() - t3
+                if on_step is not None:
+                    on_step(api, rows[-1])
 
                 # End conditions, on the state at time_s.
                 if clearance_m <= 0.0:

@@ -1,0 +1,473 @@
+"""Replay a logged episode of a batch run in sumo-gui, render one moment of it, or export it as FCD.
+
+    python -m pedsafe_sumo.replay DIR --episode N --condition sv
+    python -m pedsafe_sumo.replay DIR --episode N --condition sv --screenshot case.png --at collision
+    python -m pedsafe_sumo.replay DIR --episode N --condition v2i --export-fcd case.fcd.xml
+
+The episode runs again with the seed, scenario, parameters and AD stack the run recorded in run.json
+(never today's defaults), and every step is checked against the case log: a difference is reported
+at the first step it shows and makes the exit status 1. Bad input ends in one line on stderr and exit
+status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+from pedsafe_sumo.replay.check import CHECKED_OUTCOME, TrajectoryCheck, outcome_mismatches
+from pedsafe_sumo.replay.fcd import FcdRecorder, write_fcd
+from pedsafe_sumo.replay.rundir import LoggedEpisode, ReplayError, load_logged_episode
+from pedsafe_sumo.replay.scene import (
+    EGO_RGBA,
+    KERB_LANE_VEHICLE_RGBA,
+    PEDESTRIAN_RGBA,
+    ReplayScene,
+    ScreenshotRequest,
+    ScreenshotTaken,
+)
+from pedsafe_sumo.scenarios.registry import EpisodeSetup
+from pedsafe_sumo.settings import UsageError
+from pedsafe_sumo.sim.connection import SimulatorError
+from pedsafe_sumo.sim.episode import EpisodeRunner
+
+#: Playback: wall-clock milliseconds per simulation step; 50 plays the 0.05 s steps in real time.
+DEFAULT_DELAY_MS = 50.0
+DEFAULT_SCREENSHOT_SIZE = (1000, 800)
+#: Road shown across the view [m]; a screenshot widens it to keep the pedestrian in the picture.
+DEFAULT_VIEW_WIDTH_M = 60.0
+#: Space sumo-gui's menus, toolbars and status bar take around its canvas [px]: the window is made this
+#: much larger than the requested picture so that the canvas holds it.
+WINDOW_CHROME_PX = (60, 320)
+#: Set when the replay restarted itself under xvfb-run, so that it does not try again.
+UNDER_XVFB_ENV = "PEDSAFE_REPLAY_UNDER_XVFB"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m pedsafe_sumo.replay", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument(
+        "run_dir", type=Path, metavar="DIR", help="run directory written by pedsafe_sumo.batch"
+    )
+    parser.add_argument(
+        "--episode", type=int, required=True, help="episode number (episodes.parquet 'episode')"
+    )
+    parser.add_argument("--condition", required=True, help="sv or v2i")
+    parser.add_argument("--scenario", help="scenario of the episode (needed when the run has several)")
+    parser.add_argument(
+        "--delay",
+        type=float,
+        help=f"playback speed: milliseconds per simulation step [{DEFAULT_DELAY_MS:g}: real time with 0.05 s "
+        "steps; 0 with --screenshot]",
+    )
+    parser.add_argument("--screenshot", type=Path, metavar="FILE", help="render one moment to a PNG and exit")
+    parser.add_argument(
+        "--at",
+        metavar="MOMENT",
+        help="moment of --screenshot: first-detection, collision or a time in seconds [collision]",
+    )
+    parser.add_argument(
+        "--size",
+        default=f"{DEFAULT_SCREENSHOT_SIZE[0]},{DEFAULT_SCREENSHOT_SIZE[1]}",
+        metavar="W,H",
+        help="screenshot size in pixels [%(default)s]",
+    )
+    parser.add_argument(
+        "--view-width",
+        type=float,
+        default=DEFAULT_VIEW_WIDTH_M,
+        metavar="M",
+        help=f"road shown across the view, metres [{DEFAULT_VIEW_WIDTH_M:g}]",
+    )
+    parser.add_argument(
+        "--scene-colours",
+        action="store_true",
+        help="keep the colours the sensors saw (car bodies, clothing) instead of role colours",
+    )
+    parser.add_argument(
+        "--export-fcd",
+        type=Path,
+        metavar="FILE",
+        help="write the episode as SUMO FCD XML (headless, no window)",
+    )
+    return parser.parse_args(argv)
+
+
+def check_args(args: argparse.Namespace) -> tuple[int, int]:
+    if args.at is not None and args.screenshot is None:
+        raise UsageError("--at chooses the moment of --screenshot: give --screenshot FILE too")
+    if args.screenshot is not None and args.at is None:
+        args.at = "collision"
+    if args.screenshot is not None and args.export_fcd is not None:
+        raise UsageError("--screenshot and --export-fcd are separate runs: give one of them")
+    if args.delay is not None and (not math.isfinite(args.delay) or args.delay < 0):
+        raise UsageError(f"--delay must be a number of milliseconds >= 0, got {args.delay:g}")
+    if not math.isfinite(args.view_width) or args.view_width <= 0:
+        raise UsageError(f"--view-width must be a positive number of metres, got {args.view_width:g}")
+    try:
+        width_px, height_px = (int(v) for v in args.size.split(","))
+    except ValueError:
+        raise UsageError(f"--size must be WIDTH,HEIGHT in pixels, got '{args.size}'") from None
+    if not (16 <= width_px <= 8000 and 16 <= height_px <= 8000):
+        raise UsageError(f"--size must be between 16 and 8000 pixels each way, got {args.size}")
+    if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
+        raise UsageError(f"--screenshot writes a PNG: give a file name ending in .png, got {args.screenshot}")
+    return width_px, height_px
+
+
+def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> tuple[int, str]:
+    """Index of the reference step `--at` names, and a phrase saying which moment it is."""
+    times = reference["time_s"].to_numpy()
+    if moment == "collision":
+        hits = (reference["clearance_m"] <= 0.0).to_numpy().nonzero()[0]
+        if hits.size == 0:
+            raise ReplayError(
+                f"there is no collision in {logged.describe()} (it ended at t={times[-1]:.2f} s without one)"
+            )
+        return int(hits[0]), "the collision"
+    if moment == "first-detection":
+        seen = reference["perceived"].to_numpy(bool).nonzero()[0]
+        if seen.size == 0:
+            raise ReplayError(f"the AD stack never perceived the pedestrian in {logged.describe()}")
+        return int(seen[0]), "the first detection"
+    try:
+        time_s = float(moment)
+    except ValueError:
+        raise ReplayError(
+            f"--at must be first-detection, collision or a time in seconds, got '{moment}'"
+        ) from None
+    if not math.isfinite(time_s) or time_s < 0.0 or time_s > times[-1] + 1e-9:
+        raise ReplayError(f"--at {moment}: the episode runs from t=0 to t={times[-1]:.2f} s")
+    return int((times >= time_s - 1e-9).nonzero()[0][0]), "the requested time"
+
+
+def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> EpisodeSetup:
+    """The episode's initial world drawn from its seed as the batch did; the recorded one when the case
+    recorded a different one (then the drawing code changed since the run)."""
+    drawn = runner.draw_setup(logged.spec, logged.seed)
+    if logged.case_meta is None:
+        return drawn
+    recorded = logged.case_meta["setup"]
+    if drawn != recorded:
+        differing = [
+            f.name
+            for f in dataclasses.fields(recorded)
+            if getattr(recorded, f.name) != getattr(drawn, f.name)
+        ]
+        say(
+            f"  note: the world drawn from seed {logged.seed} today differs from the recorded one "
+            f"({', '.join(differing)}): replaying the recorded world"
+        )
+        return recorded
+    return drawn
+
+
+def chain(*hooks):
+    hooks = [h for h in hooks if h is not None]
+
+    def on_step(api, row):
+        for hook in hooks:
+            hook(api, row)
+
+    return on_step
+
+
+def error(message: str, status: int = 2) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return status
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        size_px = check_args(args)
+        logged = load_logged_episode(args.run_dir, args.episode, args.condition, args.scenario)
+    except (UsageError, ReplayError) as exc:
+        return error(str(exc))
+    if args.export_fcd is not None:
+        say_header(logged, print)
+        return export_fcd(logged, args.export_fcd, print)
+
+    has_display = bool(os.environ.get("DISPLAY"))
+    can_start_xvfb = (
+        args.screenshot is not None and shutil.which("xvfb-run") and not os.environ.get(UNDER_XVFB_ENV)
+    )
+    if not has_display and not can_start_xvfb:
+        hint = (
+            "use --screenshot (it starts Xvfb itself when xvfb-run is installed)"
+            if args.screenshot is None
+            else "install xvfb (apt-get install xvfb)"
+        )
+        return error(f"sumo-gui needs a display and there is none: {hint}")
+    # Without a display the checks below run silently and the run under Xvfb tells the story.
+    say = print if has_display else _silent
+    say_header(logged, say)
+    try:
+        plan = plan_replay(logged, args, size_px, say)
+    except ReplayError as exc:
+        return error(str(exc))
+    except SimulatorError as exc:
+        return error(str(exc), 1)
+    if not has_display:
+        return rerun_under_xvfb(argv, size_px)
+    return replay_in_gui(logged, args, plan, say)
+
+
+def say_header(logged: LoggedEpisode, say) -> None:
+    say(f"replaying {logged.describe()} of run {logged.run_dir}")
+    say(
+        f"  settings from run.json: scenario '{logged.spec.name}', algorithm {logged.algorithm}, "
+        f"site {logged.site.name}"
+    )
+    for note in logged.notes:
+        say(f"  note: {note}")
+
+
+def _silent(*_args, **_kwargs) -> None:
+    pass
+
+
+def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
+    runner = EpisodeRunner(logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s)
+    try:
+        setup = episode_setup(runner, logged, say)
+        check = _trajectory_check(logged, say)
+        angle_path = setup.pedestrian.path_xy
+        heading_rad = math.atan2(angle_path[1][1] - angle_path[0][1], angle_path[1][0] - angle_path[0][0])
+        recorder = FcdRecorder(heading_rad)
+        result = runner.run(
+            logged.spec, logged.condition, logged.seed, setup=setup, on_step=chain(check, recorder)
+        )
+    except SimulatorError as exc:
+        return error(str(exc), 1)
+    finally:
+        runner.close()
+    write_fcd(
+        path,
+        recorder.timesteps,
+        comment=f"pedsafe_sumo replay of {logged.describe()}, run {logged.run_dir}",
+    )
+    say(f"wrote {path}: {len(recorder.timesteps)} timesteps, ended ({result.end_reason.replace('_', ' ')})")
+    return _verdict(logged, check, result, say)
+
+
+@dataclasses.dataclass(frozen=True)
+class ReplayPlan:
+    setup: EpisodeSetup
+    #: The episode's course known in advance (markers, framing): the case log, else a headless run.
+    reference: pd.DataFrame
+    screenshot: ScreenshotRequest | None
+
+
+def plan_replay(logged: LoggedEpisode, args: argparse.Namespace, size_px: tuple[int, int], say) -> ReplayPlan:
+    """The world to replay, the episode's course, and the screenshot's step (ReplayError when the
+    requested moment never happened)."""
+    headless = EpisodeRunner(
+        logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
+    )
+    try:
+        setup = episode_setup(headless, logged, say)
+        reference = logged.case_log
+        if reference is None:
+            # Markers and framing need the episode's course in advance: a headless run gives it (~0.5 s).
+            say(
+                "  no case log for this episode (no collision or conflict in its pair): nothing recorded to "
+                "check the trajectory against; the outcome is checked against episodes.parquet"
+            )
+            reference = headless.run(logged.spec, logged.condition, logged.seed, setup=setup).log
+    finally:
+        headless.close()
+    screenshot = None
+    if args.screenshot is not None:
+        step_index, what = moment_step(reference, args.at, logged)
+        if step_index == 0:
+            step_index = 1
+            say(
+                f"  note: the first step (t={reference['time_s'].iloc[0]:.2f} s) is never drawn; "
+                "rendering the next one"
+            )
+        screenshot = ScreenshotRequest(args.screenshot.resolve(), step_index, *size_px)
+        say(f"  rendering {what}: t={reference['time_s'].iloc[step_index]:.2f} s")
+    return ReplayPlan(setup, reference, screenshot)
+
+
+def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, plan: ReplayPlan, say) -> int:
+    setup, reference, screenshot = plan.setup, plan.reference, plan.screenshot
+    if screenshot is not None:
+        screenshot.path.parent.mkdir(parents=True, exist_ok=True)
+    delay_ms_per_step = args.delay if args.delay is not None else (0.0 if screenshot else DEFAULT_DELAY_MS)
+    if screenshot is None:
+        say("  colours: " + _legend(args.scene_colours))
+
+    with tempfile.TemporaryDirectory(prefix="pedsafe-replay-") as tmp:
+        settings = Path(tmp) / "replay.view.xml"
+        settings.write_text(gui_settings(delay_ms_per_step, logged.step_length_s), encoding="utf-8")
+        options = []
+        if screenshot is not None:
+            options = [
+                "--window-size",
+                f"{screenshot.width_px + WINDOW_CHROME_PX[0]},{screenshot.height_px + WINDOW_CHROME_PX[1]}",
+            ]
+        runner = EpisodeRunner(
+            logged.site,
+            logged.params,
+            logged.agent_class,
+            gui=True,
+            step_length_s=logged.step_length_s,
+            gui_settings_file=settings,
+            gui_options=options,
+        )
+        check = _trajectory_check(logged, say, reference)
+        scene = ReplayScene(
+            setup,
+            runner.sensors_for(logged.spec),
+            reference,
+            logged.condition,
+            view_width_m=args.view_width,
+            scene_colours=args.scene_colours,
+            screenshot=screenshot,
+            say=say,
+        )
+        result = None
+        try:
+            result = runner.run(
+                logged.spec, logged.condition, logged.seed, setup=setup, on_step=chain(check, scene)
+            )
+        except ScreenshotTaken as taken:
+            say(f"wrote {taken}")
+        except SimulatorError as exc:
+            _close_quietly(runner)
+            return error(str(exc), 1)
+        except runner.session.connection_lost:
+            say(f"sumo-gui was closed after {check.steps_checked} steps, before the episode ended")
+            return 0 if check.ok else 1
+        except TimeoutError as exc:
+            _close_quietly(runner)
+            return error(str(exc), 1)
+        if screenshot is not None and result is not None:
+            _close_quietly(runner)
+            return error(
+                f"the replay ended ({result.end_reason.replace('_', ' ')}) "
+                f"at t={result.log['time_s'].iloc[-1]:.2f} s, "
+                "before the requested moment: it differs from the log",
+                1,
+            )
+        if result is not None and screenshot is None and sys.stdin.isatty():
+            try:
+                input("episode over: press Enter to close sumo-gui ")
+            except EOFError:
+                pass
+        _close_quietly(runner)
+    return _verdict(logged, check, result, say)
+
+
+def _trajectory_check(
+    logged: LoggedEpisode, say, reference: pd.DataFrame | None = None
+) -> TrajectoryCheck | None:
+    def report(line: str) -> None:
+        print(line, file=sys.stderr)
+
+    if logged.case_log is not None:
+        say(f"  checking every step against the case log {logged.case_path} ({len(logged.case_log)} steps)")
+        return TrajectoryCheck(logged.case_log, report)
+    if reference is not None:
+        say("  checking every step against a headless run of the same episode")
+        return TrajectoryCheck(reference, report, reference_name="the headless run")
+    say(
+        "  no case log for this episode (no collision or conflict in its pair): nothing recorded to check "
+        "the trajectory against; the outcome is checked against episodes.parquet"
+    )
+    return None
+
+
+def _verdict(logged: LoggedEpisode, check: TrajectoryCheck | None, result, say) -> int:
+    """Summary lines; 1 when the replay differs from what the run recorded."""
+    differs = False
+    if check is not None:
+        if result is not None:
+            check.finish(len(result.log), result.end_reason, complete=True)
+        say(check.summary())
+        differs = not check.ok
+    if result is not None:
+        mismatches = outcome_mismatches(logged.outcome, result.outcome)
+        for mismatch in mismatches:
+            print(mismatch.line(), file=sys.stderr)
+        if not mismatches:
+            say("outcome matches episodes.parquet (" + ", ".join(CHECKED_OUTCOME) + ")")
+        differs = differs or bool(mismatches)
+    return 1 if differs else 0
+
+
+def _legend(scene_colours: bool) -> str:
+    if scene_colours:
+        return "as the sensors saw them; the pedestrian ringed in white"
+
+    def rgb(rgba):
+        return ",".join(str(c) for c in rgba[:3])
+
+    return (
+        f"ego magenta ({rgb(EGO_RGBA)}), pedestrian orange ({rgb(PEDESTRIAN_RGBA)}) in a white ring, "
+        f"kerb-lane vehicles (occluder, queue) cyan ({rgb(KERB_LANE_VEHICLE_RGBA)}), roadside camera pole "
+        "blue square; fields of view: onboard camera magenta wedge, LiDAR range magenta circle, roadside "
+        "camera blue wedge; first detections: yellow (onboard) and light-blue (roadside) dots with "
+        "sight lines"
+    )
+
+
+def gui_settings(delay_ms_per_step: float, step_length_s: float) -> str:
+    """sumo-gui view settings of the replay: the site's real-world colours, POI labels, the delay.
+
+    sumo-gui 1.28 counts its delay in milliseconds per simulated second (it scales the value by the
+    step length, whatever its help text says): 1000 plays in real time. --delay is per step.
+    """
+    gui_delay = delay_ms_per_step / step_length_s
+    return (
+        "<viewsettings>\n"
+        '    <scheme name="real world">\n'
+        '        <pois poiType_show="1" poiType_size="50" poiType_color="255,255,255"\n'
+        '              poiType_constantSize="1"/>\n'
+        "    </scheme>\n"
+        f'    <delay value="{gui_delay:g}"/>\n'
+        "</viewsettings>\n"
+    )
+
+
+def _close_quietly(runner: EpisodeRunner) -> None:
+    try:
+        runner.close()
+    except runner.session.connection_lost:
+        pass  # the window was closed already
+
+
+def rerun_under_xvfb(argv: list[str] | None, size_px: tuple[int, int]) -> int:
+    """Run this same command again inside a virtual X server (no display here, xvfb-run installed)."""
+    width, height = size_px[0] + WINDOW_CHROME_PX[0] + 200, size_px[1] + WINDOW_CHROME_PX[1] + 200
+    command = [
+        "xvfb-run",
+        "-a",
+        "-s",
+        f"-screen 0 {width}x{height}x24",
+        sys.executable,
+        "-m",
+        "pedsafe_sumo.replay",
+        *(sys.argv[1:] if argv is None else argv),
+    ]
+    # The same pedsafe_sumo package for the child, whatever else is installed.
+    package_root = str(Path(__file__).resolve().parents[2])
+    python_path = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p)
+    env = {**os.environ, UNDER_XVFB_ENV: "1", "LIBGL_ALWAYS_SOFTWARE": "1", "PYTHONPATH": python_path}
+    return subprocess.run(command, env=env, check=False).returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
