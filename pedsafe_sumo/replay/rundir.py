@@ -169,6 +169,10 @@ def load_logged_episode(
     )
 
 
+#: The roadside pole every scenario's V2I condition received before ScenarioSpec.roadside_units.
+BEFORE_ROADSIDE_UNITS_FIELD = "rsu_camera_0"
+
+
 def scenario_from_record(recorded: Any, name: str, notes: list[str]) -> ScenarioSpec:
     """The ScenarioSpec exactly as run.json recorded it (dataclasses.asdict of the spec the batch ran).
 
@@ -186,6 +190,13 @@ def scenario_from_record(recorded: Any, name: str, notes: list[str]) -> Scenario
             "does not know: the run was made with another version"
         )
     absent = sorted(fields - set(values))
+    if "roadside_units" in absent:
+        # Before scenarios named their roadside poles, V2I received the site's only pole.
+        values["roadside_units"] = BEFORE_ROADSIDE_UNITS_FIELD
+        absent.remove("roadside_units")
+        notes.append(
+            f"run.json predates roadside_units: the one pole of that time ({BEFORE_ROADSIDE_UNITS_FIELD})"
+        )
     if absent:
         notes.append(f"run.json predates scenario field(s) {', '.join(absent)}: today's defaults used")
     try:

@@ -133,3 +133,18 @@ def test_a_recorded_world_that_differs_from_todays_draw_is_the_one_replayed(run_
     first_line = proc.stderr.strip().splitlines()[0]
     assert first_line.startswith("MISMATCH at t=0.05 s: ego_speed_mps logged")
     assert f"replayed {logged_speed_mps + 1.0:.6f}" in first_line
+
+
+def test_a_run_recorded_before_scenarios_named_their_poles_replays_with_the_one_pole_of_that_time():
+    import dataclasses
+
+    from pedsafe_sumo.replay.rundir import scenario_from_record
+    from pedsafe_sumo.scenarios.registry import get_scenario
+
+    recorded = dataclasses.asdict(get_scenario("background_blending"))
+    assert recorded["roadside_units"] == "rsu_camera_0,rsu_camera_1"  # today's default
+    del recorded["roadside_units"]
+    notes: list[str] = []
+    spec = scenario_from_record({"background_blending": recorded}, "background_blending", notes)
+    assert spec.roadside_unit_ids == ("rsu_camera_0",)
+    assert any("roadside_units" in note for note in notes)
