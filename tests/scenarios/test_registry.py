@@ -148,7 +148,7 @@ def test_blending_pedestrian_passes_within_the_lidar_cluster_tolerance_of_the_ve
             (ax, ay), (bx, by)
         )
         gap = dist_to_line - setup.pedestrian.radius_m
-        assert -1e-6 <= gap <= 0.1 + 1e-6
+        assert 0.1 - 1e-6 <= gap <= 0.4 + 1e-6
         assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
 
 
@@ -195,10 +195,11 @@ def _hidden_share(pole_xyz, ped_xy, ped_height_m, corners, vehicle_height_m):
     return hidden / len(heights)
 
 
-def test_blending_pedestrian_is_hidden_from_the_corner_pole_and_in_side_view_of_the_far_pole(approach):
-    """Why background blending has a second pole: from the corner pole the waiting vehicle stands
-    between the camera and the pedestrian behind it; from the far-side pole no sight line to them
-    crosses the vehicle. Poles from the built site (site.json), geometry by hand."""
+def test_blending_pedestrian_walking_out_is_hidden_from_the_corner_pole_not_from_the_far_pole(approach):
+    """Why background blending has a second pole: while the pedestrian walks out behind the waiting
+    vehicle (the first 1.5 m of their path, every 0.25 m), the vehicle stands between the corner pole
+    and them; from the far-side pole no sight line to them crosses it. Poles from the built site
+    (site.json), geometry by hand."""
     import json
 
     info = json.loads(get_site("xueqing").file("site.json").read_text())
@@ -216,9 +217,12 @@ def test_blending_pedestrian_is_hidden_from_the_corner_pole_and_in_side_view_of_
         corners = _footprint(
             approach, waiting.lane_id, waiting.front_pos_m, waiting.size.length_m, waiting.size.width_m
         )
-        start = setup.pedestrian.path_xy[0]
-        args = (start, setup.pedestrian.height_m, corners, waiting.size.height_m)
-        corner_hidden.append(_hidden_share(poles["rsu_camera_0"], *args))
-        far_hidden.append(_hidden_share(poles["rsu_camera_1"], *args))
-    assert min(corner_hidden) >= 0.5, corner_hidden
+        (ax, ay), (bx, by) = setup.pedestrian.path_xy
+        length = math.dist((ax, ay), (bx, by))
+        for walked_m in np.arange(0.0, 1.51, 0.25):
+            at = (ax + (bx - ax) * walked_m / length, ay + (by - ay) * walked_m / length)
+            args = (at, setup.pedestrian.height_m, corners, waiting.size.height_m)
+            corner_hidden.append(_hidden_share(poles["rsu_camera_0"], *args))
+            far_hidden.append(_hidden_share(poles["rsu_camera_1"], *args))
+    assert np.mean(corner_hidden) >= 0.5, np.mean(corner_hidden)
     assert max(far_hidden) == 0.0, far_hidden
