@@ -106,28 +106,43 @@ def collect(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
 
 
 def plot(table: pd.DataFrame, keys: list[str], path: Path) -> None:
+    """Collision and conflict rate (rows) per scenario (columns) against the first --vary key; colour
+    = condition, line style = the values of the other --vary keys."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    first = keys[0]
-    others = keys[1:]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-    for ax, (metric, title) in zip(axes, [("collision", "collision rate"), ("conflict", "conflict rate")]):
-        group_keys = ["scenario", "condition", *others]
-        for group, rows in table.groupby(group_keys, sort=False):
-            x = pd.to_numeric(rows[first], errors="coerce")
-            x = x if x.notna().all() else rows[first]
-            y = rows[f"{metric}_rate"]
-            # Clipped at 0: at a rate of 0 or 1 the Wilson bound equals it up to rounding.
-            err = [(y - rows[f"{metric}_low"]).clip(lower=0), (rows[f"{metric}_high"] - y).clip(lower=0)]
-            name = " ".join(str(g) for g in (group if isinstance(group, tuple) else (group,)))
-            ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=name)
-        ax.set_xlabel(first)
-        ax.set_ylabel(f"{title} (95% Wilson)")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    first, others = keys[0], keys[1:]
+    scenarios = list(dict.fromkeys(table["scenario"]))
+    colours = {"sv": "tab:red", "v2i": "tab:blue"}
+    styles = ["-", "--", ":", "-."]
+    other_values = list(dict.fromkeys(tuple(row) for row in table[others].itertuples(index=False)))
+    fig, axes = plt.subplots(
+        2, len(scenarios), figsize=(4.2 * len(scenarios), 6.4), squeeze=False, constrained_layout=True
+    )
+    for col, scenario in enumerate(scenarios):
+        for row_index, (metric, title) in enumerate(
+            [("collision", "collision rate"), ("conflict", "conflict rate")]
+        ):
+            ax = axes[row_index][col]
+            rows_of_scenario = table[table["scenario"] == scenario]
+            for (condition, *values), rows in rows_of_scenario.groupby(["condition", *others], sort=False):
+                x = pd.to_numeric(rows[first], errors="coerce")
+                x = x if x.notna().all() else rows[first]
+                y = rows[f"{metric}_rate"]
+                # Clipped at 0: at a rate of 0 or 1 the Wilson bound equals it up to rounding.
+                err = [(y - rows[f"{metric}_low"]).clip(lower=0), (rows[f"{metric}_high"] - y).clip(lower=0)]
+                style = styles[other_values.index(tuple(values)) % len(styles)]
+                name = " ".join([condition.upper(), *(f"{k}={v}" for k, v in zip(others, values))])
+                ax.errorbar(x, y, yerr=err, marker="o", capsize=3, linestyle=style,
+                            color=colours.get(condition), label=name)  # fmt: skip
+            ax.set_title(f"{scenario}: {title}", fontsize=9)
+            ax.set_xlabel(first, fontsize=8)
+            ax.grid(alpha=0.3)
+            if col == 0:
+                ax.set_ylabel(f"{title} (95% Wilson)", fontsize=8)
+    axes[0][0].legend(fontsize=7)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
