@@ -43,7 +43,6 @@ from pedsafe_sumo.io.run_store import (
     RunStoreError,
     holds_run,
     read_json,
-    run_state,
 )
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError
@@ -333,15 +332,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         plan = prepare(args)
+        backend = make_backend(args.cluster, args.workers or min(2, os.cpu_count() or 1))
     except (*INPUT_ERRORS, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if plan.recorded is not None and run_state(plan.recorded, plan.out) == STATE_COMPLETE:
+    if plan.recorded is not None and plan.recorded.get("state") == STATE_COMPLETE:
         print(
             f"{plan.out} is complete ({plan.recorded.get('episodes_total', '?')} episodes): nothing to resume"
         )
         return 0
-    backend = make_backend(args.cluster, args.workers or min(2, os.cpu_count() or 1))
     try:
         backend.start()
         return run(plan, backend, argv)
@@ -446,7 +445,10 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         f"the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
     )
     if backend.worker_deaths:
-        print(f"{backend.worker_deaths} worker process death(s): their chunks were run again")
+        print(
+            f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "
+            "(a pair that killed its worker every time is recorded as errors)"
+        )
     print_table(table)
     print(f"tables and figures: python -m pedsafe_sumo.report {plan.out}")
     return 0

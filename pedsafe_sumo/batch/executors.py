@@ -43,8 +43,6 @@ OnChunkDone = Callable[[Chunk, ChunkOutput], None]
 PAIR_ATTEMPTS_ALONE = 2
 #: Pool breaks in a row in which no chunk had even started before the batch gives up.
 MAX_STARTUP_DEATHS = 3
-#: Seconds to wait for a Dask scheduler to answer.
-CONNECT_TIMEOUT_S = 10
 LOCAL_CLUSTER_PREFIX = "local:"
 CLUSTER_EXTRA_HINT = "Dask is not installed: install the cluster extra, pip install 'pedsafe_sumo[cluster]'"
 
@@ -278,7 +276,9 @@ class DaskBackend:
                 self._client = distributed.Client(self._cluster)
             return
         try:
-            self._client = distributed.Client(self.target, timeout=f"{CONNECT_TIMEOUT_S}s")
+            # How long to wait for the scheduler: Dask's own setting distributed.comm.timeouts.connect
+            # (30 s; environment variable DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT).
+            self._client = distributed.Client(self.target)
         except (OSError, TimeoutError, ValueError) as exc:
             text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise UsageError(f"cannot reach the Dask scheduler at {self.target}: {text}") from None

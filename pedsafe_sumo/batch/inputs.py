@@ -42,4 +42,9 @@ def check_site(site: Site, params: dict[str, Any]) -> None:
     try:
         load_site_data(site, params)
     except Exception as exc:  # sumolib and the loaders raise many types on a well-formed but wrong file
-        raise InputFileError(f"site {site.name}: {_one_line(exc)}") from None
+        # The loaders' ValueErrors explain themselves; anything else (a KeyError from sumolib on a
+        # network without its attributes) needs the type and where to look.
+        detail = _one_line(exc) if type(exc) is ValueError else f"{type(exc).__name__}: {_one_line(exc)}"
+        raise InputFileError(
+            f"site {site.name}: the files in {site.network_dir} do not make a usable site: {detail}"
+        ) from None

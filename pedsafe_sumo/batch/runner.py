@@ -20,6 +20,7 @@ import json
 import os
 import socket
 import threading
+import time
 import traceback
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -32,6 +33,8 @@ from pedsafe_sumo.batch.chunks import Task
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 
 ERROR_STATUS = "error"
+#: How often a pool worker checks that its driver is still alive [s].
+PARENT_POLL_S = 1.0
 
 
 class WorkerEnvironmentError(RuntimeError):
@@ -99,6 +102,17 @@ def init_pool_worker(progress_dir: str | None) -> None:
     chunk, so that a failure there reaches the driver as that chunk's exception, with its message."""
     global _PROGRESS_DIR
     _PROGRESS_DIR = Path(progress_dir) if progress_dir else None
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
+
+
+def _exit_with_parent(parent_pid: int) -> None:
+    """A pool worker whose driver was killed (kill -9 never lets it stop its pool) would wait forever
+    for work that never comes; it leaves within a second instead. Nothing is lost: only the driver
+    writes the run directory."""
+    while True:
+        time.sleep(PARENT_POLL_S)
+        if os.getppid() != parent_pid:
+            os._exit(1)
 
 
 def _note_started(chunk_key: str) -> None:

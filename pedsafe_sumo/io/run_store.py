@@ -183,12 +183,3 @@ def holds_run(directory: Path) -> bool:
     return directory.is_dir() and any(
         (directory / name).exists() for name in (RUN_FILE, MANIFEST_FILE, EPISODES_FILE, PARTS_DIR, CASES_DIR)
     )
-
-
-def run_state(run_info: dict[str, Any], run_dir: Path) -> str:
-    """STATE_RUNNING or STATE_COMPLETE. A run.json without "state" (written before resumable batches
-    existed) is complete when episodes.parquet is there."""
-    state = run_info.get("state")
-    if state is None:
-        return STATE_COMPLETE if (run_dir / EPISODES_FILE).is_file() else STATE_RUNNING
-    return str(state)
