@@ -125,6 +125,9 @@ class Manifest:
     def __init__(self, path: Path, chunks: dict[str, ChunkRecord] | None = None) -> None:
         self.path = path
         self.chunks: dict[str, ChunkRecord] = dict(chunks or {})
+        # The JSON line of each record, kept: the manifest is rewritten whole after every chunk, and
+        # encoding a thousand records each time would cost the driver more than writing them.
+        self._lines: dict[str, tuple[ChunkRecord, str]] = {}
 
     @classmethod
     def load(cls, path: Path) -> Manifest:
@@ -137,9 +140,19 @@ class Manifest:
             raise RunStoreError(f"{path} has a malformed chunk entry: {exc}") from None
         return cls(path, chunks)
 
+    def _line(self, key: str) -> str:
+        record = self.chunks[key]
+        cached = self._lines.get(key)
+        if cached is None or cached[0] is not record:
+            cached = (record, f"  {json.dumps(key)}: {json.dumps(asdict(record), ensure_ascii=False)}")
+            self._lines[key] = cached
+        return cached[1]
+
     def save(self) -> None:
-        ordered = {key: asdict(self.chunks[key]) for key in sorted(self.chunks)}
-        write_json_atomic(self.path, {"format": MANIFEST_FORMAT, "chunks": ordered})
+        """Rewrite the manifest (atomically): one line per chunk, in key order."""
+        lines = ",\n".join(self._line(key) for key in sorted(self.chunks))
+        text = f'{{"format": {MANIFEST_FORMAT}, "chunks": {{\n{lines}\n}}}}\n'
+        write_bytes_atomic(self.path, text.encode("utf-8"))
 
     def record(self, record: ChunkRecord) -> None:
         self.chunks[record.key] = record

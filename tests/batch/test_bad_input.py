@@ -130,7 +130,11 @@ def test_broken_network_through_the_real_command_line(tmp_path):
         *CROSSING, "--out", str(out), env={NETWORKS_DIR_ENV: str(tmp_path / "networks")}, timeout=120
     )
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
-    assert "cannot parse" in proc.stderr and "xueqing.net.xml: " in proc.stderr and "Traceback" not in proc.stderr
+    assert (
+        "cannot parse" in proc.stderr
+        and "xueqing.net.xml: " in proc.stderr
+        and "Traceback" not in proc.stderr
+    )
     assert not out.exists()
 
 
