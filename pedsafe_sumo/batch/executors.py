@@ -322,6 +322,8 @@ class DaskBackend:
             chunk, pair = owners.pop(future)
             if future.status == "finished":
                 output = future.result()
+            elif future.status == "cancelled":
+                raise BatchError(f"the Dask scheduler cancelled chunk {chunk.key} (restarted or lost?)")
             else:
                 exc = future.exception()
                 if not isinstance(exc, KilledWorker):

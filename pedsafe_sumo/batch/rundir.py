@@ -99,6 +99,7 @@ class BatchRunDirectory:
             problem = check_part(self.path, record)
             if problem:
                 del self.manifest.chunks[key]
+                (self.path / record.file).unlink(missing_ok=True)
                 notes.append(f"chunk {key} runs again: {problem}")
         if notes:
             self.manifest.save()

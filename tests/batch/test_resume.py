@@ -118,6 +118,7 @@ def test_resume_reruns_what_a_killed_driver_left_unrecorded_or_damaged(small_run
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "chunk crossing-000002-000002 runs again: parts/crossing-000002-000002.parquet" in proc.stderr
     assert "removed parts/crossing-000001-000001.parquet (written but never recorded)" in proc.stderr
+    assert "removed parts/crossing-000002" not in proc.stderr
     assert "2 chunk(s) to run" in proc.stdout
     pd.testing.assert_frame_equal(
         pd.read_parquet(run / "episodes.parquet"), pd.read_parquet(reference / "episodes.parquet")
