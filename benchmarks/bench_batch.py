@@ -47,6 +47,12 @@ def run_batch(executor: str, workers: int, episodes: int, out: Path, chunk_size:
     )
     info = json.loads((out / "run.json").read_text())
     info["command_s"] = time.perf_counter() - started
+    chunks = json.loads((out / "manifest.json").read_text())["chunks"].values()
+    # Seconds the workers spent inside chunks: per episode (worker speed) and as a share of the
+    # workers' wall time (the rest is start-up, scheduling gaps and the tail).
+    compute_s = sum(chunk["compute_s"] for chunk in chunks)
+    info["compute_ms_per_episode"] = compute_s / info["episodes_total"] * 1e3
+    info["busy_share"] = compute_s / (info["wall_time_s"] * workers)
     return info
 
 
@@ -62,6 +68,8 @@ def throughput(args, tmp: Path) -> None:
                 f"in {info['wall_time_s']:.1f} s "
                 f"= {rate:.2f} episodes/s ({rate / workers:.2f} per worker, speed-up {rate / base:.2f}; "
                 f"chunks of {info['chunk_size_pairs']} pairs, {info['chunks_total']} chunks); "
+                f"in chunks {info['compute_ms_per_episode']:.0f} ms per episode, workers busy "
+                f"{info['busy_share']:.0%} of the time; "
                 f"command {info['command_s']:.1f} s; protocol of {PROTOCOL_EPISODES} episodes: "
                 f"{PROTOCOL_EPISODES / rate / 60:.0f} min",
                 flush=True,
@@ -74,7 +82,8 @@ def chunk_sizes(args, tmp: Path) -> None:
         info = run_batch("pool", workers, args.episodes, tmp / f"chunk{size}", chunk_size=size)
         print(
             f"pool {workers} worker(s), chunks of {size:3d} pair(s) ({info['chunks_total']:4d} chunks): "
-            f"{info['episodes_per_s']:.2f} episodes/s, command {info['command_s']:.1f} s",
+            f"{info['episodes_per_s']:.2f} episodes/s, workers busy {info['busy_share']:.0%}, "
+            f"command {info['command_s']:.1f} s",
             flush=True,
         )
 

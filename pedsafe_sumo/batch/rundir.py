@@ -150,6 +150,8 @@ class BatchRunDirectory:
                 session=session,
                 completed_utc=utc_now(),
                 session_elapsed_s=round(session_elapsed_s, 3),
+                worker=output.worker,
+                compute_s=round(output.compute_s, 3),
             )
         )
         return True

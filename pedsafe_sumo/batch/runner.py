@@ -79,8 +79,9 @@ class ChunkOutput:
     rows: list[dict[str, Any]]
     #: EpisodeResults of both conditions of every pair with a collision or a conflict (the cases/ logs).
     cases: list[Any]
-    #: "host:pid" of the worker process.
+    #: "host:pid" of the worker process, and the seconds it spent on the chunk.
     worker: str = ""
+    compute_s: float = 0.0
 
 
 # One runner per worker process. The lock serialises chunks in a process: a Dask worker started with
@@ -245,6 +246,7 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
 def run_chunk(config: WorkerConfig, chunk_key: str, tasks: tuple[Task, ...]) -> ChunkOutput:
     """Run every pair of `tasks` (a chunk, or one pair of it) in this process; rows in task order."""
     with _SUMO_LOCK:
+        started = time.perf_counter()
         _note_started(chunk_key)
         rows: list[dict[str, Any]] = []
         cases: list[Any] = []
@@ -252,4 +254,4 @@ def run_chunk(config: WorkerConfig, chunk_key: str, tasks: tuple[Task, ...]) -> 
             pair_rows, pair_cases = _run_pair(config, task)
             rows += pair_rows
             cases += pair_cases
-        return ChunkOutput(rows, cases, worker_label())
+        return ChunkOutput(rows, cases, worker_label(), time.perf_counter() - started)

@@ -117,6 +117,9 @@ class ChunkRecord:
     session: int
     completed_utc: str
     session_elapsed_s: float
+    #: The worker process(es) that ran it ("host:pid") and the seconds they spent on it.
+    worker: str = ""
+    compute_s: float = 0.0
 
 
 class Manifest:
