@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
+import math
 import os
 import platform
 import subprocess
@@ -224,6 +226,8 @@ def prepare(args) -> Plan:
         raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} is a file, not a run directory")
     explicit = _explicit_arguments(args)
     recorded = None
     if args.resume:
@@ -285,8 +289,6 @@ def prepare(args) -> Plan:
 
 def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:
     """Refuse to resume a run whose recorded identity differs from this command's (one line)."""
-    import json
-
     # Compare as JSON would store them (tuples as lists, the same number types).
     current = json.loads(json.dumps({key: plan.identity[key] for key in IDENTITY_KEYS}, default=str))
     previous = {key: recorded.get(key) for key in IDENTITY_KEYS}
@@ -306,7 +308,9 @@ def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:
 
 def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
     identity = plan.identity
-    chunks_total = len(plan.scenarios) * -(-identity["episodes_per_scenario"] // identity["chunk_size_pairs"])
+    chunks_total = len(plan.scenarios) * math.ceil(
+        identity["episodes_per_scenario"] / identity["chunk_size_pairs"]
+    )
     return {
         "state": STATE_RUNNING,
         "command": "python -m pedsafe_sumo.batch " + " ".join(argv),

@@ -170,6 +170,12 @@ def test_an_earlier_run_is_never_damaged_by_the_real_command_line(small_run):
     assert tree_digest(out) == before
 
 
+def test_output_that_is_a_file(capsys, tmp_path):
+    (tmp_path / "out").write_text("my notes")
+    assert_refused(capsys, [*CROSSING, "--out", str(tmp_path / "out")], "is a file, not a run directory")
+    assert (tmp_path / "out").read_text() == "my notes"
+
+
 def test_resume_needs_a_run_to_resume(capsys, tmp_path):
     assert_refused(capsys, ["--resume", "--out", str(tmp_path / "nothing")], "holds no run to resume")
     assert not (tmp_path / "nothing").exists()
