@@ -44,14 +44,6 @@ PAIR_ATTEMPTS_ALONE = 2
 #: Pool breaks in a row in which no chunk had even started before the batch gives up.
 MAX_STARTUP_DEATHS = 3
 LOCAL_CLUSTER_PREFIX = "local:"
-#: Dask settings that slow its housekeeping down (defaults 20 ms, 100 ms, 500 ms): a chunk is seconds
-#: of Python and SUMO in one thread, and every wake-up of the worker's event loop takes the GIL from it.
-#: Set for local:N; for your own workers, the same through DASK_* environment variables (docs/batch.md).
-QUIET_WORKER_CONFIG = {
-    "distributed.admin.tick.interval": "1s",
-    "distributed.worker.memory.monitor-interval": "1s",
-    "distributed.admin.system-monitor.interval": "2s",
-}
 CLUSTER_EXTRA_HINT = "Dask is not installed: install the cluster extra, pip install 'pedsafe_sumo[cluster]'"
 
 
@@ -268,14 +260,10 @@ class DaskBackend:
             # allowed-failures 1: a chunk whose worker dies runs once more, then is split (module docstring).
             # worker-saturation 1.0: one chunk per single-threaded worker at a time, none queued behind it
             # (a queued chunk would be blamed too when the worker dies).
-            # The rest: Dask's periodic housekeeping, which in a worker process competes for the GIL with
-            # the chunk's thread (the event-loop watchdog wakes every process 50 times a second by
-            # default). Measured in BENCHMARKS.md.
             with dask.config.set(
                 {
                     "distributed.scheduler.allowed-failures": 1,
                     "distributed.scheduler.worker-saturation": 1.0,
-                    **QUIET_WORKER_CONFIG,
                 }
             ):
                 # One thread per worker process: libsumo is one SUMO instance per process.
