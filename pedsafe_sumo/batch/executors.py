@@ -51,13 +51,17 @@ class BatchError(RuntimeError):
     """The batch cannot go on; one-line message. What was recorded stays for --resume."""
 
 
-def worker_died_rows(task: Task, attempts: str) -> list[dict]:
-    """Error rows of a pair whose worker process died every time it ran (`attempts` says how often)."""
-    message = (
-        f"worker process died each time this episode pair ran ({attempts}): "
-        "killed by the OS, or a crash in SUMO or the AD stack"
-    )
-    return [error_row(task, condition, message) for condition in task.conditions]
+#: The error of a pair whose worker process died every time it ran; the same on every executor, so a
+#: table does not depend on where it was computed.
+WORKER_DIED_MESSAGE = (
+    "worker process died each time this episode pair ran (docs/batch.md: faults): killed by the OS, "
+    "or a crash in SUMO or the AD stack"
+)
+
+
+def worker_died_rows(task: Task) -> list[dict]:
+    """Error rows of a pair whose worker process died every time it ran."""
+    return [error_row(task, condition, WORKER_DIED_MESSAGE) for condition in task.conditions]
 
 
 def merge_outputs(outputs: list[ChunkOutput]) -> ChunkOutput:
@@ -198,13 +202,7 @@ class ProcessPoolBackend:
                     while pair_output is None and tries_left > 0:
                         pair_output = self._alone(config, chunk.key, (task,))
                         tries_left -= 1
-                    outputs.append(
-                        pair_output
-                        or ChunkOutput(
-                            worker_died_rows(task, f"{PAIR_ATTEMPTS_ALONE} times alone in a fresh process"),
-                            [],
-                        )
-                    )
+                    outputs.append(pair_output or ChunkOutput(worker_died_rows(task), []))
                 output = merge_outputs(outputs)
         except (BrokenProcessPool, BatchError):
             raise
@@ -337,9 +335,7 @@ class DaskBackend:
                     future.release()
                     continue
                 task = chunk.tasks[0 if pair is None else pair]
-                output = ChunkOutput(
-                    worker_died_rows(task, "the Dask scheduler's allowed failures used up"), []
-                )
+                output = ChunkOutput(worker_died_rows(task), [])
             future.release()
             if pair is None:
                 on_done(chunk, output)

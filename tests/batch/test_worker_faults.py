@@ -48,14 +48,14 @@ def test_a_killed_worker_is_retried_and_no_episode_is_counted_twice(small_run, t
 
 
 @pytest.mark.slow
-def test_a_pair_that_always_kills_its_worker_becomes_error_rows(small_run, tmp_path):
+@pytest.mark.parametrize("executor", [("--workers", "2"), ("--cluster", "local:2")], ids=["pool", "dask"])
+def test_a_pair_that_always_kills_its_worker_becomes_error_rows(small_run, tmp_path, executor):
     reference, _ = small_run
     out = tmp_path / "run"
     proc = batch(
         *SMALL_RUN_ARGS[:-1],
         "2",  # two pairs per chunk: the killing chunk is split and its other pair still runs
-        "--workers",
-        "2",
+        *executor,
         "--algorithm",
         "tests.batch.plugin_agents:KillsWorkerAlways",
         "--out",
