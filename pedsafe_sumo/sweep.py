@@ -6,7 +6,8 @@
 Each combination of the --vary values (their Cartesian product) is a full batch run
 (`python -m pedsafe_sumo.batch ... --set KEY=VALUE ...`, same seed, so every combination sees the same
 worlds) in its own run directory OUT/<key>=<value>,... ; a combination whose run directory already
-holds episodes.parquet is not run again, so a stopped sweep continues where it stopped. At the end
+holds episodes.parquet is not run again and one stopped part-way is resumed (`--resume`), so a
+stopped sweep continues where it stopped. At the end
 OUT/sweep.csv and OUT/sweep.md hold Table I of every combination with its settings, and
 OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key.
 Every --set / --vary key is validated for every combination before anything runs.
@@ -98,7 +99,7 @@ def collect(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
 
     frames = []
     for combo in combos:
-        table = table_one(pd.read_parquet(out / label(combo) / "episodes.parquet"))
+        table = table_one(pd.read_parquet(out / label(combo) / "episodes.parquet", partitioning=None))
         for key, value in reversed(combo.items()):
             table.insert(0, key, value)
         frames.append(table)
@@ -162,8 +163,11 @@ def main(argv: list[str] | None = None) -> int:
         if (run_dir / "episodes.parquet").exists():
             print(f"[{number}/{len(combos)}] {label(combo)}: done before, kept")
             continue
-        print(f"[{number}/{len(combos)}] {label(combo)}")
-        code = batch_main(batch_argv(args, combo, run_dir))
+        argv = batch_argv(args, combo, run_dir)
+        if (run_dir / "run.json").exists():  # stopped part-way: the batch continues it
+            argv.append("--resume")
+        print(f"[{number}/{len(combos)}] {label(combo)}" + (" (resuming)" if "--resume" in argv else ""))
+        code = batch_main(argv)
         if code != 0:
             print(f"error: the batch for {label(combo)} failed (exit {code})", file=sys.stderr)
             return code

@@ -2,30 +2,50 @@
 
     python -m pedsafe_sumo.batch --scenario crossing                      # ~1 minute, 100 pairs
     python -m pedsafe_sumo.batch --scenario all --episodes 10000 --workers 2 --out results/protocol
+    python -m pedsafe_sumo.batch --resume --out results/protocol          # after a crash or a kill
+    python -m pedsafe_sumo.batch --scenario all --episodes 10000 --cluster tcp://host:8786 --out DIR
     python -m pedsafe_sumo.batch --scenario jaywalking --set perception.v2i.latency_s=0.3 \
         --algorithm my.stack:Stack
 
 Writes DIR/episodes.parquet (one row per episode and condition), DIR/run.json (configuration,
-parameters, seeds, versions, timings: the paper's global information file) and DIR/cases/ (per-step
-logs of both conditions of every episode pair with a collision or a conflict). Bad input ends in one
-line on stderr and exit code 2, and nothing is written.
+parameters, seeds, versions, timings: the paper's global information file), DIR/cases/ (per-step logs
+of both conditions of every episode pair with a collision or a conflict), and while it runs
+DIR/parts/ and DIR/manifest.json (finished chunks; docs/batch.md). `--resume` continues a stopped
+run with the configuration recorded in its run.json. Bad input ends in one line on stderr and exit
+code 2, and nothing is written.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import math
 import os
 import platform
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
-from pedsafe_sumo import REPO_ROOT, __version__
-from pedsafe_sumo.batch.runner import Task, WorkerConfig, episode_seed, run_tasks
+from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, auto_chunk_size, plan_chunks
+from pedsafe_sumo.batch.executors import BatchError, make_backend
+from pedsafe_sumo.batch.inputs import InputFileError, check_site
+from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
+from pedsafe_sumo.batch.runner import ERROR_STATUS, WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.io.run_store import (
+    RUN_FILE,
+    STATE_COMPLETE,
+    STATE_RUNNING,
+    RunStoreError,
+    holds_run,
+    read_json,
+)
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
@@ -33,6 +53,42 @@ from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, p
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
 DEFAULT_EPISODES = 100
+#: The arguments that decide a run's results (and its chunk layout), with their defaults. run.json
+#: records them; --resume takes them from there, and a flag given again must repeat its value.
+RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
+    "scenario": None,
+    "condition": "both",
+    "episodes": DEFAULT_EPISODES,
+    "seed": 1,
+    "site": "xueqing",
+    "params": None,
+    "set": [],
+    "algorithm": DEFAULT_ALGORITHM,
+    "chunk_size": None,
+}
+#: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
+IDENTITY_KEYS = (
+    "site",
+    "scenarios",
+    "conditions",
+    "episodes_per_scenario",
+    "run_seed",
+    "episode_seed_rule",
+    "algorithm",
+    "parameters",
+    "site_files_sha256",
+    "chunk_size_pairs",
+)
+#: Versions that must be the same on --resume (another SUMO or pedsafe_sumo may give other episodes).
+PINNED_VERSIONS = ("pedsafe_sumo", "sumo")
+INPUT_ERRORS = (
+    UsageError,
+    ParameterError,
+    ScenarioError,
+    AlgorithmLoadError,
+    UnknownSiteError,
+    InputFileError,
+)
 
 
 def _git_commit() -> str:
@@ -51,11 +107,9 @@ def _git_commit() -> str:
 def _versions() -> dict[str, str]:
     import numpy
     import pandas
-    import sumolib
 
     return {
-        "pedsafe_sumo": __version__,
-        "sumo": sumolib.version.gitDescribe(),
+        **worker_versions(),
         "python": platform.python_version(),
         "numpy": numpy.__version__,
         "pandas": pandas.__version__,
@@ -63,135 +117,353 @@ def _versions() -> dict[str, str]:
     }
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse whose errors are one line on stderr (exit 2), like every other bad input."""
+
+    def error(self, message: str):
+        self.exit(2, f"error: {message} (see --help)\n")
+
+
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", required=True, help=f"{', '.join(SCENARIOS)} or all")
-    parser.add_argument("--condition", default="both", help="sv, v2i or both (paired: same seed) [both]")
+    parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", help=f"{', '.join(SCENARIOS)} or all (required unless --resume)")
+    parser.add_argument("--condition", help="sv, v2i or both (paired: same seed) [both]")
     parser.add_argument(
         "--episodes",
         type=int,
-        default=DEFAULT_EPISODES,
         help=f"episodes per scenario (each run under every condition) [{DEFAULT_EPISODES}]",
     )
-    parser.add_argument("--seed", type=int, default=1, help="run seed; episode seeds derive from it [1]")
+    parser.add_argument("--seed", type=int, help="run seed; episode seeds derive from it [1]")
     parser.add_argument(
         "--workers",
         type=int,
-        default=min(2, os.cpu_count() or 1),
-        help="worker processes, one SUMO each [min(2, cores)]",
+        help="local worker processes, one SUMO each [min(2, cores)]; not with --cluster",
+    )
+    parser.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="run the chunks on a Dask cluster: a scheduler address (tcp://host:8786) or local:N to start "
+        "N local workers; needs pip install 'pedsafe_sumo[cluster]'",
+    )
+    parser.add_argument(
+        "--chunk-size",
+        type=int,
+        dest="chunk_size",
+        metavar="PAIRS",
+        help="episode pairs per chunk (the unit written, retried and resumed) [about 8 chunks per worker, "
+        "at most 25]",
     )
     parser.add_argument("--out", type=Path, help="run directory [results/<scenario>-<time>]")
-    parser.add_argument("--site", default="xueqing", help=f"study site [xueqing; known: {', '.join(SITES)}]")
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the stopped run in --out with its recorded configuration; flags given again must "
+        "repeat the recorded values",
+    )
+    parser.add_argument("--site", help=f"study site [xueqing; known: {', '.join(SITES)}]")
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
-    parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
+    parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
     return parser.parse_args(argv)
 
 
-def validate(args) -> tuple[list[str], list[str], dict, dict]:
-    scenarios = list(SCENARIOS) if args.scenario == "all" else [args.scenario]
-    if args.scenario != "all" and args.scenario not in SCENARIOS:
-        raise UsageError(f"unknown scenario '{args.scenario}' (known: {', '.join(SCENARIOS)}, all)")
-    if args.condition not in (*CONDITIONS, "both"):
-        raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
-    conditions = list(CONDITIONS) if args.condition == "both" else [args.condition]
-    if args.episodes < 1:
-        raise UsageError(f"--episodes must be at least 1, got {args.episodes}")
-    if args.workers < 1:
+@dataclass
+class Plan:
+    """A validated batch: what to run (identity), how (backend), where (run directory)."""
+
+    arguments: dict[str, Any]
+    scenarios: list[str]
+    conditions: list[str]
+    identity: dict[str, Any]
+    config: WorkerConfig
+    out: Path
+    recorded: dict[str, Any] | None  # run.json of the run being resumed
+
+
+def _explicit_arguments(args) -> dict[str, Any]:
+    given = {name: getattr(args, name) for name in RUN_ARGUMENT_DEFAULTS if getattr(args, name) is not None}
+    if "params" in given:
+        given["params"] = str(Path(given["params"]).resolve())
+    return given
+
+
+def _first_difference(recorded: Any, current: Any, path: str) -> str | None:
+    """The dotted path of the first value that differs, or None when equal."""
+    if isinstance(recorded, dict) and isinstance(current, dict):
+        for key in sorted(set(recorded) | set(current), key=str):
+            if key not in recorded or key not in current:
+                return f"{path}.{key}"
+            found = _first_difference(recorded[key], current[key], f"{path}.{key}")
+            if found:
+                return found
+        return None
+    return None if recorded == current else path
+
+
+def _lookup(data: Any, dotted: str) -> Any:
+    for part in dotted.split("."):
+        data = data.get(part, "(absent)") if isinstance(data, dict) else "(absent)"
+    return data
+
+
+def _recorded_run(out: Path) -> dict[str, Any]:
+    try:
+        recorded = read_json(out / RUN_FILE)
+    except RunStoreError as exc:
+        if not (out / RUN_FILE).exists():
+            raise UsageError(f"{out} holds no run to resume (no {RUN_FILE})") from None
+        raise UsageError(f"cannot resume: {exc}") from None
+    if not isinstance(recorded.get("arguments"), dict) or "sessions" not in recorded:
+        raise UsageError(f"{out / RUN_FILE} was written by a batch that cannot be resumed (no arguments)")
+    return recorded
+
+
+def prepare(args) -> Plan:
+    """Check everything about the command and its input files; writes nothing."""
+    if args.workers is not None and args.cluster:
+        raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
+    if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
-    if args.seed < 0:
-        raise UsageError(f"--seed must not be negative, got {args.seed}")
-    site = get_site(args.site)
-    specs, params = configure(scenarios, args.params, args.set)
-    check_roadside_units(specs, site)
-    load_agent_class(args.algorithm)
-    if (
-        args.out is not None
-        and args.out.exists()
-        and any((args.out / name).exists() for name in ("episodes.parquet", "run.json", "cases"))
-    ):
-        raise UsageError(f"output directory {args.out} already holds a run; choose another --out")
-    return scenarios, conditions, specs, params
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} is a file, not a run directory")
+    explicit = _explicit_arguments(args)
+    recorded = None
+    if args.resume:
+        if args.out is None:
+            raise UsageError("--resume needs --out DIR, the run directory to continue")
+        recorded = _recorded_run(args.out)
+        arguments = {**RUN_ARGUMENT_DEFAULTS, **recorded["arguments"], **explicit}
+    else:
+        if args.out is not None and holds_run(args.out):
+            state = "complete" if (args.out / "episodes.parquet").exists() else "incomplete"
+            raise UsageError(
+                f"output directory {args.out} already holds a run ({state}); continue it with --resume "
+                "or choose another --out"
+            )
+        arguments = {**RUN_ARGUMENT_DEFAULTS, **explicit}
+    scenario = arguments["scenario"]
+    if scenario is None:
+        raise UsageError(f"--scenario is required ({', '.join(SCENARIOS)} or all)")
+    if scenario != "all" and scenario not in SCENARIOS:
+        raise UsageError(f"unknown scenario '{scenario}' (known: {', '.join(SCENARIOS)}, all)")
+    scenarios = list(SCENARIOS) if scenario == "all" else [scenario]
+    if arguments["condition"] not in (*CONDITIONS, "both"):
+        raise UsageError(f"unknown condition '{arguments['condition']}' (known: sv, v2i, both)")
+    conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
+    if arguments["episodes"] < 1:
+        raise UsageError(f"--episodes must be at least 1, got {arguments['episodes']}")
+    if arguments["seed"] < 0:
+        raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
+    if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
+        raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
+    site = get_site(arguments["site"])
+    params_file = Path(arguments["params"]) if arguments["params"] else None
+    specs, params = configure(scenarios, params_file, arguments["set"])
+    load_agent_class(arguments["algorithm"])
+    check_site(site, params)
+    check_roadside_units(specs, site)  # after check_site: it reads the site's site.json
+    digests = site_file_digests(site.name)
+    identity = {
+        "site": site.name,
+        "scenarios": {name: dataclasses.asdict(specs[name]) for name in scenarios},
+        "conditions": conditions,
+        "episodes_per_scenario": arguments["episodes"],
+        "run_seed": arguments["seed"],
+        "episode_seed_rule": EPISODE_SEED_RULE,
+        "algorithm": arguments["algorithm"],
+        "parameters": params,
+        "site_files_sha256": digests,
+        "chunk_size_pairs": arguments["chunk_size"],
+    }
+    scenario_overrides, _ = parse_set(arguments["set"])
+    versions = worker_versions()
+    config = WorkerConfig(site.name, params, scenario_overrides, arguments["algorithm"], digests, versions)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
+    plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded)
+    if recorded is not None:
+        _check_same_run(plan, recorded)
+    return plan
+
+
+def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:
+    """Refuse to resume a run whose recorded identity differs from this command's (one line)."""
+    # Compare as JSON would store them (tuples as lists, the same number types).
+    current = json.loads(json.dumps({key: plan.identity[key] for key in IDENTITY_KEYS}, default=str))
+    previous = {key: recorded.get(key) for key in IDENTITY_KEYS}
+    where = _first_difference(previous, current, "")
+    if where:
+        where = where.lstrip(".")
+        raise UsageError(
+            f"{plan.out} holds a different run: {where} is {_lookup(previous, where)!r} there, "
+            f"{_lookup(current, where)!r} here; --resume continues the recorded run (leave the flag out "
+            "or repeat its value), a new run needs another --out"
+        )
+    for name in PINNED_VERSIONS:
+        was, now = recorded.get("versions", {}).get(name), plan.config.versions.get(name)
+        if was != now:
+            raise UsageError(f"{plan.out} was started with {name} {was}, this is {now}: resume it with {was}")
+
+
+def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
+    identity = plan.identity
+    chunks_total = len(plan.scenarios) * math.ceil(
+        identity["episodes_per_scenario"] / identity["chunk_size_pairs"]
+    )
+    return {
+        "state": STATE_RUNNING,
+        "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
+        "created_utc": datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S"),
+        **identity,
+        "chunks_total": chunks_total,
+        "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
+        "arguments": plan.arguments,
+        "workers": backend.n_workers,
+        "executor": backend.description,
+        "versions": _versions(),
+        "commit": _git_commit(),
+        "sessions": [],
+        "wall_time_s": None,
+        "episodes_per_s": None,
+        "n_error": None,
+        "cases_written": None,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     try:
-        scenarios, conditions, specs, params = validate(args)
-    except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
+        plan = prepare(args)
+        backend = make_backend(args.cluster, args.workers or min(2, os.cpu_count() or 1))
+    except (*INPUT_ERRORS, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
-    out = args.out or REPO_ROOT / "results" / f"{args.scenario}-{stamp}"
-    cases = out / "cases"
-    cases.mkdir(parents=True, exist_ok=True)
-    scenario_overrides, _ = parse_set(args.set or [])
-    tasks = [
-        Task(name, i, episode_seed(args.seed, i), tuple(conditions))
-        for name in scenarios
-        for i in range(args.episodes)
-    ]
-    total = len(tasks) * len(conditions)
-    config = WorkerConfig(args.site, params, scenario_overrides, args.algorithm, str(cases))
+    if plan.recorded is not None and plan.recorded.get("state") == STATE_COMPLETE:
+        print(
+            f"{plan.out} is complete ({plan.recorded.get('episodes_total', '?')} episodes): nothing to resume"
+        )
+        return 0
+    try:
+        backend.start()
+        return run(plan, backend, argv)
+    except INPUT_ERRORS as exc:  # an unreachable cluster, a run directory another batch holds
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (BatchError, OSError) as exc:
+        print(f"error: {exc}; the chunks finished so far are kept: continue with --resume", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted; the chunks finished so far are kept: continue with --resume", file=sys.stderr)
+        return 130
+    finally:
+        backend.close()
+
+
+def run(plan: Plan, backend, argv: list[str]) -> int:
+    run_dir = BatchRunDirectory(plan.out)
+    if plan.recorded is None:
+        if plan.identity["chunk_size_pairs"] is None:
+            size = auto_chunk_size(plan.identity["episodes_per_scenario"], backend.n_workers)
+            plan.identity["chunk_size_pairs"] = plan.arguments["chunk_size"] = size
+        run_info = new_run_info(plan, backend, argv)
+        run_dir.create(run_info)
+    else:
+        run_info = plan.recorded
+        for note in run_dir.reopen():
+            print(f"note: {note}", file=sys.stderr)
+        commit = _git_commit()
+        if commit != run_info.get("commit"):
+            print(
+                f"note: the run was started at commit {run_info.get('commit') or '?'}, this is "
+                f"{commit or '?'}",
+                file=sys.stderr,
+            )
+    for note in getattr(backend, "notes", []):
+        print(f"note: {note}", file=sys.stderr)
+
+    chunks = plan_chunks(
+        plan.scenarios,
+        plan.conditions,
+        plan.identity["episodes_per_scenario"],
+        plan.identity["run_seed"],
+        plan.identity["chunk_size_pairs"],
+    )
+    recorded = run_dir.manifest.chunks
+    todo = [chunk for chunk in chunks if chunk.key not in recorded]
+    total = sum(chunk.n_rows for chunk in chunks)
+    done_rows = total - sum(chunk.n_rows for chunk in todo)
+    session_index = len(run_info["sessions"])
+    session = {
+        "started_utc": utc_now(),
+        "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
+        "executor": backend.description,
+        "commit": _git_commit(),
+        "chunks_to_run": len(todo),
+        "wall_time_s": None,
+    }
+    run_info["sessions"].append(session)
+    run_dir.save_run_info(run_info)
 
     from tqdm import tqdm
 
+    what = f"{total} episodes ({', '.join(plan.scenarios)} x {', '.join(plan.conditions)})"
+    resumed = f", {done_rows} done before" if plan.recorded is not None else ""
     print(
-        f"{total} episodes ({', '.join(scenarios)} x {', '.join(conditions)}) "
-        f"on {args.workers} worker(s) -> {out}"
+        f"{what} in {len(chunks)} chunk(s) of up to {plan.identity['chunk_size_pairs']} pair(s){resumed}; "
+        f"{len(todo)} chunk(s) to run on {backend.description} -> {plan.out}"
     )
     started = time.perf_counter()
-    with tqdm(total=total, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr) as bar:
-        table = run_tasks(tasks, config, args.workers, progress=bar.update)
-    wall_s = time.perf_counter() - started
+    with tqdm(
+        total=total, initial=done_rows, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr
+    ) as bar:
 
-    tmp = out / "episodes.parquet.tmp"
-    table.to_parquet(tmp, index=False)
-    os.replace(tmp, out / "episodes.parquet")
-    run_info = {
-        "command": "python -m pedsafe_sumo.batch " + " ".join(sys.argv[1:] if argv is None else argv),
-        "created_utc": stamp,
-        "site": args.site,
-        "scenarios": {name: _spec_dict(specs[name]) for name in scenarios},
-        "conditions": conditions,
-        "episodes_per_scenario": args.episodes,
-        "run_seed": args.seed,
-        "episode_seed_rule": "SeedSequence(entropy=run_seed, spawn_key=(episode,)).generate_state(1)[0]",
-        "algorithm": args.algorithm,
-        "workers": args.workers,
-        "parameters": params,
-        "versions": _versions(),
-        "commit": _git_commit(),
-        "wall_time_s": round(wall_s, 3),
-        "episodes_per_s": round(total / wall_s, 3) if wall_s > 0 else None,
-        "n_error": int((table["status"] == "error").sum()),
-        "cases_written": len(list(cases.glob("*.parquet"))),
-    }
-    (out / "run.json.tmp").write_text(json.dumps(run_info, indent=2, ensure_ascii=False, default=str) + "\n")
-    os.replace(out / "run.json.tmp", out / "run.json")
+        def on_chunk_done(chunk, output) -> None:
+            if run_dir.record(chunk, output, session_index, time.perf_counter() - started):
+                bar.update(chunk.n_rows)
 
-    print(
-        f"{total} episodes in {wall_s:.1f} s ({total / wall_s:.1f} episodes/s); "
-        f"{run_info['n_error']} error(s); {run_info['cases_written']} case log(s) in {cases}"
+        backend.run(plan.config, todo, on_chunk_done)
+    session_wall_s = time.perf_counter() - started
+
+    table = run_dir.finalize(chunks)
+    session.update(wall_time_s=round(session_wall_s, 3), worker_deaths=backend.worker_deaths)
+    wall_s = sum(run_dir.session_wall_times_s(run_info["sessions"]))
+    n_error = int((table["status"] == ERROR_STATUS).sum())
+    cases_written = len(list(run_dir.cases_dir.glob("*.parquet")))
+    run_info.update(
+        state=STATE_COMPLETE,
+        completed_utc=utc_now(),
+        wall_time_s=round(wall_s, 3),
+        episodes_per_s=round(total / wall_s, 3) if wall_s > 0 else None,
+        n_error=n_error,
+        cases_written=cases_written,
     )
+    run_dir.save_run_info(run_info)
+    run_dir.release(remove_lock=True)
+
+    ran_rows = total - done_rows
+    rate = f" ({ran_rows / session_wall_s:.1f} episodes/s)" if ran_rows and session_wall_s > 0 else ""
+    print(
+        f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s), left out of "
+        f"the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
+    )
+    if backend.worker_deaths:
+        print(
+            f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "
+            "(a pair that killed its worker every time is recorded as errors)"
+        )
     print_table(table)
-    print(f"tables and figures: python -m pedsafe_sumo.report {out}")
+    print(f"tables and figures: python -m pedsafe_sumo.report {plan.out}")
     return 0
-
-
-def _spec_dict(spec) -> dict:
-    import dataclasses
-
-    return dataclasses.asdict(spec)
 
 
 def print_table(table) -> None:
     from pedsafe_sumo.safety.stats import table_one
 
     summary = table_one(table)
-    print("Table I (95% Wilson intervals):")
+    print("Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the rates):")
     for _, row in summary.iterrows():
         print(
             f"  {row['scenario']:20s} {row['condition']:4s} n={int(row['n']):5d} "

@@ -1,65 +1,203 @@
-"""Batches of episodes: paired SV/V2I runs of one or more scenarios over a pool of worker processes.
+"""The worker side of a batch: the episode pairs of one chunk, on this process's SUMO.
 
-Episode i of a scenario gets seed `episode_seed(run_seed, i)`; both conditions of the pair run from
-that seed, in the same worker, one after the other. Each worker owns one SUMO instance (libsumo) and
-reuses it. Rows are sorted by (scenario, episode, condition) before writing, so the table is the
-same whatever the number of workers.
+Both executors (a local process pool, a Dask cluster) call `run_chunk` in a worker process. Each worker
+process owns one EpisodeRunner, hence one SUMO instance (libsumo holds a single instance per process),
+built on its first chunk and reused while the configuration stays the same. The runner reloads SUMO for
+every episode (`load`), and every random draw comes from the episode's seed, so an episode's rows do not
+depend on the worker, on the episodes it ran before, or on the order: tests/batch checks 1 against 2
+workers, a resumed run against an uninterrupted one, and Dask against the process pool.
+
+A failing episode (SUMO refusing it, an exception in the AD stack under test) becomes a row with status
+"error" and its message; the runner is rebuilt (SUMO may be in any state) and the chunk goes on. Rows
+are returned to the driver, which alone writes the run directory: workers on other machines need no
+shared file system.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as futures
-import multiprocessing
+import hashlib
+import json
+import os
+import socket
+import threading
+import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
-from pedsafe_sumo.io.episodes import EPISODE_COLUMNS, to_table
+from pedsafe_sumo.batch.chunks import Task
+from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 
-
-def episode_seed(run_seed: int, episode: int) -> int:
-    """Seed of episode `episode` of a run: independent streams per episode (numpy SeedSequence)."""
-    state = np.random.SeedSequence(entropy=run_seed, spawn_key=(episode,)).generate_state(1, dtype=np.uint32)
-    return int(state[0])
+ERROR_STATUS = "error"
+#: How often a pool worker checks that its driver is still alive [s].
+PARENT_POLL_S = 1.0
 
 
-@dataclass(frozen=True)
-class Task:
-    scenario: str
-    episode: int
-    seed: int
-    conditions: tuple[str, ...]
+class WorkerEnvironmentError(RuntimeError):
+    """This worker cannot give the driver's results (other network files, other versions)."""
 
 
 @dataclass(frozen=True)
 class WorkerConfig:
+    """Everything a worker needs besides the tasks; the same for every chunk of a run."""
+
     site: str
     params: dict[str, Any]
     scenario_overrides: dict[str, str]
     algorithm: str
-    cases_dir: str | None
+    #: SHA-256 of each site file as the driver read it (file name -> digest). A worker whose files differ
+    #: (another machine, another checkout) refuses to run instead of giving other results.
+    site_digests: dict[str, str] = field(default_factory=dict)
+    #: The driver's pedsafe_sumo and SUMO versions, checked the same way.
+    versions: dict[str, str] = field(default_factory=dict)
+
+    @cached_property
+    def fingerprint(self) -> str:
+        text = json.dumps(
+            [
+                self.site,
+                self.params,
+                self.scenario_overrides,
+                self.algorithm,
+                self.site_digests,
+                self.versions,
+            ],
+            sort_keys=True,
+            default=str,
+        )
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
+@dataclass
+class ChunkOutput:
+    """What a worker sends back for a chunk (or part of one)."""
+
+    rows: list[dict[str, Any]]
+    #: EpisodeResults of both conditions of every pair with a collision or a conflict (the cases/ logs).
+    cases: list[Any]
+    #: "host:pid" of the worker process, and the seconds it spent on the chunk.
+    worker: str = ""
+    compute_s: float = 0.0
+
+
+# One runner per worker process. The lock serialises chunks in a process: a Dask worker started with
+# more than one thread would otherwise drive the process's single SUMO from two threads at once.
+_SUMO_LOCK = threading.Lock()
 _RUNNER = None
-_CONFIG: WorkerConfig | None = None
+_RUNNER_FINGERPRINT = ""
+_RUNNER_CONFIG: WorkerConfig | None = None
+#: Set by the process pool's initializer: where this worker notes the chunk it has started.
+_PROGRESS_DIR: Path | None = None
 
 
-def init_worker(config: WorkerConfig) -> None:
-    """Process-pool initializer: one EpisodeRunner (and one SUMO) per worker process."""
-    global _RUNNER, _CONFIG
+def worker_label() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def init_pool_worker(progress_dir: str | None) -> None:
+    """Process-pool initializer (progress_dir None: no notes). Building the runner waits for the first
+    chunk, so that a failure there reaches the driver as that chunk's exception, with its message."""
+    global _PROGRESS_DIR
+    _PROGRESS_DIR = Path(progress_dir) if progress_dir else None
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
+
+
+def _exit_with_parent(parent_pid: int) -> None:
+    """A pool worker whose driver was killed (kill -9 never lets it stop its pool) would wait forever
+    for work that never comes; it leaves within a second instead. Nothing is lost: only the driver
+    writes the run directory."""
+    while True:
+        time.sleep(PARENT_POLL_S)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+
+def _note_started(chunk_key: str) -> None:
+    """Tell the process-pool driver which chunk this process works on: if the process dies, the pool
+    breaks for every chunk, and only this note says which chunks were really running."""
+    if _PROGRESS_DIR is None:
+        return
+    note = _PROGRESS_DIR / str(os.getpid())
+    tmp = note.with_suffix(".tmp")
+    tmp.write_text(chunk_key, encoding="utf-8")
+    os.replace(tmp, note)
+
+
+def site_file_digests(site_name: str) -> dict[str, str]:
+    """SHA-256 of every site file an episode reads, by file name."""
+    from pedsafe_sumo.network.sites import get_site
+    from pedsafe_sumo.sim.episode import SITE_FILES_READ
+
+    site = get_site(site_name)
+    digests = {}
+    for suffix in SITE_FILES_READ:
+        path = site.file(suffix)
+        digests[path.name] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return digests
+
+
+def worker_versions() -> dict[str, str]:
+    import sumolib
+
+    from pedsafe_sumo import __version__
+
+    return {"pedsafe_sumo": __version__, "sumo": sumolib.version.gitDescribe()}
+
+
+def check_environment(config: WorkerConfig) -> None:
+    """Raise WorkerEnvironmentError when this process would not reproduce the driver's episodes."""
+    where = worker_label()
+    mine = worker_versions()
+    for name, wanted in config.versions.items():
+        if mine.get(name) != wanted:
+            raise WorkerEnvironmentError(
+                f"worker {where} has {name} {mine.get(name)}, the batch was started with {wanted}: "
+                "install the same version on every machine"
+            )
+    try:
+        digests = site_file_digests(config.site)
+    except OSError as exc:
+        raise WorkerEnvironmentError(f"worker {where} cannot read the site files: {exc}") from None
+    for name, wanted in config.site_digests.items():
+        if digests.get(name) != wanted:
+            raise WorkerEnvironmentError(
+                f"worker {where}: {name} differs from the file the batch was started with: "
+                "every machine needs the same network files"
+            )
+
+
+def _runner_for(config: WorkerConfig):
+    global _RUNNER, _RUNNER_FINGERPRINT, _RUNNER_CONFIG
+    fingerprint = config.fingerprint
+    if _RUNNER is not None and _RUNNER_FINGERPRINT == fingerprint:
+        return _RUNNER
     from pedsafe_sumo.control.agent import load_agent_class
     from pedsafe_sumo.network.sites import get_site
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
-    _CONFIG = config
+    if _RUNNER is not None:
+        _close_runner()
+    check_environment(config)
     _RUNNER = EpisodeRunner(get_site(config.site), config.params, load_agent_class(config.algorithm))
+    _RUNNER_FINGERPRINT, _RUNNER_CONFIG = fingerprint, config
+    return _RUNNER
+
+
+def _close_runner() -> None:
+    global _RUNNER, _RUNNER_FINGERPRINT
+    runner, _RUNNER, _RUNNER_FINGERPRINT = _RUNNER, None, ""
+    try:
+        runner.close()
+    except Exception:  # noqa: BLE001 - the instance is being discarded anyway
+        traceback.print_exc(limit=0)
 
 
 def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
+    """The row of an episode that did not run to its end: status "error", the message, the pair's keys."""
     row: dict[str, Any] = {c: np.nan for c in EPISODE_COLUMNS}
     row.update(
         scenario=task.scenario,
@@ -72,71 +210,48 @@ def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
         detected_by="",
         ped_gender="",
         ped_risk="",
-        status="error",
+        status=ERROR_STATUS,
         error=message,
     )
     return row
 
 
-def run_task(task: Task) -> list[dict[str, Any]]:
-    """Both conditions of one paired episode; cases written for the pair when either had an event."""
-    from pedsafe_sumo.io.cases import write_case
+def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any]]:
+    """Both conditions of one paired episode: its rows, and both results when either had an event."""
     from pedsafe_sumo.scenarios.registry import get_scenario
 
-    assert _RUNNER is not None and _CONFIG is not None, "init_worker was not called"
+    runner = _runner_for(config)
     rows, results = [], []
     try:
-        spec = get_scenario(task.scenario).with_overrides(_CONFIG.scenario_overrides)
-        setup = _RUNNER.draw_setup(spec, task.seed)
+        spec = get_scenario(task.scenario).with_overrides(config.scenario_overrides)
+        setup = runner.draw_setup(spec, task.seed)
     except Exception as exc:  # the pair cannot even be set up: both rows are errors
         message = f"{type(exc).__name__}: {exc}"
-        return [error_row(task, c, message) for c in task.conditions]
+        return [error_row(task, c, message) for c in task.conditions], []
     for condition in task.conditions:
         try:
-            result = _RUNNER.run(spec, condition, task.seed, setup=setup)
+            result = runner.run(spec, condition, task.seed, setup=setup)
         except Exception as exc:
             rows.append(error_row(task, condition, f"{type(exc).__name__}: {exc}"))
-            _reset_runner()
+            # After a failed episode SUMO may be in any state: a fresh instance for the next one.
+            _close_runner()
+            runner = _runner_for(config)
             continue
         rows.append({**result.outcome, "episode": task.episode})
         results.append(result)
-    if _CONFIG.cases_dir and any(r.outcome["collision"] or r.outcome["conflict"] for r in results):
-        for result in results:
-            write_case(Path(_CONFIG.cases_dir), result)
-    return rows
+    event = any(r.outcome["collision"] or r.outcome["conflict"] for r in results)
+    return rows, (results if event else [])
 
 
-def _reset_runner() -> None:
-    """After a failed episode SUMO may be in any state: start a fresh instance for the next one."""
-    global _RUNNER
-    try:
-        _RUNNER.close()
-    except Exception:  # noqa: BLE001 - the instance is being discarded anyway
-        traceback.print_exc(limit=0)
-    init_worker(_CONFIG)
-
-
-def run_tasks(tasks: list[Task], config: WorkerConfig, workers: int, progress=None) -> pd.DataFrame:
-    """Run every task; `progress(n_episodes_done)` is called as pairs complete."""
-    rows: list[dict[str, Any]] = []
-    if workers <= 1:
-        init_worker(config)
-        try:
-            for task in tasks:
-                rows += run_task(task)
-                if progress:
-                    progress(len(task.conditions))
-        finally:
-            _RUNNER.close()
-    else:
-        context = multiprocessing.get_context("spawn")  # no SUMO state inherited across fork
-        with futures.ProcessPoolExecutor(
-            workers, mp_context=context, initializer=init_worker, initargs=(config,)
-        ) as pool:
-            pending = [pool.submit(run_task, task) for task in tasks]
-            for done in futures.as_completed(pending):
-                task_rows = done.result()
-                rows += task_rows
-                if progress:
-                    progress(len(task_rows))
-    return to_table(rows)
+def run_chunk(config: WorkerConfig, chunk_key: str, tasks: tuple[Task, ...]) -> ChunkOutput:
+    """Run every pair of `tasks` (a chunk, or one pair of it) in this process; rows in task order."""
+    with _SUMO_LOCK:
+        started = time.perf_counter()
+        _note_started(chunk_key)
+        rows: list[dict[str, Any]] = []
+        cases: list[Any] = []
+        for task in tasks:
+            pair_rows, pair_cases = _run_pair(config, task)
+            rows += pair_rows
+            cases += pair_cases
+        return ChunkOutput(rows, cases, worker_label(), time.perf_counter() - started)

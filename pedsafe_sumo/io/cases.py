@@ -92,7 +92,9 @@ def setup_from_dict(data: dict[str, Any]) -> EpisodeSetup:
 
 def read_case(log_path: Path) -> tuple[pd.DataFrame, dict[str, Any]]:
     """The per-step log and the metadata of a case (metadata 'setup' as an EpisodeSetup)."""
-    log = pd.read_parquet(log_path)
+    # partitioning=None: pandas would turn a 'key=value' folder of the path (a sweep's run
+    # directories) into an extra column.
+    log = pd.read_parquet(log_path, partitioning=None)
     meta = json.loads(log_path.with_suffix(".json").read_text(encoding="utf-8"))
     meta["setup"] = setup_from_dict(meta["setup"])
     return log, meta

@@ -34,8 +34,15 @@ def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
         table[column] = table[column].fillna("").astype(str)
     for column in FLOAT_COLUMNS:
         table[column] = table[column].astype(float)
+    return sort_rows(table)
+
+
+def sort_rows(table: pd.DataFrame) -> pd.DataFrame:
+    """Rows ordered by (scenario, episode, sv before v2i), index 0..n-1. The key is unique in a run, so
+    the order is the same whichever chunks, workers or sessions the rows came from."""
     table = table.sort_values(
         ["scenario", "episode", "condition"],
         key=lambda s: s.map(CONDITION_ORDER) if s.name == "condition" else s,
+        kind="stable",
     )
     return table.reset_index(drop=True)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -12,6 +13,10 @@ from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 OSM_DIR = REPO_ROOT / "osm"
 #: The unmodified OpenStreetMap export the team shares beside the repository (not shipped).
 SHARED_OSM_SOURCE = REPO_ROOT.parent / "shared" / "data" / "osm" / "haidian_xueqing.osm"
+#: Environment variable naming another folder of built networks (<folder>/<site>/<site>.net.xml, ...)
+#: in place of networks/: a batch on a modified copy of a site, or a package installed away from its
+#: checkout. Read at every lookup, so worker processes started by a batch see what the batch saw.
+NETWORKS_DIR_ENV = "PEDSAFE_NETWORKS_DIR"
 
 
 @dataclass(frozen=True)
@@ -34,7 +39,8 @@ class Site:
 
     @property
     def network_dir(self) -> Path:
-        return NETWORKS_DIR / self.name
+        override = os.environ.get(NETWORKS_DIR_ENV)
+        return (Path(override) if override else NETWORKS_DIR) / self.name
 
     def file(self, suffix: str) -> Path:
         """A file of the built site, e.g. file('net.xml') -> networks/xueqing/xueqing.net.xml."""

@@ -46,8 +46,10 @@ def _read_toml(path: Path) -> dict[str, Any]:
             return tomllib.load(handle)
     except FileNotFoundError:
         raise ParameterError(f"parameter file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ParameterError(f"parameter file {path} is not valid TOML: {exc}") from None
+    except OSError as exc:  # a directory, no permission
+        raise ParameterError(f"cannot read parameter file {path}: {exc.strerror or exc}") from None
 
 
 def _overlay(base: dict[str, Any], override: dict[str, Any], where: str) -> None:

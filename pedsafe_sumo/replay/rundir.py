@@ -253,7 +253,7 @@ def _read_run_info(path: Path) -> dict[str, Any]:
 
 def _read_episodes(path: Path) -> pd.DataFrame:
     try:
-        episodes = pd.read_parquet(path)
+        episodes = pd.read_parquet(path, partitioning=None)
     except Exception as exc:  # pyarrow raises several unrelated types for a broken file
         raise ReplayError(f"cannot read {path}: {_first_line(exc)}") from None
     missing = [c for c in KEY_COLUMNS if c not in episodes.columns]

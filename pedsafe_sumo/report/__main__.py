@@ -1,10 +1,13 @@
 """Report of a batch run: Table I with 95% intervals, the paired SV-vs-V2I tests, and the figures.
 
     python -m pedsafe_sumo.report DIR
+    python -m pedsafe_sumo.report DIR --partial     # a batch that has not finished yet
 
 Prints the tables and writes DIR/tables/{table1,paired}.{csv,md} and DIR/figures/*.png (see
 docs/report.md). Bad input (no DIR, no episodes.parquet, missing columns) ends in one line on stderr
-and exit code 2.
+and exit code 2; so does a batch that has not finished, unless --partial: then the report covers the
+chunks finished so far, says INCOMPLETE RUN in its first and last lines and in its Markdown tables,
+and writes under DIR/partial/ so that nothing is taken for the final report.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ from pedsafe_sumo.report.tables import (
 
 TABLES_DIR = "tables"
 FIGURES_DIR = "figures"
+#: Where the report of an unfinished batch goes (--partial), away from the final report's files.
+PARTIAL_DIR = "partial"
 
 
 def _fmt_time(value: float) -> str:
@@ -116,6 +121,8 @@ def report(run: RunDirectory, say=print) -> list[Path]:
         paired = paired_of_run(run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
+    if run.incomplete:
+        say(run.incomplete)
     if run.run_info is not None:
         say(run_header(run))
     if run.run_info_problem:
@@ -127,9 +134,12 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say(PAIRED_TITLE)
     say(text_table(*paired_rows(paired)))
     say("")
-    written = write_tables(table, paired, run.path / TABLES_DIR)
-    written += write_figures(run, run.path / FIGURES_DIR, say)
+    out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path
+    written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
+    written += write_figures(run, out_dir / FIGURES_DIR, say)
     say("wrote " + ", ".join(str(p.relative_to(run.path)) for p in written) + f" in {run.path}")
+    if run.incomplete:
+        say(run.incomplete)
     return written
 
 
@@ -157,9 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "run_dir", metavar="DIR", type=Path, help="run directory written by pedsafe_sumo.batch"
     )
+    parser.add_argument(
+        "--partial",
+        action="store_true",
+        help="report a batch that has not finished on the chunks done so far (written under DIR/partial/)",
+    )
     args = parser.parse_args(argv)
     try:
-        report(load_run(args.run_dir), say=_StdoutLines())
+        report(load_run(args.run_dir, partial=args.partial), say=_StdoutLines())
     except ReportError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -3,6 +3,11 @@
 DIR/episodes.parquet   one row per episode and condition (required)
 DIR/run.json           the run's global information (optional: only its header line needs it)
 DIR/cases/             per-step logs `<scenario>_<condition>_<seed>.parquet` (optional: the case figure)
+
+A batch that has not finished (run.json state "running": stopped, killed, or still going) has no
+complete episodes.parquet. It is refused with one line saying how to finish it, or, with
+`partial=True`, read from the part files its manifest lists (pedsafe_sumo.io.run_store), and flagged
+incomplete so that every output says so.
 """
 
 from __future__ import annotations
@@ -16,10 +21,17 @@ from typing import Any
 import pandas as pd
 
 from pedsafe_sumo.io.cases import case_stem
-
-EPISODES_FILE = "episodes.parquet"
-RUN_FILE = "run.json"
-CASES_DIR = "cases"
+from pedsafe_sumo.io.run_store import (
+    CASES_DIR,
+    EPISODES_FILE,
+    MANIFEST_FILE,
+    RUN_FILE,
+    STATE_COMPLETE,
+    Manifest,
+    RunStoreError,
+    check_part,
+    read_parts,
+)
 
 #: The episodes.parquet columns the report reads (a subset of DESIGN section 3's).
 REQUIRED_COLUMNS = (
@@ -51,6 +63,8 @@ class RunDirectory:
     run_info: dict[str, Any] | None
     #: one line saying why run.json could not be read ("" when it was read or is absent)
     run_info_problem: str = ""
+    #: for a batch that has not finished, read with partial=True: one line saying how much is there
+    incomplete: str = ""
 
     @property
     def cases_dir(self) -> Path:
@@ -60,39 +74,72 @@ class RunDirectory:
         return self.cases_dir / f"{case_stem(scenario, condition, int(seed))}.parquet"
 
 
-def load_run(path: Path) -> RunDirectory:
-    """Read and check a run directory; raises ReportError with a one-line message on bad input."""
+def _read_run_info(path: Path) -> tuple[dict[str, Any] | None, str]:
+    """run.json as a dict (None when absent or unreadable) and the problem, if any, in one line."""
+    run_path = path / RUN_FILE
+    if not run_path.is_file():
+        return None, ""
+    try:
+        loaded = json.loads(run_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"{run_path} is unreadable ({exc}); header left out"
+    if not isinstance(loaded, dict):
+        return None, f"{run_path} is not a JSON object; header left out"
+    return loaded, ""
+
+
+def _finished_parts(path: Path, run_info: dict[str, Any], partial: bool) -> tuple[pd.DataFrame, str]:
+    """The rows of the chunks an unfinished batch has recorded, and the line that says so."""
+    try:
+        manifest = Manifest.load(path / MANIFEST_FILE)
+    except RunStoreError as exc:
+        raise ReportError(f"{path} is an unfinished batch run whose manifest cannot be read: {exc}") from None
+    records = [r for _, r in sorted(manifest.chunks.items()) if not check_part(path, r)]
+    total = run_info.get("chunks_total", "?")
+    rows = sum(r.rows for r in records)
+    done = f"{len(records)} of {total} chunks, {rows} of {run_info.get('episodes_total', '?')} episode rows"
+    if not partial:
+        raise ReportError(
+            f"{path} is an unfinished batch run ({done} done): finish it with "
+            f"python -m pedsafe_sumo.batch --resume --out {path}, or report what is done with --partial"
+        )
+    if not records:
+        raise ReportError(f"{path} is an unfinished batch run with no finished chunk yet")
+    return read_parts(path, records), f"INCOMPLETE RUN: {done}; every number covers these episodes only"
+
+
+def load_run(path: Path, partial: bool = False) -> RunDirectory:
+    """Read and check a run directory; raises ReportError with a one-line message on bad input.
+
+    An unfinished batch is refused, or with `partial` read from its finished chunks (module docstring).
+    """
     path = Path(path)
     if not path.exists():
         raise ReportError(f"run directory {path} does not exist")
     if not path.is_dir():
         raise ReportError(f"{path} is not a directory (expected a run directory with {EPISODES_FILE})")
+    run_info, problem = _read_run_info(path)
     episodes_path = path / EPISODES_FILE
-    if not episodes_path.is_file():
-        raise ReportError(f"{path} has no {EPISODES_FILE}: not a batch run directory")
-    try:
-        episodes = pd.read_parquet(episodes_path)
-    except Exception as exc:  # pyarrow raises several unrelated types for a broken file
-        first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ReportError(f"cannot read {episodes_path}: {first_line}") from exc
+    incomplete = ""
+    # run.json without a state: written by a batch from before resumable runs, always at its end.
+    if run_info is not None and run_info.get("state", STATE_COMPLETE) != STATE_COMPLETE:
+        episodes, incomplete = _finished_parts(path, run_info, partial)
+        source = path / MANIFEST_FILE
+    else:
+        if not episodes_path.is_file():
+            raise ReportError(f"{path} has no {EPISODES_FILE}: not a batch run directory")
+        try:
+            episodes = pd.read_parquet(episodes_path, partitioning=None)
+        except Exception as exc:  # pyarrow raises several unrelated types for a broken file
+            first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise ReportError(f"cannot read {episodes_path}: {first_line}") from exc
+        source = episodes_path
     missing = [c for c in REQUIRED_COLUMNS if c not in episodes.columns]
     if missing:
-        raise ReportError(f"{episodes_path} lacks required column(s): {', '.join(missing)}")
+        raise ReportError(f"{source} lacks required column(s): {', '.join(missing)}")
     if episodes.empty:
-        raise ReportError(f"{episodes_path} has no rows")
-    run_info, problem = None, ""
-    run_path = path / RUN_FILE
-    if run_path.is_file():
-        try:
-            loaded = json.loads(run_path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            problem = f"{run_path} is unreadable ({exc}); header left out"
-        else:
-            if isinstance(loaded, dict):
-                run_info = loaded
-            else:
-                problem = f"{run_path} is not a JSON object; header left out"
-    return RunDirectory(path, episodes, run_info, problem)
+        raise ReportError(f"{source} has no rows")
+    return RunDirectory(path, episodes, run_info, problem, incomplete)
 
 
 def _find(info: dict[str, Any], *names: str) -> Any:

@@ -261,6 +261,8 @@ def load_case_traces(run: RunDirectory, pair: CasePair) -> list[CaseTrace]:
     """The SV and V2I traces of a case pair, read from DIR/cases (the logs only; no SUMO needed)."""
     collisions = {"sv": pair.sv_collision, "v2i": pair.v2i_collision}
     return [
-        case_trace(pd.read_parquet(run.case_path(pair.scenario, c, pair.seed)), c, collisions[c])
+        case_trace(
+            pd.read_parquet(run.case_path(pair.scenario, c, pair.seed), partitioning=None), c, collisions[c]
+        )
         for c in ("sv", "v2i")
     ]

@@ -174,16 +174,18 @@ def _md_title(title: str) -> str:
     return f"**{first}**\n\n{rest}" if rest else f"**{first}**"
 
 
-def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path) -> list[Path]:
-    """DIR/tables/table1.csv, table1.md, paired.csv, paired.md; returns the paths written."""
+def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path, banner: str = "") -> list[Path]:
+    """DIR/tables/table1.csv, table1.md, paired.csv, paired.md; returns the paths written. A `banner`
+    (an unfinished run) opens each Markdown table."""
     directory.mkdir(parents=True, exist_ok=True)
     paths = [directory / name for name in TABLE_FILES]
+    head = f"**{banner}**\n\n" if banner else ""
     table.to_csv(paths[0], index=False)
     paths[1].write_text(
-        f"{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8"
+        f"{head}{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8"
     )
     paired.to_csv(paths[2], index=False)
     paths[3].write_text(
-        f"{_md_title(PAIRED_TITLE)}\n\n{markdown_table(*paired_rows(paired))}\n", encoding="utf-8"
+        f"{head}{_md_title(PAIRED_TITLE)}\n\n{markdown_table(*paired_rows(paired))}\n", encoding="utf-8"
     )
     return paths

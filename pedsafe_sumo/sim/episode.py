@@ -91,6 +91,47 @@ class EpisodeResult:
     sumo_collision: dict[str, Any] = field(default_factory=dict)
 
 
+#: The files of a site an episode reads (besides the sumo-gui view settings): the network, the
+#: occluding buildings, the roadside unit and the site facts. No route file: the background traffic
+#: is drawn from the demand model for each episode.
+SITE_FILES_READ = ("net.xml", "poly.xml", "rsu.add.xml", "site.json")
+
+
+@dataclass(frozen=True)
+class SiteData:
+    """What the episode loop derives from the site's files once per worker (load_site_data)."""
+
+    approach: Any
+    static: Any
+    #: Every roadside camera pole of the site by id; a scenario names the ones its V2I receives.
+    roadside_units: dict[str, Any]
+    #: Background traffic enters on every entering lane except the scenario's own approach.
+    background_lanes: list
+    edge_lengths: dict[str, float]
+    route_edges: dict[str, tuple[str, ...]]
+
+
+def load_site_data(site: Site, params: dict[str, Any]) -> SiteData:
+    """Read the site's files (SITE_FILES_READ) into the loop's static world; raises on a bad file."""
+    approach = load_approach(site)
+    perception = params["perception"]
+    static = load_static_occluders(site.file("poly.xml"), perception["occluders"])
+    rsu = perception["roadside_camera"]
+    units = load_roadside_units(
+        site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
+    )
+    demand_site = load_demand_site(site.name, net_file=site.file("net.xml"))
+    background_lanes = [lane for lane in demand_site.entering_lanes if lane.edge_id != approach.edge_id]
+    return SiteData(
+        approach=approach,
+        static=static,
+        roadside_units={unit.id: unit for unit in units},
+        background_lanes=background_lanes,
+        edge_lengths={lane.edge_id: lane.length_m for lane in demand_site.entering_lanes},
+        route_edges={rid: edges for edges, rid in route_ids(background_lanes).items()},
+    )
+
+
 class EpisodeRunner:
     """Runs episodes on one site, reusing one SUMO instance (libsumo, or sumo-gui through traci)."""
 
@@ -114,23 +155,15 @@ class EpisodeRunner:
         self.agent_class = agent_class
         self.step_length_s = step_length_s
         self.injury_model = injury_model
-        self.session = SumoSession(gui=gui)
-        self.approach = load_approach(site)
-        perception = params["perception"]
-        self.static = load_static_occluders(site.file("poly.xml"), perception["occluders"])
-        rsu = perception["roadside_camera"]
-        units = load_roadside_units(
-            site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
-        )
-        self.roadside_units = {unit.id: unit for unit in units}
+        data = load_site_data(site, params)
+        self.approach = data.approach
+        self.static = data.static
+        self.roadside_units = data.roadside_units
         self._suites: dict[tuple[str, ...], SensorSuite] = {}
-        # Background traffic enters on every entering lane except the scenario's own approach.
-        demand_site = load_demand_site(site.name, net_file=site.file("net.xml"))
-        self.background_lanes = [
-            lane for lane in demand_site.entering_lanes if lane.edge_id != self.approach.edge_id
-        ]
-        self._edge_lengths = {lane.edge_id: lane.length_m for lane in demand_site.entering_lanes}
-        self._route_edges = {rid: edges for edges, rid in route_ids(self.background_lanes).items()}
+        self.background_lanes = data.background_lanes
+        self._edge_lengths = data.edge_lengths
+        self._route_edges = data.route_edges
+        self.session = SumoSession(gui=gui)
 
     def close(self) -> None:
         self.session.close()

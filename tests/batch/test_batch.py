@@ -1,19 +1,18 @@
-"""The batch runner: a small paired batch on two workers writes every column with the right types,
-1 and 2 workers give identical tables, failing episodes are errors not crashes, bad input is refused."""
+"""The batch runner: a small paired batch writes every column with the right types, in chunks recorded
+atomically in a manifest; 1 and 2 workers give identical tables."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
+from batch_cli import SMALL_RUN_ARGS, batch
 
-from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.batch.runner import episode_seed
+from pedsafe_sumo.batch.chunks import auto_chunk_size, episode_seed, plan_chunks
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
+from pedsafe_sumo.io.run_store import LOCK_FILE, Manifest, sha256_file
 
 MUST_EXIST = [
     "scenario",
@@ -33,29 +32,9 @@ MUST_EXIST = [
 ]
 
 
-def batch(*args, timeout=600):
-    return subprocess.run(
-        [sys.executable, "-m", "pedsafe_sumo.batch", *args],
-        capture_output=True,
-        text=True,
-        cwd=REPO_ROOT,
-        timeout=timeout,
-    )
-
-
-@pytest.fixture(scope="module")
-def two_worker_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("batch") / "run2"
-    proc = batch(
-        "--scenario", "crossing", "--episodes", "4", "--workers", "2", "--seed", "5", "--out", str(out)
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return out, proc
-
-
 @pytest.mark.slow
-def test_small_paired_batch_writes_every_column_with_the_right_types(two_worker_run):
-    out, proc = two_worker_run
+def test_small_paired_batch_writes_every_column_with_the_right_types(small_run):
+    out, proc = small_run
     table = pd.read_parquet(out / "episodes.parquet")
     assert list(table.columns) == list(EPISODE_COLUMNS)
     assert len(table) == 8 and sorted(table["condition"].unique()) == ["sv", "v2i"]
@@ -75,9 +54,16 @@ def test_small_paired_batch_writes_every_column_with_the_right_types(two_worker_
     # Injury probability is 0 exactly where there is no collision.
     assert (table.loc[~table["collision"], "injury_probability"] == 0).all()
     run = json.loads((out / "run.json").read_text())
-    assert run["run_seed"] == 5 and run["episodes_per_scenario"] == 4 and run["workers"] == 2
+    assert run["state"] == "complete" and run["run_seed"] == 5 and run["episodes_per_scenario"] == 4
+    assert run["workers"] == 2 and run["n_error"] == 0
     assert run["versions"]["sumo"].startswith("v1.28") and run["wall_time_s"] > 0
     assert "perception" in run["parameters"] and "crossing" in run["scenarios"]
+    assert set(run["site_files_sha256"]) == {
+        "xueqing.net.xml",
+        "xueqing.poly.xml",
+        "xueqing.rsu.add.xml",
+        "xueqing.site.json",
+    }
     # Cases come in pairs, for the episodes with a collision or a conflict.
     kept = table[table["collision"] | table["conflict"]]["episode"].unique()
     assert len(list((out / "cases").glob("*.parquet"))) == 2 * len(kept)
@@ -85,74 +71,53 @@ def test_small_paired_batch_writes_every_column_with_the_right_types(two_worker_
 
 
 @pytest.mark.slow
-def test_one_and_two_workers_give_identical_tables(two_worker_run, tmp_path):
-    out2, _ = two_worker_run
-    proc = batch(
-        "--scenario",
-        "crossing",
-        "--episodes",
-        "4",
-        "--workers",
-        "1",
-        "--seed",
-        "5",
-        "--out",
-        str(tmp_path / "run1"),
-    )
+def test_every_chunk_is_a_part_file_recorded_with_its_checksum(small_run):
+    out, _ = small_run
+    manifest = Manifest.load(out / "manifest.json")
+    assert sorted(manifest.chunks) == [f"crossing-{i:06d}-{i:06d}" for i in range(4)]
+    parts = []
+    for record in manifest.chunks.values():
+        assert sha256_file(out / record.file) == record.sha256
+        part = pd.read_parquet(out / record.file)
+        assert len(part) == record.rows == 2 and set(part["episode"]) == {record.first_episode}
+        parts.append(part)
+    whole = pd.concat(parts).sort_values(["episode", "condition"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(whole, pd.read_parquet(out / "episodes.parquet"))
+    # No temporary file, no stray part, and the lock is gone with the driver.
+    assert not list(out.rglob("*.tmp")) and len(list((out / "parts").iterdir())) == 4
+    assert not (out / LOCK_FILE).exists()
+    run = json.loads((out / "run.json").read_text())
+    assert run["chunks_total"] == 4 and run["chunk_size_pairs"] == 1 and len(run["sessions"]) == 1
+
+
+@pytest.mark.slow
+def test_one_and_two_workers_give_identical_tables(small_run, tmp_path):
+    out2, _ = small_run
+    proc = batch(*SMALL_RUN_ARGS, "--workers", "1", "--out", str(tmp_path / "run1"))
     assert proc.returncode == 0, proc.stderr[-2000:]
     pd.testing.assert_frame_equal(
         pd.read_parquet(tmp_path / "run1" / "episodes.parquet"), pd.read_parquet(out2 / "episodes.parquet")
     )
 
 
-@pytest.mark.slow
-def test_failing_episodes_are_recorded_as_errors_and_the_batch_goes_on(tmp_path):
-    out = tmp_path / "run"
-    proc = batch(
-        "--scenario",
-        "jaywalking",
-        "--episodes",
-        "4",
-        "--workers",
-        "1",
-        "--out",
-        str(out),
-        "--algorithm",
-        "tests.sim.plugin_agents:FailsOnOddSeeds",
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    table = pd.read_parquet(out / "episodes.parquet")
-    odd = table["seed"] % 2 == 1
-    assert (table.loc[odd, "status"] == "error").all() and (table.loc[~odd, "status"] == "ok").all()
-    assert table.loc[odd, "error"].str.contains("planner crashed").all()
-    assert json.loads((out / "run.json").read_text())["n_error"] == int(odd.sum())
+def test_chunks_cover_every_episode_once_in_order():
+    chunks = plan_chunks(["crossing", "jaywalking"], ["sv", "v2i"], 10, 3, 4)
+    assert [(c.scenario, c.first_episode, c.last_episode) for c in chunks] == [
+        ("crossing", 0, 3),
+        ("crossing", 4, 7),
+        ("crossing", 8, 9),
+        ("jaywalking", 0, 3),
+        ("jaywalking", 4, 7),
+        ("jaywalking", 8, 9),
+    ]
+    episodes = [(t.scenario, t.episode) for c in chunks for t in c.tasks]
+    assert len(episodes) == len(set(episodes)) == 20
+    assert all(t.seed == episode_seed(3, t.episode) for c in chunks for t in c.tasks)
+    assert chunks[2].key == "crossing-000008-000009" and chunks[2].n_rows == 4
 
 
-@pytest.mark.parametrize(
-    ("args", "message"),
-    [
-        (["--scenario", "parking"], "unknown scenario 'parking'"),
-        (["--scenario", "crossing", "--condition", "v3i"], "unknown condition 'v3i'"),
-        (["--scenario", "crossing", "--episodes", "0"], "--episodes must be at least 1"),
-        (
-            ["--scenario", "crossing", "--set", "perception.v2i.packet_loss_probability=1.5"],
-            "packet_loss_probability",
-        ),
-        (["--scenario", "crossing", "--set", "ego_speed_min_mps=-2"], "ego_speed_min_mps"),
-        (["--scenario", "crossing", "--algorithm", "nowhere:Agent"], "cannot import module 'nowhere'"),
-    ],
-)
-def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, message):
-    out = tmp_path / "out"
-    proc = batch(*args, "--out", str(out), timeout=120)
-    assert proc.returncode == 2
-    assert proc.stderr.count("\n") == 1 and message in proc.stderr and "Traceback" not in proc.stderr
-    assert not out.exists()
-
-
-def test_an_existing_run_is_never_overwritten(two_worker_run):
-    out, _ = two_worker_run
-    before = (out / "episodes.parquet").read_bytes()
-    proc = batch("--scenario", "crossing", "--episodes", "1", "--out", str(out), timeout=120)
-    assert proc.returncode == 2 and "already holds a run" in proc.stderr
-    assert (out / "episodes.parquet").read_bytes() == before
+def test_automatic_chunk_size_gives_each_worker_several_chunks_of_at_most_25_pairs():
+    assert auto_chunk_size(4, 2) == 1
+    assert auto_chunk_size(100, 2) == 7  # 15 chunks: about 8 per worker
+    assert auto_chunk_size(10_000, 2) == 25
+    assert auto_chunk_size(10_000, 64) == 20

@@ -18,10 +18,11 @@ def test_case_round_trip(tmp_path):
         result = runner.run(get_scenario("jaywalking"), "v2i", 2)
     finally:
         runner.close()
-    path = write_case(tmp_path, result)
+    # A folder named key=value (as a sweep names its runs) must not add a column on reading.
+    path = write_case(tmp_path / "algorithm.reaction_time_s=1.0", result)
     assert path.name == "jaywalking_v2i_2.parquet"
     log, meta = read_case(path)
     pd.testing.assert_frame_equal(log, result.log)
     assert meta["setup"] == result.setup
     assert meta["end_reason"] == result.end_reason and meta["condition"] == "v2i"
-    assert not list(tmp_path.glob("*.tmp"))
+    assert not list(tmp_path.rglob("*.tmp"))
