@@ -58,7 +58,14 @@ def configure(
 
 def check_roadside_units(specs: dict[str, ScenarioSpec], site) -> None:
     """Every roadside pole a scenario names must exist at the site (else one clear line, before any work)."""
-    known = site.roadside_unit_ids()
+    from pedsafe_sumo.perception.world import load_roadside_units
+
+    # The poles the engine loads: the roadside_camera POIs of the site's rsu.add.xml (heights and
+    # pitches do not matter here).
+    try:
+        known = tuple(unit.id for unit in load_roadside_units(site.file("rsu.add.xml"), 0.0, 0.0))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     for spec in specs.values():
         unknown = [unit for unit in spec.roadside_unit_ids if unit not in known]
         if unknown:

@@ -263,7 +263,7 @@ def prepare(args) -> Plan:
     specs, params = configure(scenarios, params_file, arguments["set"])
     load_agent_class(arguments["algorithm"])
     check_site(site, params)
-    check_roadside_units(specs, site)  # after check_site: it reads the site's site.json
+    check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
     digests = site_file_digests(site.name)
     identity = {
         "site": site.name,

@@ -152,16 +152,20 @@ def place_roadside_unit(
     dist = math.hypot(dx, dy) or 1.0
     px, py = cx + RSU_SETBACK_M * dx / dist, cy + RSU_SETBACK_M * dy / dist
     ax, ay = _arm_axis(junction, watch_arm)
-    aim_x, aim_y = jx + aim_distance_m * ax, jy + aim_distance_m * ay
-    ground_dist = math.hypot(aim_x - px, aim_y - py)
-    yaw_deg = math.degrees(math.atan2(aim_x - px, aim_y - py)) % 360.0
-    pitch_deg = math.degrees(math.atan2(RSU_HEIGHT_M, ground_dist))
+    aim_xy = (jx + aim_distance_m * ax, jy + aim_distance_m * ay)
+    return _pole_aimed_at((px, py), aim_xy, corner, watch_arm)
+
+
+def _pole_aimed_at(pole_xy, aim_xy, corner: str, watch_arm: str) -> dict:
+    """A pole RSU_HEIGHT_M high at `pole_xy` whose optical axis meets the ground at `aim_xy`: yaw in
+    degrees clockwise from north, pitch in degrees below the horizon (SUMO's POI convention)."""
+    dx, dy = aim_xy[0] - pole_xy[0], aim_xy[1] - pole_xy[1]
     return {
-        "x": round(px, 2),
-        "y": round(py, 2),
+        "x": round(pole_xy[0], 2),
+        "y": round(pole_xy[1], 2),
         "height_m": RSU_HEIGHT_M,
-        "yaw_deg": round(yaw_deg, 2),
-        "pitch_deg": round(pitch_deg, 2),
+        "yaw_deg": round(math.degrees(math.atan2(dx, dy)) % 360.0, 2),
+        "pitch_deg": round(math.degrees(math.atan2(RSU_HEIGHT_M, math.hypot(dx, dy))), 2),
         "fov_deg": RSU_FOV_DEG,
         "corner": corner,
         "watched_arm": watch_arm,
@@ -220,25 +224,13 @@ def place_roadside_unit_across(
         )
 
     abreast = before_stop_line(abreast_m)
-    aim_x, aim_y = before_stop_line(aim_m)
     offset = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(abreast, sidewalk.getShape())
     sx, sy = sumolib.geomhelper.positionAtShapeOffset(sidewalk.getShape(), offset)
     dx, dy = sx - abreast[0], sy - abreast[1]
     dist = math.hypot(dx, dy) or 1.0
     px = sx + (sidewalk.getWidth() / 2 + RSU_ACROSS_SETBACK_M) * dx / dist
     py = sy + (sidewalk.getWidth() / 2 + RSU_ACROSS_SETBACK_M) * dy / dist
-    yaw_deg = math.degrees(math.atan2(aim_x - px, aim_y - py)) % 360.0
-    pitch_deg = math.degrees(math.atan2(RSU_HEIGHT_M, math.hypot(aim_x - px, aim_y - py)))
-    return {
-        "x": round(px, 2),
-        "y": round(py, 2),
-        "height_m": RSU_HEIGHT_M,
-        "yaw_deg": round(yaw_deg, 2),
-        "pitch_deg": round(pitch_deg, 2),
-        "fov_deg": RSU_FOV_DEG,
-        "corner": "across",
-        "watched_arm": watch_arm,
-    }
+    return _pole_aimed_at((px, py), before_stop_line(aim_m), "across", watch_arm)
 
 
 def _distance_to_shape(point, shape) -> float:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -45,11 +44,6 @@ class Site:
     def file(self, suffix: str) -> Path:
         """A file of the built site, e.g. file('net.xml') -> networks/xueqing/xueqing.net.xml."""
         return self.network_dir / f"{self.name}.{suffix}"
-
-    def roadside_unit_ids(self) -> tuple[str, ...]:
-        """Ids of the roadside camera poles the build placed (from site.json)."""
-        info = json.loads(self.file("site.json").read_text(encoding="utf-8"))
-        return tuple(unit["id"] for unit in info.get("roadside_units", [info["roadside_unit"]]))
 
 
 SITES: dict[str, Site] = {

@@ -132,6 +132,19 @@ def load_site_data(site: Site, params: dict[str, Any]) -> SiteData:
     )
 
 
+def _move_pedestrian(api, pose) -> None:
+    """Put the pedestrian where the behaviour model says, free of SUMO's walking model (keepRoute=2)."""
+    api.person.moveToXY(
+        PED_ID,
+        "",
+        pose.x_m,
+        pose.y_m,
+        angle=yaw_rad_to_sumo_angle(pose.heading_rad),
+        keepRoute=2,
+        matchThreshold=PED_MATCH_RADIUS_M,
+    )
+
+
 class EpisodeRunner:
     """Runs episodes on one site, reusing one SUMO instance (libsumo, or sumo-gui through traci)."""
 
@@ -450,15 +463,7 @@ class EpisodeRunner:
         sumo_record: dict[str, Any] = {}
         end_reason = "time_limit"
         pose = walker.step(0.0, 0.0, (0.0, 0.0), 0.0, 0.0)  # position at the start of the path
-        api.person.moveToXY(
-            PED_ID,
-            "",
-            pose.x_m,
-            pose.y_m,
-            angle=yaw_rad_to_sumo_angle(pose.heading_rad),
-            keepRoute=2,
-            matchThreshold=PED_MATCH_RADIUS_M,
-        )
+        _move_pedestrian(api, pose)
         try:
             while True:
                 t0 = clock()
@@ -587,15 +592,7 @@ class EpisodeRunner:
                 t4 = clock()
                 api.vehicle.setSpeed(EGO_ID, target_mps)
                 pose = walker.step(self.step_length_s, time_s, (ego_x, ego_y), ego_yaw, ego_speed, ego_length)
-                api.person.moveToXY(
-                    PED_ID,
-                    "",
-                    pose.x_m,
-                    pose.y_m,
-                    angle=yaw_rad_to_sumo_angle(pose.heading_rad),
-                    keepRoute=2,
-                    matchThreshold=PED_MATCH_RADIUS_M,
-                )
+                _move_pedestrian(api, pose)
                 api.simulation.step()
                 timings["sumo_s"] += clock() - t4
         finally:
