@@ -29,7 +29,14 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker
-from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
+from pedsafe_sumo.control.agent import (
+    Agent,
+    Command,
+    EgoState,
+    Observation,
+    PerceivedPedestrian,
+    check_sensor_names,
+)
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
 from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
@@ -57,7 +64,10 @@ from pedsafe_sumo.scenarios.registry import (
     VehicleSetup,
     draw_episode,
 )
+from pedsafe_sumo.sim.actuation import actuate_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
+from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names
+from pedsafe_sumo.sim.road_map import load_net_map
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
 
 CONDITIONS = ("sv", "v2i")
@@ -433,6 +443,8 @@ class EpisodeRunner:
         walker = PedestrianWalker(ped.path_xy, self._behaviour(ped), start_delay_s=ped.start_delay_s)
         agent = self.agent_class()
         granted = {"onboard_camera", "onboard_lidar"} | ({"v2i"} if condition == "v2i" else set())
+        granted |= granted_names(condition)  # raw data and world feeds (issue 15), on request only
+        check_sensor_names(agent.sensors(), type(agent).__name__)
         agent.setup(
             {
                 # The parameter file's [algorithm] settings (older run.json files have none).
@@ -447,6 +459,9 @@ class EpisodeRunner:
         wanted = set(agent.sensors()) & granted
         sensors = self.sensors_for(spec)
         link = V2ILink(sensors.v2i, np.random.default_rng(streams[3])) if "v2i" in wanted else None
+        feeds = ObservationFeeds.for_agent(
+            api, EGO_ID, wanted, condition, self.site.file("net.xml"), sensors, self.params["perception"]
+        )
         ped_ids = (PED_ID,)
         ped_radii = np.array([ped.radius_m], dtype=float)
         ped_heights = np.array([ped.height_m], dtype=float)
@@ -505,14 +520,9 @@ class EpisodeRunner:
                 t1 = clock()
                 timings["snapshot_s"] += t1 - t0
 
-                detections = perceive(
-                    snapshot,
-                    EgoPose(ego_x, ego_y, ego_yaw, EGO_ID),
-                    sensors,
-                    perception_rng,
-                    time_s,
-                    link,
-                )
+                ego_pose = EgoPose(ego_x, ego_y, ego_yaw, EGO_ID)
+                detections = perceive(snapshot, ego_pose, sensors, perception_rng, time_s, link)
+                extra = feeds.step(snapshot, ego_pose, ego_index, time_s) if feeds is not None else {}
                 t2 = clock()
                 timings["perception_s"] += t2 - t1
 
@@ -532,9 +542,16 @@ class EpisodeRunner:
                     EgoState(ego_x, ego_y, ego_yaw, ego_speed, ego_length, ego_width),
                     tuple(reported),
                     self.step_length_s,
+                    **extra,
                 )
                 command: Command = agent.run_step(observation, time_s)
                 target_mps = max(0.0, float(command.target_speed_mps))
+                refused = ""
+                if wants_lateral(command):  # lane change or path (issue 15); refusals are logged
+                    net = load_net_map(str(self.site.file("net.xml")))
+                    refused = actuate_lateral(
+                        api, EGO_ID, command, net, (ego_x, ego_y), ego_length, target_mps, self.step_length_s
+                    )
                 t3 = clock()
                 timings["agent_s"] += t3 - t2
 
@@ -568,6 +585,7 @@ class EpisodeRunner:
                         "braking": bool(command.info.get("braking", False)),
                         "ped_state": pose.state,
                         "sumo_collision": sumo_collision,
+                        "command_refused": refused,
                     }
                 )
                 timings["logging_s"] += clock() - t3
