@@ -66,7 +66,7 @@ from pedsafe_sumo.scenarios.registry import (
 )
 from pedsafe_sumo.sim.actuation import actuate_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
-from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names
+from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
 from pedsafe_sumo.sim.road_map import load_net_map
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
 
@@ -454,6 +454,7 @@ class EpisodeRunner:
                 "seed": seed,
                 "step_length_s": self.step_length_s,
                 "sensors": sorted(set(agent.sensors()) & granted),
+                "sensor_mounts": sensor_mounts(self.params["perception"]),
             }
         )
         wanted = set(agent.sensors()) & granted

@@ -32,6 +32,20 @@ from pedsafe_sumo.sim.road_map import load_net_map
 V2I_ONLY = frozenset({"roadside_camera_image"})
 
 
+def sensor_mounts(perception_params: dict[str, Any]) -> dict[str, dict[str, float]]:
+    """Where the onboard sensors sit on the ego (handed to setup() as ``sensor_mounts``): per sensor,
+    forward_offset_m and left_offset_m from the box centre, height_m above ground, and the camera's
+    yaw_offset_deg, pitch_down_deg and hfov_deg."""
+    cam, lid = perception_params["camera"], perception_params["lidar"]
+    keys = ("forward_offset_m", "left_offset_m", "height_m")
+    return {
+        "onboard_lidar": {k: float(lid[k]) for k in keys},
+        "onboard_camera": {
+            **{k: float(cam[k]) for k in (*keys, "yaw_offset_deg", "pitch_down_deg", "hfov_deg")},
+        },
+    }
+
+
 def granted_names(condition: str) -> set[str]:
     """Every RAW_SENSORS / WORLD_FEEDS name the condition grants."""
     names = set(RAW_SENSORS) | set(WORLD_FEEDS)
