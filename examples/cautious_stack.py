@@ -44,7 +44,9 @@ class CautiousStack(ReferenceStack):
             if lon <= 0 or abs(lat) > (ego.width_m + v.width_m) / 2:
                 continue
             gap = lon - (ego.length_m + v.length_m) / 2 - GAP_M
-            target = min(target, max(0.0, min(gap / HEADWAY_S, math.sqrt(max(0.0, 2 * COMFORT_DECEL_MPS2 * gap)))))
+            target = min(
+                target, max(0.0, min(gap / HEADWAY_S, math.sqrt(max(0.0, 2 * COMFORT_DECEL_MPS2 * gap))))
+            )
             info["following"] = v.vehicle_id
         dt = observation.step_length_s
         target = max(target, ego.speed_mps - self.max_decel_mps2 * dt)

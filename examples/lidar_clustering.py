@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from pedsafe_sumo.control.agent import Perception, PerceivedPedestrian, PerceivedVehicle
+from pedsafe_sumo.control.agent import PerceivedPedestrian, PerceivedVehicle, Perception
 
 CELL_M = 0.4  # grid cell of the clustering: points in touching cells form one cluster [m]
 GROUND_CLEARANCE_M = 0.2  # points lower than this above the ground are ground [m]
@@ -80,7 +80,9 @@ class LidarClustering(Perception):
                 found.append(PerceivedPedestrian(track, wx, wy, "onboard_lidar"))
             elif extent <= VEHICLE_MAX_EXTENT_M:
                 length, width = float(hi[0] - lo[0]), float(hi[1] - lo[1])
-                found.append(PerceivedVehicle(f"cluster_{k}", wx, wy, ego.yaw_rad, length, width, "onboard_lidar"))
+                found.append(
+                    PerceivedVehicle(f"cluster_{k}", wx, wy, ego.yaw_rad, length, width, "onboard_lidar")
+                )
         self.tracks = tracks
         return found
 

@@ -17,7 +17,7 @@ import math
 import sys
 from pathlib import Path
 
-from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError
@@ -108,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
+    parser.add_argument("--perception", help="replace the stack's detector by package.module:Class")
     parser.add_argument("--log", type=Path, help="write the per-step log as CSV (one file per condition)")
     parser.add_argument(
         "--case-dir", type=Path, help="write each episode as a case (Parquet log + JSON world)"
@@ -123,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         specs, params = configure([args.scenario], args.params, args.set)
         check_roadside_units(specs, site)
         spec = specs[args.scenario]
+        args.algorithm = stack_spec(args.algorithm, args.perception)
         agent_class = load_agent_class(args.algorithm)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -37,7 +37,7 @@ from pedsafe_sumo.batch.executors import BatchError, make_backend
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ERROR_STATUS, WorkerConfig, site_file_digests, worker_versions
-from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.io.run_store import (
     RUN_FILE,
     STATE_COMPLETE,
@@ -64,6 +64,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "params": None,
     "set": [],
     "algorithm": DEFAULT_ALGORITHM,
+    "perception": None,
     "chunk_size": None,
 }
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
@@ -166,6 +167,9 @@ def parse_args(argv):
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--perception", help="replace the stack's detector by package.module:Class (docs/ad_interface.md)"
+    )
     return parser.parse_args(argv)
 
 
@@ -261,7 +265,8 @@ def prepare(args) -> Plan:
     site = get_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
     specs, params = configure(scenarios, params_file, arguments["set"])
-    load_agent_class(arguments["algorithm"])
+    stack = stack_spec(arguments["algorithm"], arguments.get("perception"))
+    load_agent_class(stack)
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
     digests = site_file_digests(site.name)
@@ -272,14 +277,14 @@ def prepare(args) -> Plan:
         "episodes_per_scenario": arguments["episodes"],
         "run_seed": arguments["seed"],
         "episode_seed_rule": EPISODE_SEED_RULE,
-        "algorithm": arguments["algorithm"],
+        "algorithm": stack,
         "parameters": params,
         "site_files_sha256": digests,
         "chunk_size_pairs": arguments["chunk_size"],
     }
     scenario_overrides, _ = parse_set(arguments["set"])
     versions = worker_versions()
-    config = WorkerConfig(site.name, params, scenario_overrides, arguments["algorithm"], digests, versions)
+    config = WorkerConfig(site.name, params, scenario_overrides, stack, digests, versions)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
     plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded)

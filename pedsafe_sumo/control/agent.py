@@ -207,8 +207,22 @@ class AlgorithmLoadError(ValueError):
     """`--algorithm` does not name a loadable AD stack; the message says why in one line."""
 
 
+#: Joins `--algorithm` and `--perception` into the one stack spec that run.json records, workers and
+#: replay load: "pkg.stack:Stack+pkg.detector:Detector" (a module name never holds a '+').
+PERCEPTION_JOIN = "+"
+
+
+def stack_spec(algorithm: str, perception: str | None) -> str:
+    """The stack spec of `--algorithm` with `--perception` (the algorithm alone when there is none)."""
+    return f"{algorithm}{PERCEPTION_JOIN}{perception}" if perception else algorithm
+
+
 def load_agent_class(spec: str) -> type[Agent]:
-    """Resolve 'package.module:ClassName' to an Agent subclass (or a class with the same methods)."""
+    """Resolve 'package.module:ClassName' to an Agent subclass (or a class with the same methods); a spec
+    'algorithm+perception' (stack_spec) loads the algorithm with its detector replaced."""
+    if PERCEPTION_JOIN in spec:
+        algorithm, _, perception = spec.partition(PERCEPTION_JOIN)
+        return with_perception(load_agent_class(algorithm), load_perception_class(perception))
     if ":" not in spec:
         raise AlgorithmLoadError(f"--algorithm must look like package.module:ClassName, got '{spec}'")
     module_name, _, class_name = spec.partition(":")
@@ -242,7 +256,8 @@ def check_sensor_names(names, who: str) -> None:
     """Refuse, in one line, sensor names outside ALL_SENSORS."""
     unknown = [s for s in names if s not in ALL_SENSORS]
     if unknown:
-        raise AlgorithmLoadError(f"'{who}' asks for unknown sensors {unknown}; known: {', '.join(ALL_SENSORS)}")
+        known = ", ".join(ALL_SENSORS)
+        raise AlgorithmLoadError(f"'{who}' asks for unknown sensors {unknown}; known: {known}")
 
 
 def _sensors_of(cls: type) -> list[str]:
@@ -332,9 +347,3 @@ def load_perception_class(spec: str) -> type:
         )
     check_sensor_names(_sensors_of(cls), spec)
     return cls
-
-
-def load_stack(algorithm: str, perception: str | None = None) -> type[Agent]:
-    """The agent class of `--algorithm` [with `--perception`] (one-line AlgorithmLoadError otherwise)."""
-    cls = load_agent_class(algorithm)
-    return with_perception(cls, load_perception_class(perception)) if perception else cls

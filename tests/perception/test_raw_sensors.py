@@ -25,7 +25,9 @@ RED = (200, 30, 30)
 
 def _box_scene():
     centre_x = BOX_NEAR_X_M + BOX_LENGTH_M / 2
-    return world(vehicles=[("box", centre_x, 0.0, 0.0, BOX_LENGTH_M, 2 * BOX_HALF_WIDTH_M, BOX_HEIGHT_M, RED)])
+    return world(
+        vehicles=[("box", centre_x, 0.0, 0.0, BOX_LENGTH_M, 2 * BOX_HALF_WIDTH_M, BOX_HEIGHT_M, RED)]
+    )
 
 
 def test_the_beam_straight_ahead_returns_ground_before_the_box_then_its_face_then_ground_beyond():
@@ -67,7 +69,9 @@ def test_the_number_of_returns_on_the_box_is_the_count_of_beams_that_meet_its_ne
             continue  # passes beside the box (and never reaches its sides, which start at x = 10)
         r = BOX_NEAR_X_M / math.cos(az)  # horizontal distance to the near face along this azimuth
         # Where the beam leaves the box's footprint: through the far face, or through a side.
-        r_out = min((BOX_NEAR_X_M + BOX_LENGTH_M) / math.cos(az), BOX_HALF_WIDTH_M / max(abs(math.sin(az)), 1e-12))
+        r_out = min(
+            (BOX_NEAR_X_M + BOX_LENGTH_M) / math.cos(az), BOX_HALF_WIDTH_M / max(abs(math.sin(az)), 1e-12)
+        )
         for k in range(SPEC.channels):
             el = math.radians(-25.0 + k * 40.0 / 31)
             z = SENSOR_HEIGHT_M + r * math.tan(el)
