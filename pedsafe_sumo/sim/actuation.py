@@ -5,8 +5,9 @@
   changing is off, and a TraCI request is executed without waiting for gaps).
 * ``Command.path_xy_m`` (world points) or ``Command.lateral_offset_m`` (metres left of the current
   lane's centreline): the ego's front is placed, at the end of the step, where it gets by driving the
-  commanded speed along the path (``vehicle.moveToXY`` with keepRoute=1: it stays on its route, mapped
-  to the nearest lane, at the exact position given).
+  commanded speed along the path (``vehicle.moveToXY``: it stays on its route, mapped
+  to the nearest lane for its route, at the exact position given, keepRoute=2: SUMO keeps the lateral
+  offset, which keepRoute=1 would snap back to the lane centre).
 
 A command that would leave the road (no lane there, a sidewalk, a point off every drivable lane of the
 edge or its junction) is refused: nothing is actuated laterally, and the reason is returned for the
@@ -16,6 +17,7 @@ step's log (column ``command_refused``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -58,7 +60,7 @@ def _offset_path(shape, offset_m: float) -> np.ndarray:
     return pts + offset_m * normals
 
 
-def actuate_lateral(
+def plan_lateral(
     api,
     ego_id: str,
     command: Command,
@@ -67,28 +69,32 @@ def actuate_lateral(
     ego_length_m: float,
     target_speed_mps: float,
     step_length_s: float,
-) -> str:
-    """Carry out the command's lane change or path; '' when done (or nothing asked), else the refusal."""
+) -> tuple[str, Callable[[], None] | None]:
+    """Check the command's lane change or path: ('', action) when it is on the road, (refusal, None)
+    otherwise. The loop calls ``action()`` with the step's other actuation, right before SUMO steps:
+    a moveToXY left pending when an episode ends would outlive the vehicle into the next episode."""
     edge = api.vehicle.getRoadID(ego_id)
     lane_index = api.vehicle.getLaneIndex(ego_id)
     if command.lane_change:
         if edge.startswith(":"):
-            return f"lane change {command.lane_change:+d} refused: inside junction {edge}"
+            return f"lane change {command.lane_change:+d} refused: inside junction {edge}", None
         target = lane_index + int(command.lane_change)
         lane_ids = net.edge_lanes.get(edge, ())
         if not 0 <= target < len(lane_ids) or not net.lanes[lane_ids[target]].drivable:
-            return f"lane change {command.lane_change:+d} refused: lane {target} of edge {edge} is not road"
-        api.vehicle.changeLane(ego_id, target, LANE_HOLD_S)
-        return ""
+            return (
+                f"lane change {command.lane_change:+d} refused: lane {target} of edge {edge} is not road",
+                None,
+            )
+        return "", lambda: api.vehicle.changeLane(ego_id, target, LANE_HOLD_S)
     if command.path_xy_m is not None:
         path = np.asarray(command.path_xy_m, dtype=float).reshape(-1, 2)
         if path.shape[0] < 2 or not np.all(np.isfinite(path)):
-            return "path refused: needs at least two finite points"
+            return "path refused: needs at least two finite points", None
     else:
         lane_id = api.vehicle.getLaneID(ego_id)
         offset = float(command.lateral_offset_m)
         if not math.isfinite(offset):
-            return "lateral offset refused: not a finite number"
+            return "lateral offset refused: not a finite number", None
         path = _offset_path(net.lanes[lane_id].shape_xy_m, offset)
     # The ego's box centre advances by the commanded speed; SUMO places vehicles by their front.
     cx, cy, heading = _along(path, ego_xy[0], ego_xy[1], target_speed_mps * step_length_s)
@@ -104,6 +110,6 @@ def actuate_lateral(
         what = (
             "path" if command.path_xy_m is not None else f"lateral offset {command.lateral_offset_m:+.2f} m"
         )
-        return f"{what} refused: ({cx:.1f}, {cy:.1f}) leaves the road"
-    api.vehicle.moveToXY(ego_id, "", -1, fx, fy, angle=float(yaw_rad_to_sumo_angle(heading)), keepRoute=1)
-    return ""
+        return f"{what} refused: ({cx:.1f}, {cy:.1f}) leaves the road", None
+    angle = float(yaw_rad_to_sumo_angle(heading))
+    return "", lambda: api.vehicle.moveToXY(ego_id, "", -1, fx, fy, angle=angle, keepRoute=2)

@@ -64,7 +64,7 @@ from pedsafe_sumo.scenarios.registry import (
     VehicleSetup,
     draw_episode,
 )
-from pedsafe_sumo.sim.actuation import actuate_lateral, wants_lateral
+from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
 from pedsafe_sumo.sim.road_map import load_net_map
@@ -547,10 +547,10 @@ class EpisodeRunner:
                 )
                 command: Command = agent.run_step(observation, time_s)
                 target_mps = max(0.0, float(command.target_speed_mps))
-                refused = ""
+                refused, steer = "", None
                 if wants_lateral(command):  # lane change or path (issue 15); refusals are logged
                     net = load_net_map(str(self.site.file("net.xml")))
-                    refused = actuate_lateral(
+                    refused, steer = plan_lateral(
                         api, EGO_ID, command, net, (ego_x, ego_y), ego_length, target_mps, self.step_length_s
                     )
                 t3 = clock()
@@ -610,6 +610,8 @@ class EpisodeRunner:
 
                 t4 = clock()
                 api.vehicle.setSpeed(EGO_ID, target_mps)
+                if steer is not None:
+                    steer()
                 pose = walker.step(self.step_length_s, time_s, (ego_x, ego_y), ego_yaw, ego_speed, ego_length)
                 _move_pedestrian(api, pose)
                 api.simulation.step()
