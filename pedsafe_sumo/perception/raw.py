@@ -74,42 +74,48 @@ def _beam_grid(spec: LidarSpec) -> tuple[np.ndarray, np.ndarray]:
     return azimuths, np.asarray(spec.elevations_rad, dtype=float)
 
 
-def _ground_limited(origin_z: float, dz: np.ndarray, t_far: float) -> np.ndarray:
-    """Per ray, the farthest distance worth testing: the ground hit for downward rays (every surface
-    stands on the ground, so nothing is hit beyond it), else ``t_far``."""
+def _top_m(world: WorldSnapshot) -> float:
+    """Height of the highest surface in the snapshot [m]."""
+    st = world.static
+    tops = [0.0]
+    for arr in (world.vehicles.height_m, world.pedestrians.height_m, st.z_top_m, st.cyl_z1_m):
+        if len(arr):
+            tops.append(float(np.max(arr)))
+    return max(tops)
+
+
+def _reach(origin_z: float, dz: np.ndarray, t_far: float, top_m: float) -> np.ndarray:
+    """Per ray, the farthest distance worth testing: a downward ray meets the ground (every surface
+    stands on it, so nothing is hit beyond), an upward one climbs above the highest surface, else
+    ``t_far``. Shorter rays keep each group's search corridor narrow; the hits are the same."""
     with np.errstate(divide="ignore"):
         t_ground = np.where(dz < -1e-12, origin_z / -dz, np.inf)
-    return np.minimum(t_ground, t_far)
+        t_ceiling = np.where(dz > 1e-12, (max(top_m, origin_z) - origin_z) / dz, np.inf)
+    return np.minimum(np.minimum(t_ground, t_ceiling), t_far)
 
 
-def _cast_columns(world, origin, direction, t_max, n_cols, n_rows, skip_vehicle, t_far):
-    """Cast rays laid out column-major (n_cols columns of n_rows rays); each column is split into its
-    ground-limited rays and its long ones, so each group's search corridor stays narrow."""
-    rays = n_cols * n_rows
-    long_ray = (t_max >= t_far).reshape(n_cols, n_rows)
-    # Order rays within each column: short ones first, long ones after; remember the permutation.
-    order = np.argsort(long_ray, axis=1, kind="stable") + (np.arange(n_cols) * n_rows)[:, None]
-    order = order.ravel()
-    n_long = long_ray.sum(axis=1)
-    counts = np.column_stack([n_rows - n_long, n_long]).ravel()
-    keep = counts > 0
-    counts = counts[keep].astype(np.int64)
-    starts = np.cumsum(counts) - counts
+def _cast_columns(world, origin, direction, t_max, n_rows, skip_vehicle, t_far):
+    """Cast rays laid out in columns of ``n_rows`` consecutive rays. Each column is cut into runs of
+    consecutive rays that are all short (ending on the ground or above everything) or all long, one
+    group per run, so each group's search corridor stays narrow (no reordering of the rays)."""
+    rays = t_max.shape[0]
+    long_ray = t_max >= t_far
+    first = np.zeros(rays, dtype=bool)
+    first[::n_rows] = True
+    first[1:] |= long_ray[1:] != long_ray[:-1]
+    starts = np.flatnonzero(first)
+    counts = np.diff(np.append(starts, rays))
     hits = cast_rays(
         world,
-        origin[order],
-        direction[order],
-        t_max[order],
+        origin,
+        direction,
+        t_max,
         starts,
         counts,
         np.full(rays, -1, dtype=np.int64),
         skip_vehicle,
     )
-    t = np.empty(rays)
-    kind = np.empty(rays, dtype=np.int8)
-    index = np.empty(rays, dtype=np.int64)
-    t[order], kind[order], index[order] = hits.t_m, hits.kind, hits.index
-    return t, kind, index
+    return hits.t_m, hits.kind, hits.index
 
 
 def lidar_point_cloud(
@@ -119,24 +125,24 @@ def lidar_point_cloud(
     frame, labels or None). ``skip_vehicle``: index of the ego's own box in ``world.vehicles`` (-1 none)."""
     azimuths, elevations = _beam_grid(spec)
     n_az, n_ch = azimuths.size, elevations.size
-    az = np.repeat(azimuths + pose.yaw_rad, n_ch)
-    el = np.tile(elevations, n_az)
-    ce = np.cos(el)
-    direction = np.empty((n_az * n_ch, 3))
-    direction[:, 0] = ce * np.cos(az)
-    direction[:, 1] = ce * np.sin(az)
-    direction[:, 2] = np.sin(el)
+    # Directions in the sensor frame (x forward, y left, z up): azimuth-major, channels ascending.
+    ce, se = np.cos(elevations), np.sin(elevations)
+    local = np.empty((n_az, n_ch, 3))
+    local[:, :, 0] = np.cos(azimuths)[:, None] * ce[None, :]
+    local[:, :, 1] = np.sin(azimuths)[:, None] * ce[None, :]
+    local[:, :, 2] = se[None, :]
+    local = local.reshape(-1, 3)
+    c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+    direction = np.empty_like(local)
+    direction[:, 0] = c * local[:, 0] - s * local[:, 1]
+    direction[:, 1] = s * local[:, 0] + c * local[:, 1]
+    direction[:, 2] = local[:, 2]
     o = np.asarray(pose.position_m, dtype=float)
     origin = np.broadcast_to(o, direction.shape)
-    t_max = _ground_limited(float(o[2]), direction[:, 2], spec.range_m)
-    t, kind, index = _cast_columns(world, origin, direction, t_max, n_az, n_ch, skip_vehicle, spec.range_m)
+    t_max = np.tile(_reach(float(o[2]), se, spec.range_m, _top_m(world)), n_az)
+    t, kind, index = _cast_columns(world, origin, direction, t_max, n_ch, skip_vehicle, spec.range_m)
     hit = (kind != KIND_NONE) & (t <= spec.range_m)
-    rel = direction[hit] * t[hit][:, None]
-    c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-    points = np.empty((rel.shape[0], 3))
-    points[:, 0] = rel[:, 0] * c + rel[:, 1] * s
-    points[:, 1] = -rel[:, 0] * s + rel[:, 1] * c
-    points[:, 2] = rel[:, 2]
+    points = local[hit] * t[hit][:, None]
     if not labels:
         return points, None
     return points, _labels(world, kind[hit], index[hit])
@@ -147,7 +153,7 @@ def _labels(world: WorldSnapshot, kind: np.ndarray, index: np.ndarray) -> LidarL
     for code, ids in ((KIND_VEHICLE, world.vehicles.ids), (KIND_PEDESTRIAN, world.pedestrians.ids)):
         sel = np.flatnonzero(kind == code)
         if sel.size:
-            object_id[sel] = [ids[i] for i in index[sel]]
+            object_id[sel] = np.asarray(ids, dtype=object)[index[sel]]
     return LidarLabels(kind.astype(np.int8), object_id)
 
 
@@ -183,10 +189,8 @@ def render_image(
     direction, cos_axis = pixel_rays(width_px, height_px, hfov_deg, pose)
     o = np.asarray(pose.position_m, dtype=float)
     origin = np.broadcast_to(o, direction.shape)
-    t_max = _ground_limited(float(o[2]), direction[:, 2], max_distance_m)
-    t, kind, index = _cast_columns(
-        world, origin, direction, t_max, width_px, height_px, skip_vehicle, max_distance_m
-    )
+    t_max = _reach(float(o[2]), direction[:, 2], max_distance_m, _top_m(world))
+    t, kind, index = _cast_columns(world, origin, direction, t_max, height_px, skip_vehicle, max_distance_m)
     rgb = np.empty((kind.shape[0], 3))
     rgb[:] = sky_rgb
     rgb[kind == KIND_GROUND] = ground_rgb

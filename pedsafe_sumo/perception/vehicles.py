@@ -113,8 +113,18 @@ def lidar_sees_vehicles(
         if i == skip_vehicle:
             continue
         corners = _corners(veh.x_m[i], veh.y_m[i], veh.yaw_rad[i], veh.length_m[i], veh.width_m[i])
-        d_min = min(math.hypot(x - o[0], y - o[1]) for x, y in corners)
-        if d_min > spec.range_m or math.hypot(veh.x_m[i] - o[0], veh.y_m[i] - o[1]) < 1e-6:
+        d_centre = math.hypot(veh.x_m[i] - o[0], veh.y_m[i] - o[1])
+        half_diagonal = 0.5 * math.hypot(veh.length_m[i], veh.width_m[i])
+        # Bounds of the horizontal distance from the sensor to any point of the box.
+        d_min, d_max = max(d_centre - half_diagonal, 0.05), d_centre + half_diagonal
+        if d_min > spec.range_m or d_centre < 1e-6:
+            continue
+        # Only the channels that can meet the box: between its bottom far away and its top close by
+        channels = elev[
+            (elev >= math.atan2(-o[2], d_max) - 1e-12)
+            & (elev <= math.atan2(veh.height_m[i] - o[2], d_min) + 1e-12)
+        ]
+        if channels.size == 0:
             continue
         centre_az = math.atan2(veh.y_m[i] - o[1], veh.x_m[i] - o[0])
         rel = [
@@ -125,8 +135,8 @@ def lidar_sees_vehicles(
         k1 = math.floor((centre_az + max(rel) - pose.yaw_rad) / res)
         if k1 < k0:
             continue
-        az = np.repeat(np.arange(k0, k1 + 1) * res + pose.yaw_rad, elev.size)
-        el = np.tile(elev, k1 - k0 + 1)
+        az = np.repeat(np.arange(k0, k1 + 1) * res + pose.yaw_rad, channels.size)
+        el = np.tile(channels, k1 - k0 + 1)
         d = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
         dirs.append(d)
         owners.append(i)

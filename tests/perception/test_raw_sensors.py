@@ -113,3 +113,40 @@ def test_the_pedestrian_is_drawn_at_the_pixel_the_projection_predicts():
     assert image.depth_m[60, 80] == pytest.approx(1.6 * 80 / 15.5, rel=1e-5)
     # 20 columns to the right of the pedestrian (u = 87.5, 1.7 m right of the axis at 18.5 m): no one.
     assert tuple(image.rgb[48, 87]) == (105, 105, 105)
+
+
+def _vehicle_scene(*extra):
+    from perception_scenes import ego_box
+
+    return world(vehicles=[ego_box(), *extra])
+
+
+def test_a_car_ahead_is_perceived_and_a_car_hidden_behind_a_truck_is_not(suite):
+    from perception_scenes import EGO
+
+    from pedsafe_sumo.perception.vehicles import camera_sees_vehicles, lidar_sees_vehicles
+
+    truck = ("truck", 12.0, 0.0, 0.0, 6.0, 2.5, 3.5, (230, 230, 230))
+    hidden = ("hidden", 20.0, 0.0, 0.0, 4.5, 1.8, 1.5, RED)
+    beside = ("beside", 20.0, 8.0, 0.0, 4.5, 1.8, 1.5, RED)  # 8 m to the left, in plain view
+    far = ("far", 130.0, 0.0, 0.0, 4.5, 1.8, 1.5, RED)  # beyond the LiDAR's range; 7 px tall in the camera
+    scene = _vehicle_scene(truck, hidden, beside, far)
+    cam = camera_sees_vehicles(scene, suite.camera_mount.pose(EGO), suite.camera, 0)
+    lid = lidar_sees_vehicles(scene, suite.lidar_mount.pose(EGO), suite.lidar, 0)
+    names = ("ego", "truck", "hidden", "beside", "far")
+    assert dict(zip(names, cam.tolist(), strict=True)) == {
+        "ego": False, "truck": True, "hidden": False, "beside": True, "far": False,
+    }  # fmt: skip
+    assert dict(zip(names, lid.tolist(), strict=True)) == {
+        "ego": False, "truck": True, "hidden": False, "beside": True, "far": False,
+    }  # fmt: skip
+    # Without the truck the car behind it is in plain view of both.
+    open_scene = _vehicle_scene(hidden)
+    assert camera_sees_vehicles(open_scene, suite.camera_mount.pose(EGO), suite.camera, 0).tolist() == [
+        False,
+        True,
+    ]
+    assert lidar_sees_vehicles(open_scene, suite.lidar_mount.pose(EGO), suite.lidar, 0).tolist() == [
+        False,
+        True,
+    ]
