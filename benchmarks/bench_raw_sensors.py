@@ -82,9 +82,8 @@ def main() -> None:
         }
     base = rows[next(iter(VARIANTS))]["perception_ms_per_step"]
     raw = params["perception"]["raw"]
-    print(
-        f"{args.scenario} / {args.condition}, {args.episodes} episodes, {platform.processor() or platform.machine()}"
-    )
+    machine = platform.processor() or platform.machine()
+    print(f"{args.scenario} / {args.condition}, {args.episodes} episodes, {machine}")
     print(f"camera image {raw['camera_image_width_px']}x{raw['camera_image_height_px']} px, roadside "
           f"{raw['roadside_image_width_px']}x{raw['roadside_image_height_px']} px")  # fmt: skip
     print(f"{'asks for':48s} {'ms/step':>9s} {'extra ms/frame':>15s} {'steps':>6s}")
