@@ -6,6 +6,11 @@ Plug it in front of the reference planner and controller:
 
 It reads only ``onboard_lidar_points`` (no ground-truth labels), in the sensor frame (x forward,
 y left, z up, metres, origin at the LiDAR), and reports pedestrians and vehicles in the world frame.
+
+What it gets wrong, as a simple detector does: the visible corner of a queued car half hidden behind the
+one in front is pedestrian-sized, so it reports a few false pedestrians beside a queue (the planner
+then brakes early, and drives on once they are out of its path); a pedestrian whose legs are hidden
+behind a parked car is not reported until she steps out.
 """
 
 from __future__ import annotations
@@ -21,8 +26,11 @@ CELL_M = 0.4  # grid cell of the clustering: points in touching cells form one c
 GROUND_CLEARANCE_M = 0.2  # points lower than this above the ground are ground [m]
 MAX_RANGE_M = 50.0  # clusters farther than this are ignored [m]
 MIN_POINTS = 5  # smaller clusters are noise
-PED_MAX_EXTENT_M = 1.2  # a pedestrian's footprint fits in this square [m]
+PED_MAX_EXTENT_M = 0.8  # a pedestrian's footprint fits in this square (body about 0.6 m across) [m]
 PED_HEIGHT_RANGE_M = (0.8, 2.3)  # and its top lies this high above the ground [m]
+# A pedestrian in view shows from her feet up: a small cluster that starts higher is the visible corner of
+# a vehicle half hidden behind another (queued and parked cars otherwise make pedestrian-sized fragments).
+PED_MAX_LOWEST_M = 0.6
 VEHICLE_MAX_EXTENT_M = 7.0  # larger clusters are buildings, hedges, tree rows
 ASSOCIATION_M = 1.5  # a cluster within this of last step's track keeps its id [m]
 
@@ -73,12 +81,14 @@ class LidarClustering(Perception):
             lo, hi = cl[:, :2].min(axis=0), cl[:, :2].max(axis=0)
             extent = float(max(hi - lo))
             top_m = float(cl[:, 2].max()) + self.height_m
+            lowest_m = float(cl[:, 2].min()) + self.height_m
             cx_s, cy_s = (lo + hi) / 2
             wx, wy = ox + c * cx_s - s * cy_s, oy + s * cx_s + c * cy_s
-            if extent <= PED_MAX_EXTENT_M and PED_HEIGHT_RANGE_M[0] <= top_m <= PED_HEIGHT_RANGE_M[1]:
+            ped_sized = extent <= PED_MAX_EXTENT_M and PED_HEIGHT_RANGE_M[0] <= top_m <= PED_HEIGHT_RANGE_M[1]
+            if ped_sized and lowest_m <= PED_MAX_LOWEST_M:
                 track = self._associate(wx, wy, tracks)
                 found.append(PerceivedPedestrian(track, wx, wy, "onboard_lidar"))
-            elif extent <= VEHICLE_MAX_EXTENT_M:
+            elif not ped_sized and extent <= VEHICLE_MAX_EXTENT_M:
                 length, width = float(hi[0] - lo[0]), float(hi[1] - lo[1])
                 found.append(
                     PerceivedVehicle(f"cluster_{k}", wx, wy, ego.yaw_rad, length, width, "onboard_lidar")
