@@ -30,7 +30,12 @@ LANE_HOLD_S = 1.0e5
 
 
 def wants_lateral(command: Command) -> bool:
-    return bool(command.lane_change) or command.path_xy_m is not None or command.lateral_offset_m is not None
+    """Whether the command asks for more than a speed (a duck-typed command without the fields does not)."""
+    return (
+        bool(getattr(command, "lane_change", 0))
+        or getattr(command, "path_xy_m", None) is not None
+        or getattr(command, "lateral_offset_m", None) is not None
+    )
 
 
 def _along(path: np.ndarray, x: float, y: float, advance_m: float) -> tuple[float, float, float]:
