@@ -53,7 +53,10 @@ def test_an_agent_asking_for_an_unknown_sensor_is_refused_in_one_line():
     [
         (["--algorithm", "tests.sim.ad_agents:AsksForRadar"], "onboard_radar"),
         (["--perception", "tests.sim.ad_agents:RadarPerception"], "front_radar"),
-        (["--perception", "no.such.module:Detector"], "cannot import module 'no.such.module' for --perception"),
+        (
+            ["--perception", "no.such.module:Detector"],
+            "cannot import module 'no.such.module' for --perception",
+        ),
     ],
 )
 def test_the_episode_cli_refuses_unknown_sensors_and_bad_perception_in_one_line_exit_2(flags, name):
@@ -262,3 +265,24 @@ def test_route_and_map_come_from_the_network(runner):
     end = net.getLane(ego_lane).getShape()[-1]
     assert np.mean([stop.start_xy_m, stop.end_xy_m], axis=0) == pytest.approx(end, abs=1e-6)
     assert math.dist(stop.start_xy_m, stop.end_xy_m) == pytest.approx(net.getLane(ego_lane).getWidth())
+
+
+def test_a_path_of_points_is_followed_in_sumo(runner):
+    """A path drawn by hand 0.8 m left of the ego's lane (each segment of SUMO's lane shape shifted
+    along its own left normal): SUMO puts the ego 0.8 m left of its lane centre, at the commanded speed."""
+    net = sumolib.net.readNet(str(SITE.file("net.xml")))
+    shape = net.getLane("177353854#0_2").getShape()
+    path = []
+    for (x0, y0), (x1, y1) in zip(shape, shape[1:]):
+        length = math.hypot(x1 - x0, y1 - y0)
+        nx, ny = -(y1 - y0) / length * 0.8, (x1 - x0) / length * 0.8
+        path += [(x0 + nx, y0 + ny), (x1 + nx, y1 + ny)]
+    seen: list = []
+    result, _ = _run(runner, [], {"path_xy_m": tuple(path)}, hook=_lane_probe(None, seen))
+    assert seen[0][0] == "177353854#0_2"
+    assert [s[1] for s in seen[1:15]] == pytest.approx([0.8] * 14, abs=0.01)
+    assert all(s[2] == "" for s in seen[:15])
+    # Advanced by speed x step along the lane: 0.05 s at the initial speed each step.
+    log = result.log
+    step_m = np.hypot(np.diff(log.ego_x_m[1:15]), np.diff(log.ego_y_m[1:15]))
+    assert step_m == pytest.approx(log.ego_speed_mps.iloc[0] * 0.05, rel=0.02)
