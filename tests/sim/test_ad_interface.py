@@ -286,3 +286,15 @@ def test_a_path_of_points_is_followed_in_sumo(runner):
     log = result.log
     step_m = np.hypot(np.diff(log.ego_x_m[1:15]), np.diff(log.ego_y_m[1:15]))
     assert step_m == pytest.approx(log.ego_speed_mps.iloc[0] * 0.05, rel=0.02)
+
+
+def test_the_batch_refuses_an_unknown_sensor_of_a_perception_plugin_in_one_line_and_writes_nothing(tmp_path):
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.batch", "--scenario", "crossing", "--episodes", "1",
+         "--out", str(out), "--perception", "tests.sim.ad_agents:RadarPerception"],
+        capture_output=True, text=True, cwd=REPO_ROOT, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "front_radar" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()
