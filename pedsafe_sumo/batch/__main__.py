@@ -46,6 +46,7 @@ from pedsafe_sumo.io.run_store import (
     holds_run,
     read_json,
 )
+from pedsafe_sumo.network.hosting import check_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
@@ -264,6 +265,7 @@ def prepare(args) -> Plan:
     load_agent_class(arguments["algorithm"])
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
+    check_hosting(site, specs, params, conditions)  # its roadside poles see each scenario's staging area
     reference = site_reference(arguments["site"], site)
     digests = site_file_digests(reference)
     identity = {

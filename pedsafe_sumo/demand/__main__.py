@@ -1,4 +1,4 @@
-"""CLI: python -m pedsafe_sumo.demand --site NAME_OR_PATH --duration 3600 --seed 1 --out routes/ [--params F]"""
+"""CLI: python -m pedsafe_sumo.demand --site NAME_OR_PATH --duration 3600 --seed 1 --out routes/"""
 
 from __future__ import annotations
 

@@ -49,6 +49,11 @@ def main(argv: list[str] | None = None) -> int:
         )
     for line in summarise(site).lines():
         print(line)
+    from pedsafe_sumo.network.hosting import hosting_lines
+
+    print("  scenarios:")
+    for line in hosting_lines(resolve_site(args.site)):
+        print(f"  {line}")
     print(f"  open it: sumo-gui -c {site.file('sumocfg')}   edit it: netedit -s {site.file('net.xml')}")
     print(f"  {OSM_ATTRIBUTION}")
     return 0

@@ -624,6 +624,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  wrote     {path}")
     for path in report.unchanged:
         print(f"  unchanged {path}")
+    from pedsafe_sumo.network.hosting import hosting_lines
+
+    print("scenarios:")
+    for line in hosting_lines(resolve_site(str(report.out_dir.resolve()))):
+        print(line)
     print(f"  use it: --site {report.out_dir}")
     return 0
 
