@@ -84,6 +84,8 @@ class BuildReport:
     unchanged: list[Path]
     main_junction: str
     seconds: float
+    lane_defaults: dict | None = None
+    signal_nodes: list | None = None
 
 
 def _run(cmd: list[str], cwd: Path, step: str) -> str:
@@ -108,6 +110,95 @@ def find_main_junction(net: sumolib.net.Net, center_xy: tuple[float, float]) -> 
     if not tls_nodes:
         raise BuildError("netconvert made no signalised junction; check the OSM signals near the centre")
     return min(tls_nodes, key=lambda n: math.dist(n.getCoord(), center_xy))
+
+
+#: Signal nodes within this distance of the one nearest the centre belong to the same intersection:
+#: netconvert splits a junction of divided roads (a T onto a dual carriageway, a wide median) into several
+#: signal nodes when its OSM nodes lie further apart than junctions.join-dist [m].
+SIGNAL_GROUP_DIST_M = 60.0
+#: Kerb corner of each arm under right-hand traffic: vehicles approaching from the north drive on the
+#: west half of that arm, so the pole that watches them stands on its north-west corner.
+KERB_CORNER = {"N": "NW", "E": "NE", "S": "SE", "W": "SW"}
+
+
+def lane_defaults(osm_path: Path, typemap_paths: list[Path]) -> dict[str, dict]:
+    """Road classes of the clip whose ways carry no lane tag, with how many such ways and the lanes per
+    direction the build gives them (the last typemap that defines the class wins, as in netconvert)."""
+    import xml.etree.ElementTree as ET
+
+    lanes_by_type: dict[str, int] = {}
+    for typemap in typemap_paths:
+        for t in ET.parse(typemap).getroot().iter("type"):
+            if t.get("numLanes"):
+                lanes_by_type[t.get("id")] = int(t.get("numLanes"))
+    kept = set()
+    for option in ET.parse(NETCONVERT_OPTIONS).getroot().iter("keep-edges.by-type"):
+        kept = set(option.get("value").split(","))
+    _nodes, ways, _relations = read_osm(osm_path)
+    found: dict[str, dict] = {}
+    for way in ways.values():
+        road_type = f"highway.{way.tags.get('highway', '')}"
+        if road_type not in kept or any(k in way.tags for k in ("lanes", "lanes:forward", "lanes:backward")):
+            continue
+        entry = found.setdefault(road_type, {"ways": 0, "lanes_per_direction": lanes_by_type.get(road_type)})
+        entry["ways"] += 1
+    return dict(sorted(found.items()))
+
+
+def signal_group(net: sumolib.net.Net, center_xy: tuple[float, float]) -> list:
+    """The signal nodes of the intersection at the centre: the one nearest it and every signal node within
+    SIGNAL_GROUP_DIST_M of that one."""
+    main = find_main_junction(net, center_xy)
+    tls_nodes = [n for n in net.getNodes() if n.getType().startswith("traffic_light")]
+    group = [n for n in tls_nodes if math.dist(n.getCoord(), main.getCoord()) <= SIGNAL_GROUP_DIST_M]
+    return sorted(group, key=lambda n: n.getID() != main.getID())
+
+
+def _vehicle_lane_count(edge) -> int:
+    return sum(lane.allows("passenger") for lane in edge.getLanes())
+
+
+def _has_crossing(net, node, edge) -> bool:
+    return any(
+        c.getFunction() == "crossing"
+        and edge in c._crossingEdges
+        and c.getID().startswith(f":{node.getID()}_")
+        for c in net.getEdges(withInternal=True)
+    )
+
+
+def choose_approach(net: sumolib.net.Net, group: list, preferred_arm: str | None = None):
+    """(junction, arm) of the approach the scenarios are staged on: among the roads entering the signal
+    nodes of `group` from outside it, the best by (the preferred arm, two or more vehicle lanes, a
+    sidewalk, a crosswalk at the stop line, a leaving carriageway on the same arm, most vehicle lanes).
+    BuildError when no road enters the intersection."""
+    group_ids = {n.getID() for n in group}
+    candidates = []
+    for node in group:
+        centre = node.getCoord()
+        leaving_arms = {
+            compass_sector(centre, e.getShape()[-1])
+            for e in node.getOutgoing()
+            if e.getFunction() == "" and _vehicle_lane_count(e) and e.getToNode().getID() not in group_ids
+        }
+        for edge in node.getIncoming():
+            if edge.getFunction() or not _vehicle_lane_count(edge) or edge.getFromNode().getID() in group_ids:
+                continue
+            arm = compass_sector(centre, edge.getShape()[0])
+            sidewalk = edge.getLane(0).getPermissions() == {"pedestrian"}
+            score = (
+                arm == preferred_arm,
+                _vehicle_lane_count(edge) >= 2,
+                sidewalk,
+                _has_crossing(net, node, edge),
+                arm in leaving_arms,
+                _vehicle_lane_count(edge),
+            )
+            candidates.append((score, edge.getID(), node, arm))
+    if not candidates:
+        raise BuildError("no road enters the signalised junction at the centre")
+    _score, _edge, node, arm = max(candidates, key=lambda c: (c[0], c[1]))
+    return node, arm
 
 
 def _arm_axis(junction, arm: str) -> tuple[float, float]:
@@ -216,15 +307,10 @@ def place_roadside_unit_across(
 
     incoming = [e for e in junction.getIncoming() if in_arm(e, e.getShape()[0]) and vehicle_lanes(e)]
     outgoing = [e for e in junction.getOutgoing() if in_arm(e, e.getShape()[-1]) and vehicle_lanes(e)]
-    if not incoming or not outgoing:
-        raise BuildError(f"the main junction's {watch_arm} arm has no incoming and leaving carriageway")
+    if not incoming:
+        raise BuildError(f"the main junction's {watch_arm} arm has no incoming carriageway")
     approach = max(incoming, key=lambda e: len(vehicle_lanes(e)))
     kerb_lane = vehicle_lanes(approach)[0]
-    leaving = min(outgoing, key=lambda e: _distance_to_shape(kerb_lane.getShape()[-1], e.getShape()))
-    sidewalks = [lane for lane in leaving.getLanes() if lane.getPermissions() == {"pedestrian"}]
-    if not sidewalks:
-        raise BuildError(f"the leaving carriageway {leaving.getID()} of the {watch_arm} arm has no sidewalk")
-    sidewalk = sidewalks[0]  # lane 0: the outermost
 
     def before_stop_line(distance_m: float) -> tuple[float, float]:
         return sumolib.geomhelper.positionAtShapeOffset(
@@ -232,6 +318,23 @@ def place_roadside_unit_across(
         )
 
     abreast = before_stop_line(abreast_m)
+    sidewalks = []
+    if outgoing:
+        leaving = min(outgoing, key=lambda e: _distance_to_shape(kerb_lane.getShape()[-1], e.getShape()))
+        sidewalks = [lane for lane in leaving.getLanes() if lane.getPermissions() == {"pedestrian"}]
+    if not sidewalks:
+        # A one-way approach, or a leaving road without a sidewalk: the pole stands beyond the far
+        # (left) edge of the approach itself, as far from its kerb lane as the far sidewalk would be.
+        far_lane = vehicle_lanes(approach)[-1]
+        x, y = abreast
+        heading = sumolib.geomhelper.rotationAtShapeOffset(
+            kerb_lane.getShape(), max(kerb_lane.getLength() - abreast_m, 0.0)
+        )
+        left_m = (len(vehicle_lanes(approach)) - 0.5) * far_lane.getWidth() + RSU_ACROSS_SETBACK_M + 1.0
+        pole = (x - left_m * math.sin(heading), y + left_m * math.cos(heading))
+        return _pole_aimed_at(pole, before_stop_line(aim_m), "across", watch_arm)
+    sidewalk = sidewalks[0]  # lane 0: the outermost
+
     offset = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(abreast, sidewalk.getShape())
     sx, sy = sumolib.geomhelper.positionAtShapeOffset(sidewalk.getShape(), offset)
     dx, dy = sx - abreast[0], sy - abreast[1]
@@ -377,8 +480,8 @@ def build_site(
     clip_out: Path,
     clip: bool = True,
     patches_dir: Path | None = None,
-    rsu_corner: str = "NW",
-    rsu_watch_arm: str = "N",
+    rsu_corner: str | None = "NW",
+    rsu_watch_arm: str | None = "N",
     description: str = "",
     source_osm: Path | None = None,
     net_from: Path | None = None,
@@ -464,7 +567,14 @@ def build_site(
         except Exception as exc:  # sumolib raises bare SAX errors on a broken network
             raise BuildError(f"cannot read the network {net_from or net_file}: {exc}") from None
         center_xy = net.convertLonLat2XY(center_lon, center_lat)
-        junction = find_main_junction(net, center_xy)
+        # The approach the scenarios use: the watched arm when given, else the best one of every signal
+        # node of the intersection (netconvert may split it into several); its node is the main junction.
+        group = signal_group(net, center_xy)
+        junction, chosen_arm = choose_approach(net, group, rsu_watch_arm)
+        if rsu_watch_arm is not None and chosen_arm != rsu_watch_arm:
+            raise BuildError(f"the main junction has no arm towards {rsu_watch_arm}")
+        rsu_watch_arm = chosen_arm
+        rsu_corner = rsu_corner or KERB_CORNER[rsu_watch_arm]
         # Two poles: the corner pole watches the approach and its crosswalk (crossing, jaywalking); the
         # far-side pole looks across at the approach's stop-line queue (background blending).
         rsu_units = [
@@ -482,6 +592,10 @@ def build_site(
         marker = derived_marker(stage / net_file)
         for derived in (poly_file, f"{name}.rsu.add.xml"):
             _insert_after_declaration(stage / derived, marker)
+        defaults = lane_defaults(
+            staged_osm,
+            [*(stage / t for t in SUMO_TYPEMAPS), stage / URBAN_SPEEDS_TYPEMAP.name],
+        )
         site_info = {
             "name": name,
             "description": description,
@@ -494,6 +608,10 @@ def build_site(
             "rsu_watch_arm": rsu_watch_arm,
             "main_junction": junction.getID(),
             "main_junction_xy": [round(c, 2) for c in junction.getCoord()],
+            # Every signal node of the intersection (more than one when netconvert split it).
+            "signal_nodes": [n.getID() for n in group],
+            # OSM road classes without a lane tag and the lanes per direction the build gave them.
+            "lane_defaults": defaults,
             # "roadside_unit": the corner pole, whose watched arm is the scenarios' approach.
             "roadside_unit": rsu_units[0],
             "roadside_units": rsu_units,
@@ -524,7 +642,15 @@ def build_site(
             os.replace(tmp_target, target)
             written.append(target)
     return BuildReport(
-        name, out_dir, clip_out, written, unchanged, junction.getID(), time.perf_counter() - started
+        name,
+        out_dir,
+        clip_out,
+        written,
+        unchanged,
+        junction.getID(),
+        time.perf_counter() - started,
+        defaults,
+        [n.getID() for n in group],
     )
 
 
@@ -620,6 +746,16 @@ def main(argv: list[str] | None = None) -> int:
     except BuildError as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
+    if report.signal_nodes and len(report.signal_nodes) > 1:
+        print(
+            f"  the intersection has {len(report.signal_nodes)} signal nodes: "
+            + ", ".join(report.signal_nodes)
+        )
+    for road_type, entry in (report.lane_defaults or {}).items():
+        print(
+            f"  lane default: {entry['ways']} {road_type} way(s) without a lane tag get "
+            f"{entry['lanes_per_direction']} lane(s) per direction"
+        )
     for path in report.written:
         print(f"  wrote     {path}")
     for path in report.unchanged:
@@ -666,8 +802,9 @@ def _build(parser, args) -> BuildReport:
         args.osm_out or default_clip,
         clip=not args.no_clip,
         patches_dir=args.patches or (site.directory if same_site else out_dir) / "patches",
-        rsu_corner=args.rsu_corner or (site.rsu_corner if site else "NW"),
-        rsu_watch_arm=args.rsu_watch or (site.rsu_watch_arm if site else "N"),
+        # A new site's watched arm is chosen by the build (choose_approach), its pole on that arm's kerb.
+        rsu_corner=args.rsu_corner or (site.rsu_corner if same_site else None),
+        rsu_watch_arm=args.rsu_watch or (site.rsu_watch_arm if same_site else None),
         description=args.description if args.description is not None else (site.description if site else ""),
         source_osm=(site.source_osm if same_site else None) if args.no_clip else osm,
     )

@@ -115,9 +115,9 @@ def hosting_problem(spec, approach, roadside_units: dict, params: dict[str, Any]
     unseen = [p for p, s in zip(points, seen, strict=True) if not s]
     first = unseen[0]
     return (
-        f"roadside pole(s) {', '.join(spec.roadside_unit_ids)} do not see {len(unseen)} of the "
-        f"{len(points)} points of its staging area (first: {first.where}, at {first.xy[0]:.1f}, "
-        f"{first.xy[1]:.1f})"
+        f"not seen under V2I: roadside pole(s) {', '.join(spec.roadside_unit_ids)} do not see "
+        f"{len(unseen)} of the {len(points)} points of its staging area "
+        f"(first: {first.where}, at {first.xy[0]:.1f}, {first.xy[1]:.1f})"
     )
 
 
@@ -134,7 +134,7 @@ def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | N
     try:
         approach = load_approach(site)
     except ValueError as exc:
-        return {name: str(exc) for name in specs}
+        return {name: f"cannot be staged: {exc}" for name in specs}
     return {name: hosting_problem(spec, approach, by_id, params) for name, spec in specs.items()}
 
 
@@ -146,7 +146,7 @@ def check_hosting(site, specs: dict, params: dict[str, Any], conditions) -> None
         return
     for name, problem in site_hosting(site, specs, params).items():
         if problem:
-            raise SiteError(f"site {site.name} cannot host scenario '{name}' under V2I: {problem}")
+            raise SiteError(f"site {site.name} cannot host scenario '{name}': {problem}")
 
 
 def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
@@ -162,7 +162,7 @@ def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
             + (
                 "hosted (its roadside poles see its staging area)"
                 if problem is None
-                else f"NOT hosted under V2I: {problem}"
+                else f"NOT hosted: {problem}"
             )
         )
     return lines

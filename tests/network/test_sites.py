@@ -220,4 +220,6 @@ def test_a_pole_turned_away_cannot_host_the_crossing():
     spec = SCENARIOS["crossing"]
     problem = hosting_problem(spec, approach, turned, params)
     n = len(staging_points(spec, approach))
-    assert problem.startswith(f"roadside pole(s) rsu_camera_0 do not see {n} of the {n} points")
+    assert problem.startswith(
+        f"not seen under V2I: roadside pole(s) rsu_camera_0 do not see {n} of the {n} points"
+    )
