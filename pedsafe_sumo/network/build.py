@@ -227,6 +227,7 @@ def place_roadside_unit(
     corner: str = "NW",
     watch_arm: str = "N",
     aim_distance_m: float = RSU_AIM_DISTANCE_M,
+    setback_m: float = RSU_SETBACK_M,
 ) -> dict:
     """Pole on one corner of the junction, its camera watching one approach and its crosswalk.
 
@@ -249,7 +250,7 @@ def place_roadside_unit(
     cx, cy = max(corners, key=lambda p: toward[0] * (p[0] - jx) + toward[1] * (p[1] - jy))
     dx, dy = cx - jx, cy - jy
     dist = math.hypot(dx, dy) or 1.0
-    px, py = cx + RSU_SETBACK_M * dx / dist, cy + RSU_SETBACK_M * dy / dist
+    px, py = cx + setback_m * dx / dist, cy + setback_m * dy / dist
     ax, ay = _arm_axis(junction, watch_arm)
     aim_xy = (jx + aim_distance_m * ax, jy + aim_distance_m * ay)
     return _pole_aimed_at((px, py), aim_xy, corner, watch_arm)
@@ -286,6 +287,7 @@ def place_roadside_unit_across(
     watch_arm: str = "N",
     abreast_m: float = RSU_ACROSS_ABREAST_M,
     aim_m: float = RSU_ACROSS_AIM_M,
+    setback_m: float = RSU_ACROSS_SETBACK_M,
 ) -> dict:
     """Pole on the far sidewalk of one arm, looking across at the approach's stop-line queue.
 
@@ -330,7 +332,7 @@ def place_roadside_unit_across(
         heading = sumolib.geomhelper.rotationAtShapeOffset(
             kerb_lane.getShape(), max(kerb_lane.getLength() - abreast_m, 0.0)
         )
-        left_m = (len(vehicle_lanes(approach)) - 0.5) * far_lane.getWidth() + RSU_ACROSS_SETBACK_M + 1.0
+        left_m = (len(vehicle_lanes(approach)) - 0.5) * far_lane.getWidth() + setback_m + 1.0
         pole = (x - left_m * math.sin(heading), y + left_m * math.cos(heading))
         return _pole_aimed_at(pole, before_stop_line(aim_m), "across", watch_arm)
     sidewalk = sidewalks[0]  # lane 0: the outermost
@@ -339,9 +341,53 @@ def place_roadside_unit_across(
     sx, sy = sumolib.geomhelper.positionAtShapeOffset(sidewalk.getShape(), offset)
     dx, dy = sx - abreast[0], sy - abreast[1]
     dist = math.hypot(dx, dy) or 1.0
-    px = sx + (sidewalk.getWidth() / 2 + RSU_ACROSS_SETBACK_M) * dx / dist
-    py = sy + (sidewalk.getWidth() / 2 + RSU_ACROSS_SETBACK_M) * dy / dist
+    px = sx + (sidewalk.getWidth() / 2 + setback_m) * dx / dist
+    py = sy + (sidewalk.getWidth() / 2 + setback_m) * dy / dist
     return _pole_aimed_at((px, py), before_stop_line(aim_m), "across", watch_arm)
+
+
+#: Where the build tries the poles, in order (the first placement is the one described above): the corner
+#: pole behind each corner of the junction, the watched arm's kerb corner first, at these setbacks [m];
+#: the far-side pole at these setbacks beyond the far sidewalk [m].
+RSU_SETBACKS_TRIED_M = (RSU_SETBACK_M, 4.0, 6.0)
+RSU_ACROSS_SETBACKS_TRIED_M = (RSU_ACROSS_SETBACK_M, 3.0, 5.0)
+
+
+def _place_poles(stage: Path, name: str, net, junction, corner: str, arm: str, poly_file: str) -> list[dict]:
+    """The two poles, each at the first placement tried where the scenarios that use it can be hosted
+    (pedsafe_sumo.network.hosting: its camera sees where their pedestrians start and most of their
+    path, past the buildings and trees of the site); the first placement when none is better."""
+    from pedsafe_sumo.network.hosting import hosted_count
+    from pedsafe_sumo.network.sites import Site
+
+    first = [
+        {"id": "rsu_camera_0", **place_roadside_unit(net, junction, corner, arm)},
+        {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, arm)},
+    ]
+    # The scenarios read the main junction and the watched arm from the site file.
+    (stage / f"{name}.site.json").write_text(
+        json.dumps({"main_junction": junction.getID(), "roadside_unit": first[0]}), encoding="utf-8"
+    )
+    site = Site(name, stage, "", 0.0, 0.0, 0.0, None, stage / f"{name}.osm", corner, arm)
+    corners = [corner] + [c for c in ("NW", "NE", "SE", "SW") if c != corner]
+    corner_poles = [
+        {"id": "rsu_camera_0", **place_roadside_unit(net, junction, c, arm, setback_m=setback)}
+        for c in corners
+        for setback in RSU_SETBACKS_TRIED_M
+    ]
+    best0 = max(
+        corner_poles,
+        key=lambda pole: (hosted_count(site, [pole, first[1]], poly_file), -corner_poles.index(pole)),
+    )
+    across_poles = [
+        {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, arm, setback_m=setback)}
+        for setback in RSU_ACROSS_SETBACKS_TRIED_M
+    ]
+    best1 = max(
+        across_poles,
+        key=lambda pole: (hosted_count(site, [best0, pole], poly_file), -across_poles.index(pole)),
+    )
+    return [best0, best1]
 
 
 def _distance_to_shape(point, shape) -> float:
@@ -457,6 +503,24 @@ def _apply_patches(stage: Path, name: str, net_file: str, patches_dir: Path | No
     return patch_args
 
 
+UNDERGROUND_POLY = re.compile(
+    r"[ \t]*<poly [^>]*[^/]>(?:(?!</poly>|<poly ).)*?"
+    r"(?:<param key=\"layer\" value=\"-|<param key=\"location\" value=\"underground)"
+    r"(?:(?!</poly>|<poly ).)*?</poly>\n",
+    re.DOTALL,
+)
+
+
+def _drop_underground(path: Path) -> int:
+    """Remove the polygons OSM puts below ground (a negative layer, location=underground: subway
+    stations drawn over the road) from a polyconvert file; they hide nothing from a camera. How many."""
+    text = path.read_text(encoding="utf-8")
+    kept, dropped = UNDERGROUND_POLY.subn("", text)
+    if dropped:
+        path.write_text(kept, encoding="utf-8")
+    return dropped
+
+
 def _insert_after_declaration(path: Path, line: str) -> None:
     text = path.read_text(encoding="utf-8")
     end = text.index("?>") + 2 if text.startswith("<?xml") else 0
@@ -562,6 +626,7 @@ def build_site(
             "polyconvert",
         )
 
+        dropped_underground = _drop_underground(stage / poly_file)
         try:
             net = sumolib.net.readNet(str(stage / net_file), withInternal=True)
         except Exception as exc:  # sumolib raises bare SAX errors on a broken network
@@ -577,10 +642,7 @@ def build_site(
         rsu_corner = rsu_corner or KERB_CORNER[rsu_watch_arm]
         # Two poles: the corner pole watches the approach and its crosswalk (crossing, jaywalking); the
         # far-side pole looks across at the approach's stop-line queue (background blending).
-        rsu_units = [
-            {"id": "rsu_camera_0", **place_roadside_unit(net, junction, rsu_corner, rsu_watch_arm)},
-            {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, rsu_watch_arm)},
-        ]
+        rsu_units = _place_poles(stage, name, net, junction, rsu_corner, rsu_watch_arm, poly_file)
         _write_rsu(stage / f"{name}.rsu.add.xml", rsu_units)
         _write_view(stage / f"{name}.view.xml", junction.getCoord())
         _write_sumocfg(stage / f"{name}.sumocfg", name)
@@ -612,6 +674,8 @@ def build_site(
             "signal_nodes": [n.getID() for n in group],
             # OSM road classes without a lane tag and the lanes per direction the build gave them.
             "lane_defaults": defaults,
+            # Polygons OSM puts below ground, left out of the occluders (_drop_underground).
+            "underground_polygons_dropped": dropped_underground,
             # "roadside_unit": the corner pole, whose watched arm is the scenarios' approach.
             "roadside_unit": rsu_units[0],
             "roadside_units": rsu_units,

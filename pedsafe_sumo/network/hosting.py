@@ -6,8 +6,11 @@ the road at the nearest and farthest mid-block distances (jaywalking); behind a 
 line (background blending). A point is seen by a pole when a pedestrian standing there, as short as the
 shortest one the scenarios draw, passes the roadside camera's own culling (pedsafe_sumo.perception.
 sensors.plan_camera: in front of the camera, inside the image, at least min_height_px tall) with at least
-min_visible_fraction of its sample points inside the image. Occlusion is not part of the check: hiding
-the pedestrian is what the scenarios are about. Every point must be seen by one of the scenario's poles.
+min_visible_fraction of its sample points inside the image and in clear view past the site's static
+occluders (buildings, trees: the camera's own ray casting, finish_camera). Vehicles are not part of the
+check (hiding the pedestrian is what the scenarios are about), nor is the colour contrast (the clothing is
+drawn per episode). The scenario's poles must see where the pedestrian starts and at least half of the
+points of its path.
 
 The batch calls `check_hosting` before it writes anything; the build prints `hosting_lines` in its
 summary. A site that cannot host a scenario says why in one line.
@@ -31,6 +34,9 @@ PEDESTRIAN_RADIUS_M = 0.3
 class StagingPoint:
     where: str
     xy: tuple[float, float]
+    #: Where the pedestrian stands before stepping into the road (the kerb, the gap between parked cars,
+    #: behind the waiting car): the roadside camera has to see it there.
+    start: bool = False
 
 
 def staging_points(spec, approach) -> list[StagingPoint]:
@@ -51,6 +57,7 @@ def staging_points(spec, approach) -> list[StagingPoint]:
             StagingPoint(
                 f"crosswalk {approach.crosswalk_id}, {f * reach:.0%} across",
                 (ax + f * reach * (bx - ax), ay + f * reach * (by - ay)),
+                start=f == 0.0,
             )
             for f in np.linspace(0.0, 1.0, 5)
         ]
@@ -62,7 +69,8 @@ def staging_points(spec, approach) -> list[StagingPoint]:
                 start, end = line
                 f = (offset_m - offsets[0]) / (offsets[-1] - offsets[0]) if offsets[-1] != offsets[0] else 0.0
                 xy = (start[0] + f * (end[0] - start[0]), start[1] + f * (end[1] - start[1]))
-                points.append(StagingPoint(f"{distance_m:g} m before the stop line, {offset_m:+.1f} m", xy))
+                where = f"{distance_m:g} m before the stop line, {offset_m:+.1f} m"
+                points.append(StagingPoint(where, xy, start=offset_m == offsets[0]))
         return points
     # behind_waiting_vehicle: a car's length, the gap and the body behind a car at the stop line.
     behind_m = 0.5 + VEHICLE_CLASSES["car"].length_m + spec.blend_gap_max_m + PEDESTRIAN_RADIUS_M
@@ -70,15 +78,18 @@ def staging_points(spec, approach) -> list[StagingPoint]:
         StagingPoint(
             f"{behind_m:.1f} m before the stop line, {offset_m:+.1f} m",
             approach.across(0, stop_line_m - behind_m, offset_m, offset_m)[0],
+            start=offset_m == offsets[1],
         )
         for offset_m in offsets[1:]
     ]
 
 
-def _seen(spec, pose, points: list[StagingPoint]) -> np.ndarray:
-    """Per point: a pedestrian there passes the camera's culling and enough samples are in the image."""
-    from pedsafe_sumo.perception.sensors import plan_camera
-    from pedsafe_sumo.perception.world import Pedestrians
+def _seen(spec, pose, points: list[StagingPoint], static) -> np.ndarray:
+    """Per point: a pedestrian there passes the camera's culling and enough of its sample points are in
+    the image with a clear line of sight past the site's static occluders (buildings, trees)."""
+    from pedsafe_sumo.perception.pipeline import _NO_HITS, _cast_all
+    from pedsafe_sumo.perception.sensors import finish_camera, plan_camera
+    from pedsafe_sumo.perception.world import Pedestrians, VehicleBoxes, WorldSnapshot
 
     n = len(points)
     peds = Pedestrians.build(
@@ -89,15 +100,15 @@ def _seen(spec, pose, points: list[StagingPoint]) -> np.ndarray:
         [SHORTEST_PEDESTRIAN_M] * n,
         np.zeros((n, 3)),
     )
+    world = WorldSnapshot(0.0, VehicleBoxes.empty(), peds, static)
     plan = plan_camera(spec, pose, peds)
-    seen = np.zeros(n, dtype=bool)
-    if plan.ped.size:
-        in_image = plan.extra["in_image"].reshape(plan.ped.size, -1)
-        seen[plan.ped] = in_image.mean(axis=1) >= spec.min_visible_fraction
-    return seen
+    hits = _cast_all(world, [plan], -1, onboard=[False])[0] or _NO_HITS
+    # Colour contrast is left out: the clothing is drawn per episode.
+    result = finish_camera(spec, plan, hits, world, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    return (result.visible_fraction >= spec.min_visible_fraction) & (result.height_px >= spec.min_height_px)
 
 
-def hosting_problem(spec, approach, roadside_units: dict, params: dict[str, Any]) -> str | None:
+def hosting_problem(spec, approach, roadside_units: dict, params: dict[str, Any], static=None) -> str | None:
     """Why the site cannot host `spec` under V2I (one line), or None when it can."""
     from pedsafe_sumo.perception.pipeline import SensorSuite
 
@@ -105,25 +116,30 @@ def hosting_problem(spec, approach, roadside_units: dict, params: dict[str, Any]
     missing = [u for u in spec.roadside_unit_ids if u not in roadside_units]
     if missing:
         return f"the site has no roadside pole {', '.join(missing)}"
+    from pedsafe_sumo.perception.world import StaticOccluders
+
+    static = static if static is not None else StaticOccluders.empty()
     suite = SensorSuite.from_params(params["perception"], units)
     points = staging_points(spec, approach)
     seen = np.zeros(len(points), dtype=bool)
     for pose in suite.roadside_poses:
-        seen |= _seen(suite.roadside, pose, points)
-    if seen.all():
-        return None
+        seen |= _seen(suite.roadside, pose, points, static)
     unseen = [p for p, s in zip(points, seen, strict=True) if not s]
-    first = unseen[0]
-    return (
-        f"not seen under V2I: roadside pole(s) {', '.join(spec.roadside_unit_ids)} do not see "
-        f"{len(unseen)} of the {len(points)} points of its staging area "
+    hidden_starts = [p for p in unseen if p.start]
+    if not hidden_starts and 2 * len(unseen) <= len(points):
+        return None
+    first = (hidden_starts or unseen)[0]
+    return f"not seen under V2I: roadside pole(s) {', '.join(spec.roadside_unit_ids)} do not see " + (
+        f"where the pedestrian starts ({first.where}, at {first.xy[0]:.1f}, {first.xy[1]:.1f})"
+        if hidden_starts
+        else f"{len(unseen)} of the {len(points)} points of its staging area "
         f"(first: {first.where}, at {first.xy[0]:.1f}, {first.xy[1]:.1f})"
     )
 
 
 def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | None]:
     """Scenario name -> why the site cannot host it under V2I, or None."""
-    from pedsafe_sumo.perception.world import load_roadside_units
+    from pedsafe_sumo.perception.world import load_roadside_units, load_static_occluders
     from pedsafe_sumo.scenarios.geometry import load_approach
 
     rsu = params["perception"]["roadside_camera"]
@@ -135,7 +151,8 @@ def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | N
         approach = load_approach(site)
     except ValueError as exc:
         return {name: f"cannot be staged: {exc}" for name in specs}
-    return {name: hosting_problem(spec, approach, by_id, params) for name, spec in specs.items()}
+    static = load_static_occluders(site.file("poly.xml"), params["perception"]["occluders"])
+    return {name: hosting_problem(spec, approach, by_id, params, static) for name, spec in specs.items()}
 
 
 def check_hosting(site, specs: dict, params: dict[str, Any], conditions) -> None:
@@ -166,3 +183,32 @@ def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
             )
         )
     return lines
+
+
+def hosted_count(site, poles: list[dict], poly_file: str) -> int:
+    """How many registered scenarios (default settings) the site would host under V2I with these poles
+    (dicts as tools/build_network.py writes them); used by the build to place its poles."""
+    from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.perception.world import RoadsideUnit, load_static_occluders
+    from pedsafe_sumo.scenarios.geometry import load_approach
+    from pedsafe_sumo.scenarios.registry import SCENARIOS
+    from pedsafe_sumo.units import sumo_angle_to_yaw_rad
+
+    params = load_params(None)
+    try:
+        approach = load_approach(site)
+    except ValueError:
+        return 0
+    static = load_static_occluders(site.directory / poly_file, params["perception"]["occluders"])
+    units = {
+        p["id"]: RoadsideUnit(
+            id=p["id"],
+            x_m=p["x"],
+            y_m=p["y"],
+            height_m=p["height_m"],
+            yaw_rad=float(sumo_angle_to_yaw_rad(p["yaw_deg"])),
+            pitch_down_rad=math.radians(p["pitch_deg"]),
+        )
+        for p in poles
+    }
+    return sum(hosting_problem(spec, approach, units, params, static) is None for spec in SCENARIOS.values())
