@@ -219,7 +219,10 @@ def test_a_pole_turned_away_cannot_host_the_crossing():
     approach = load_approach(site)
     spec = SCENARIOS["crossing"]
     problem = hosting_problem(spec, approach, turned, params)
-    n = len(staging_points(spec, approach))
-    assert problem.startswith(
-        f"not seen under V2I: roadside pole(s) rsu_camera_0 do not see {n} of the {n} points"
+    start = staging_points(spec, approach)[0]
+    assert start.start
+    assert problem == (
+        "not seen under V2I: roadside pole(s) rsu_camera_0 do not see where the pedestrian starts "
+        f"({start.where}, at {start.xy[0]:.1f}, {start.xy[1]:.1f})"
     )
+    assert hosting_problem(spec, approach, units, params) is None
