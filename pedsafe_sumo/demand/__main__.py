@@ -28,8 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     start = time.perf_counter()
     try:
-        site = resolve_site(args.site)
-        args.site, args.net = site.name, args.net or site.file("net.xml")
+        if args.net is None:  # with --net, --site only names the output files
+            site = resolve_site(args.site)
+            args.site, args.net = site.name, site.file("net.xml")
         files = generate_demand(args.site, args.duration, args.seed, args.out, args.params, net_file=args.net)
     except (SiteError, ParameterError, ValueError, OSError) as exc:
         print(f"pedsafe_sumo.demand: error: {exc}", file=sys.stderr)

@@ -422,8 +422,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     started = time.perf_counter()
     try:
-        site = resolve_site(args.site)
-        args.site, args.net = site.name, args.net or site.file("net.xml")
+        if args.net is None:  # with --net, --site only names the output files
+            site = resolve_site(args.site)
+            args.site, args.net = site.name, site.file("net.xml")
         runs = validate(args)
         site = load_site(args.site, NETWORKS_DIR, args.net)
         n_loops = {
