@@ -46,7 +46,7 @@ from pedsafe_sumo.io.run_store import (
     holds_run,
     read_json,
 )
-from pedsafe_sumo.network.hosting import check_hosting
+from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
@@ -265,6 +265,13 @@ def prepare(args) -> Plan:
     load_agent_class(arguments["algorithm"])
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
+    if scenario == "all":  # every scenario the site can host; the others are named with the reason
+        scenarios, skipped = split_hosted(site, specs, params, conditions)
+        for name, why in skipped.items():
+            print(f"skipping scenario '{name}' on site {site.name}: {why}")
+        if not scenarios:
+            raise UsageError(f"site {site.name} hosts none of the scenarios (see the lines above)")
+        specs = {name: specs[name] for name in scenarios}
     check_hosting(site, specs, params, conditions)  # its roadside poles see each scenario's staging area
     reference = site_reference(arguments["site"], site)
     digests = site_file_digests(reference)

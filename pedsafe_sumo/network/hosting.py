@@ -155,6 +155,15 @@ def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | N
     return {name: hosting_problem(spec, approach, by_id, params, static) for name, spec in specs.items()}
 
 
+def split_hosted(site, specs: dict, params: dict[str, Any], conditions) -> tuple[list[str], dict[str, str]]:
+    """(names the site hosts, {name: why not} for the others) under these conditions; without V2I every
+    scenario the site can stage is hosted."""
+    if "v2i" not in conditions:
+        return list(specs), {}
+    problems = site_hosting(site, specs, params)
+    return [n for n in specs if problems[n] is None], {n: p for n, p in problems.items() if p is not None}
+
+
 def check_hosting(site, specs: dict, params: dict[str, Any], conditions) -> None:
     """SiteError (one line) when a scenario to run under V2I cannot be hosted by the site."""
     from pedsafe_sumo.network.sites import SiteError

@@ -177,3 +177,21 @@ def test_hosted_scenarios_run_with_roadside_detections_under_v2i(built, tmp_path
     assert (episodes["status"] == "ok").all(), episodes["error"].tolist()
     v2i = episodes[episodes["condition"] == "v2i"]
     assert len(v2i) == 2 and (v2i["detected_by"] == "roadside").any(), v2i["detected_by"].tolist()
+
+
+@pytest.mark.slow
+def test_scenario_all_runs_what_the_site_hosts_and_names_what_it_skips(built, tmp_path):
+    folder, _ = built["qinghua_link"]
+    out = tmp_path / "run"
+    proc = _run(
+        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--episodes", "1", "--workers", "1",
+        "--site", str(folder), "--out", str(out),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "skipping scenario 'crossing' on site qinghua_link: not seen under V2I" in proc.stdout
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    assert set(episodes["scenario"]) == {"jaywalking", "background_blending"}
+    assert list(json.loads((out / "run.json").read_text())["scenarios"]) == [
+        "jaywalking",
+        "background_blending",
+    ]
