@@ -104,12 +104,24 @@ def _add_comment(path: Path, text: str) -> None:
     path.write_text(content[:end] + f"\n<!-- {text} -->" + content[end:], encoding="utf-8")
 
 
+#: The main junction is a signal node at most this far from the site's centre [m]: beyond it, the nearest
+#: signal is another intersection (e.g. after the site's own signal was removed).
+MAIN_JUNCTION_MAX_DISTANCE_M = 60.0
+
+
 def find_main_junction(net: sumolib.net.Net, center_xy: tuple[float, float]) -> sumolib.net.node.Node:
-    """The traffic-light junction nearest the site centre."""
+    """The traffic-light junction nearest the site centre, within MAIN_JUNCTION_MAX_DISTANCE_M."""
     tls_nodes = [n for n in net.getNodes() if n.getType().startswith("traffic_light")]
     if not tls_nodes:
-        raise BuildError("netconvert made no signalised junction; check the OSM signals near the centre")
-    return min(tls_nodes, key=lambda n: math.dist(n.getCoord(), center_xy))
+        raise BuildError("the network has no signalised junction; check the OSM signals near the centre")
+    nearest = min(tls_nodes, key=lambda n: math.dist(n.getCoord(), center_xy))
+    distance_m = math.dist(nearest.getCoord(), center_xy)
+    if distance_m > MAIN_JUNCTION_MAX_DISTANCE_M:
+        raise BuildError(
+            f"the network has no signalised junction within {MAIN_JUNCTION_MAX_DISTANCE_M:g} m of the centre "
+            f"(the nearest, {nearest.getID()}, is {distance_m:.0f} m away)"
+        )
+    return nearest
 
 
 #: Signal nodes within this distance of the one nearest the centre belong to the same intersection:
