@@ -19,6 +19,7 @@ from pathlib import Path
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
+from pedsafe_sumo.network.hosting import check_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
@@ -120,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         site = resolve_site(args.site)
         specs, params = configure([args.scenario], args.params, args.set)
         check_roadside_units(specs, site)
+        check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
         agent_class = load_agent_class(args.algorithm)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:

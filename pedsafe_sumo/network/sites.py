@@ -122,12 +122,14 @@ def site_folder(name_or_path: str | os.PathLike) -> Path:
             )
         return folder
     folder = Path(text)
+    if folder.is_file():
+        raise SiteError(f"{folder} is a file: --site takes a site's name or its folder")
     if not folder.is_dir():
         raise SiteError(f"site folder {folder} does not exist")
     return folder
 
 
-def _site_file_in(folder: Path, hint: str) -> Path:
+def _site_file_in(folder: Path) -> Path:
     named = folder / f"{folder.resolve().name}.site.json"
     if named.is_file():
         return named
@@ -137,7 +139,7 @@ def _site_file_in(folder: Path, hint: str) -> Path:
     if not found:
         raise SiteError(
             f"{folder} is not a site folder (no <name>.site.json): build one with "
-            f"python tools/build_network.py --osm FILE --center LAT,LON --name NAME --out {hint}"
+            f"python tools/build_network.py --osm FILE --center LAT,LON --name NAME --out {folder}"
         )
     raise SiteError(f"{folder} holds several site files ({', '.join(p.name for p in found)}): keep one")
 
@@ -167,7 +169,7 @@ def read_site_file(path: Path, name: str) -> dict:
 def resolve_site(name_or_path: str | os.PathLike = DEFAULT_SITE, verify: bool = True) -> Site:
     """The site a --site value names, checked (verify_site) unless verify is False."""
     folder = site_folder(name_or_path)
-    site_file = _site_file_in(folder, str(name_or_path))
+    site_file = _site_file_in(folder)
     name = site_file.name.removesuffix(".site.json")
     info = read_site_file(site_file, name)
     try:
