@@ -37,6 +37,7 @@ class Dummy:
     width_m: float
     depth_m: float
     age_years: float
+    clothing_rgb: tuple[int, int, int]
 
     @property
     def radius_m(self) -> float:
@@ -116,7 +117,10 @@ def _num(value: float) -> str:
 @lru_cache(maxsize=2)
 def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
     raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    dummies = {name: Dummy(name=name, **values) for name, values in raw["dummies"].items()}
+    dummies = {
+        name: Dummy(name=name, **{**values, "clothing_rgb": tuple(values["clothing_rgb"])})
+        for name, values in raw["dummies"].items()
+    }
     tests = {}
     for name, t in raw["tests"].items():
         test = NcapTest(
