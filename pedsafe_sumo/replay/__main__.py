@@ -153,7 +153,10 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
 
 def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> EpisodeSetup:
     """The episode's initial world drawn from its seed as the batch did; the recorded one when the case
-    recorded a different one (then the drawing code changed since the run)."""
+    recorded a different one (then the drawing code changed since the run). A Euro NCAP cell
+    (pedsafe_sumo.ncap) is staged, not drawn: its recorded world is the world."""
+    if logged.run_info.get("kind") == "ncap" and logged.case_meta is not None:
+        return logged.case_meta["setup"]
     drawn = runner.draw_setup(logged.spec, logged.seed)
     if logged.case_meta is None:
         return drawn
