@@ -17,9 +17,9 @@ y_p (crossing) or at C (longitudinal); the test starts at least `start_ttc_s` be
 logs from SUMO's insertion step (time dt), when the ego's front is at its depart position and moves
 speed x dt per step; a walker with start delay d (on the step grid, >= dt) has walked speed x (t - d).
 
-A robustness variation keeps the ego and the timing of the nominal cell and changes the dummy only:
-its speed, its heading (the path turned about the nominal impact position) or its start (moved along
-the path), so the impact point moves or the dummy misses the ego, as on a test track.
+A robustness variation changes the dummy (its speed, its heading, or where it starts on its path) and
+keeps the cell on its collision course: without braking the ego still hits the dummy at the cell's
+impact point at the test speed (see the variations block in stage_cell).
 """
 
 from __future__ import annotations
@@ -207,6 +207,30 @@ def stage_cell(
         if test.obstructed:
             parked = _obstruction(protocol, approach, origin)
 
+    # Robustness variations, still on a collision course: the dummy reaches the nominal impact position
+    # at the nominal impact time. Speed: it starts farther or nearer for the same walking time. Start:
+    # it starts start_offset_m farther back along its path (to a whole step of walking) and sets off
+    # earlier; if that would be before the first step, the whole test starts later. Heading: its path is
+    # turned about the impact position.
+    ped_speed_mps = walk_mps
+    variation = cell.variation
+    walk_time_s = impact_time_s - delay_s
+    if variation.speed_delta_kmh:
+        ped_speed_mps = (test.ped_speed_kmh + variation.speed_delta_kmh) / KMH_PER_MPS
+        if ped_speed_mps <= 0:
+            raise NcapError(f"{cell.cell_id}: the varied dummy speed is not positive")
+    if variation.start_offset_m:
+        walk_time_s = _on_grid(walk_time_s + variation.start_offset_m / ped_speed_mps, step_length_s)
+        delay_s = impact_time_s - walk_time_s
+        if delay_s < step_length_s:
+            impact_time_s += step_length_s - delay_s
+            delay_s = step_length_s
+    start_along = -ped_speed_mps * walk_time_s
+    if variation.heading_delta_deg:
+        turn = math.radians(variation.heading_delta_deg)
+        c, s = math.cos(turn), math.sin(turn)
+        direction = (c * direction[0] - s * direction[1], s * direction[0] + c * direction[1])
+
     # The ego's front touches the dummy's circle at impact_time_s (a logged step; the first is at dt),
     # CONTACT_OVERLAP_M deep so that rounding cannot push the first contact to the step after.
     contact_m = c_sumo_m - (radius_m - CONTACT_OVERLAP_M) * per_drawn_m
@@ -216,18 +240,6 @@ def stage_cell(
             f"{cell.cell_id}: the approach is too short for this cell ({start_m:.1f} m of lane before "
             f"the ego's front at the start, {ego_size.length_m} m needed)"
         )
-
-    ped_speed_mps = walk_mps
-    variation = cell.variation
-    if variation.speed_delta_kmh:
-        ped_speed_mps = (test.ped_speed_kmh + variation.speed_delta_kmh) / KMH_PER_MPS
-        if ped_speed_mps <= 0:
-            raise NcapError(f"{cell.cell_id}: the varied dummy speed is not positive")
-    if variation.heading_delta_deg:
-        turn = math.radians(variation.heading_delta_deg)
-        c, s = math.cos(turn), math.sin(turn)
-        direction = (c * direction[0] - s * direction[1], s * direction[0] + c * direction[1])
-    start_along += variation.start_offset_m
     start_xy = (impact_xy[0] + start_along * direction[0], impact_xy[1] + start_along * direction[1])
     end_xy = (impact_xy[0] + end_along * direction[0], impact_xy[1] + end_along * direction[1])
 

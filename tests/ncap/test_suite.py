@@ -131,3 +131,38 @@ def test_an_oracle_braking_from_the_first_frame_avoids_every_cell(oracle, name):
     got = scores.loc[scores["test"] == name].iloc[0]
     # Every run cell green: the full standard and extended points of the cells that were run.
     assert got["points"] == pytest.approx(test.points_standard + test.points_extended)
+
+
+@pytest.mark.slow
+def test_robustness_variations_stay_on_the_collision_course(never):
+    # Never braking, every variation still hits at the cell's impact point; the relative impact speed
+    # by hand: the ego's 60 km/h minus the dummy's velocity along the lane. Crossing child (5 km/h)
+    # turned by 10 degrees: 60 -/+ 5 sin 10 = 59.13 / 60.87. Walker ahead: speed +3: 60 - 8 = 52,
+    # -2: 60 - 3 = 57; turned by 10 degrees: 60 - 5 cos 10 = 55.08.
+    cells = select_cells(PROTOCOL, "CPNCO-50,CPLA-50", (60.0,), robustness=True)
+    table = run_cells(never, PROTOCOL, cells, conditions=("sv",)).set_index("cell_id")
+    assert not table["avoided"].any()
+    assert (table["measured_impact_point_pct"] - 50).abs().max() < 1e-6
+    sin10, cos10 = math.sin(math.radians(10)), math.cos(math.radians(10))
+    expected_kmh = {
+        "CPNCO-50_60kmh": 60,
+        "CPNCO-50_60kmh_speed+3": 60,
+        "CPNCO-50_60kmh_speed-2": 60,
+        "CPNCO-50_60kmh_heading+10": 60 + 5 * sin10,
+        "CPNCO-50_60kmh_heading-10": 60 - 5 * sin10,
+        "CPNCO-50_60kmh_start+0.5": 60,
+        "CPNCO-50_60kmh_start-0.5": 60,
+        "CPLA-50_60kmh": 55,
+        "CPLA-50_60kmh_speed+3": 52,
+        "CPLA-50_60kmh_speed-2": 57,
+        "CPLA-50_60kmh_heading+10": 60 - 5 * cos10,
+        "CPLA-50_60kmh_heading-10": 60 - 5 * cos10,
+        "CPLA-50_60kmh_start+0.5": 55,
+        "CPLA-50_60kmh_start-0.5": 55,
+    }
+    assert table.loc[list(expected_kmh), "impact_speed_kmh"].to_numpy() == pytest.approx(
+        list(expected_kmh.values()), abs=1e-6
+    )
+    # Robustness runs are reported, not scored: the points come from the nominal cells alone.
+    scores = score_tests(PROTOCOL, table.reset_index())
+    assert scores.loc[scores["test"] == "overall", "cells"].item() == 2
