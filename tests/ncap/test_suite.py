@@ -1,6 +1,7 @@
 """The Euro NCAP suite in real SUMO on the Xueqing approach: a never-braking stack scores 0 and hits at
 the test speed where the cell says; an oracle braking at 9 m/s2 from the first frame avoids every cell
-(each is avoidable: worked out by hand below); every cell stages on the site."""
+(each is avoidable: worked out by hand below); every cell stages on the site, and on a second site built
+from the shared OSM export."""
 
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ from agents import ORACLE_DECELERATION_MPS2, BrakesFromFirstFrame, NeverBrakes  
 from pedsafe_sumo.ncap.protocol import load_protocol, select_cells  # noqa: E402
 from pedsafe_sumo.ncap.staging import stage_cell  # noqa: E402
 from pedsafe_sumo.ncap.suite import run_cells, score_tests  # noqa: E402
-from pedsafe_sumo.network.sites import get_site  # noqa: E402
+from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, SHARED_OSM_SOURCE, Site, get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
+from pedsafe_sumo.scenarios.geometry import load_approach  # noqa: E402
 from pedsafe_sumo.sim.episode import EpisodeRunner  # noqa: E402
 
 PROTOCOL = load_protocol()
@@ -166,3 +168,42 @@ def test_robustness_variations_stay_on_the_collision_course(never):
     # Robustness runs are reported, not scored: the points come from the nominal cells alone.
     scores = score_tests(PROTOCOL, table.reset_index())
     assert scores.loc[scores["test"] == "overall", "cells"].item() == 2
+
+
+def _second_site(folder: Path) -> Site:
+    """Another signalised junction of the shared OSM export (Xueqing Road, 750 m south of the study site),
+    built with tools/build_network.py into `folder`."""
+    from pedsafe_sumo.network.build import main as build_network
+
+    osm = SHARED_OSM_SOURCE
+    if not osm.is_file():
+        pytest.fail(f"the shared OSM export {osm} is missing")
+    code = build_network(
+        [
+            "--osm", str(osm), "--center", "39.99968,116.34651", "--radius", "200", "--name", "second",
+            "--out-dir", str(folder / "second"), "--osm-out", str(folder / "second.osm"),
+            "--patches", str(folder / "no_patches"),
+        ]
+    )  # fmt: skip
+    assert code in (0, None)
+    return Site("second", "Xueqing Road, 750 m south", 39.99968, 116.34651, 200.0, osm)
+
+
+@pytest.mark.slow
+def test_every_test_stages_and_hits_where_it_should_on_a_second_site(tmp_path, monkeypatch):
+    xueqing_edge = load_approach(SITE).edge_id
+    monkeypatch.setenv(NETWORKS_DIR_ENV, str(tmp_path))
+    site = _second_site(tmp_path)
+    runner = EpisodeRunner(site, load_params(), NeverBrakes)
+    try:
+        assert runner.approach.edge_id != xueqing_edge
+        for cell in select_cells(PROTOCOL, robustness=True):
+            stage_cell(PROTOCOL, runner.approach, site.file("net.xml"), cell, 0, STEP_S)
+        table = run_cells(runner, PROTOCOL, select_cells(PROTOCOL, None, (60.0,)), conditions=("sv",))
+    finally:
+        runner.close()
+    assert not table["avoided"].any()
+    relative = table["ego_speed_kmh"] - table["test"].map(lambda t: 5.0 if t == "CPLA" else 0.0)
+    assert table["impact_speed_kmh"].to_numpy() == pytest.approx(relative.to_numpy(), abs=1e-6)
+    midblock = table[table["test"].isin(["CPNCO", "CPLA"])]
+    assert (midblock["measured_impact_point_pct"] - midblock["impact_point_pct"]).abs().max() < 1e-6
