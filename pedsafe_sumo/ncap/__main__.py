@@ -103,13 +103,12 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     from pedsafe_sumo.io.episodes import to_table
     from pedsafe_sumo.ncap.figure import grid_figure
     from pedsafe_sumo.ncap.staging import spec_for, stage_cell
-    from pedsafe_sumo.ncap.suite import run_cells, score_tests
+    from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests
     from pedsafe_sumo.sim.connection import SimulatorError
-    from pedsafe_sumo.sim.episode import EpisodeRunner
 
     out: Path = args.out
     try:
-        runner = EpisodeRunner(site, params, agent_class)
+        runner = NcapRunner(site, params, agent_class)
     except (OSError, ValueError) as exc:
         return error(f"site {site.name}: {exc}")
     try:

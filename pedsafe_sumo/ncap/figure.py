@@ -40,14 +40,17 @@ def grid_figure(table: pd.DataFrame, path: Path) -> Path:
     )
     for i, test in enumerate(tests):
         of_test = nominal[nominal["test"] == test]
-        speeds = sorted(of_test["ego_speed_kmh"].unique())
+        turns = of_test["turn"].fillna("") if "turn" in of_test else pd.Series("", index=of_test.index)
+        row_keys = list(zip(turns, of_test["ego_speed_kmh"]))
+        # Rows as run (the protocol's order); a turning test's rows carry their turn.
+        speeds = list(dict.fromkeys(row_keys))
         points = sorted(of_test["impact_point_pct"].unique())
         for j, condition in enumerate(conditions):
             ax = axes[i][j]
             cells = of_test[of_test["condition"] == condition]
-            for _, cell in cells.iterrows():
+            for index, cell in cells.iterrows():
                 x = points.index(cell["impact_point_pct"])
-                y = len(speeds) - 1 - speeds.index(cell["ego_speed_kmh"])
+                y = len(speeds) - 1 - speeds.index(row_keys[of_test.index.get_loc(index)])
                 ax.add_patch(
                     Rectangle(
                         (x, y),
@@ -63,7 +66,8 @@ def grid_figure(table: pd.DataFrame, path: Path) -> Path:
             ax.set_xlim(0, len(points))
             ax.set_ylim(0, len(speeds))
             ax.set_xticks([k + 0.5 for k in range(len(points))], [f"{p:g}%" for p in points])
-            ax.set_yticks([k + 0.5 for k in range(len(speeds))], [f"{s:g}" for s in reversed(speeds)])
+            labels = [f"{turn} {speed:g}".strip() for turn, speed in reversed(speeds)]
+            ax.set_yticks([k + 0.5 for k in range(len(speeds))], labels)
             ax.set_title(f"{test} - {condition.upper()}")
             if j == 0:
                 ax.set_ylabel("ego speed [km/h]")

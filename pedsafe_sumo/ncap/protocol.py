@@ -21,7 +21,8 @@ else:  # pragma: no cover - Python 3.10
 
 PROTOCOL_PATH = Path(__file__).with_name("protocol.toml")
 COLOURS = ("green", "yellow", "orange", "brown", "red")
-APPROACHES = ("nearside", "farside", "longitudinal")
+APPROACHES = ("nearside", "farside", "longitudinal", "turning")
+CRITERIA = ("mitigation_or_avoidance", "avoidance")
 PLACEMENTS = ("crosswalk", "midblock")
 KMH_PER_MPS = 3.6
 
@@ -54,14 +55,29 @@ class NcapTest:
     approach: str
     placement: str
     obstructed: bool
-    speeds_kmh: tuple[float, ...]
+    #: The grid's rows: (turn, ego speed km/h); turn is "" except in the turning tests ("farside": a
+    #: left turn across the traffic, "nearside": a right turn).
+    rows: tuple[tuple[str, float], ...]
     impact_points_pct: tuple[float, ...]
+    #: Standard-range cells, as columns (every row) or as (turn, speed, pct) cells; the rest are extended.
     standard_pct: tuple[float, ...]
+    standard_cells: tuple[tuple[str, float, float], ...]
     points_standard: float
     points_extended: float
+    #: "mitigation_or_avoidance" (colour bands by impact speed) or "avoidance" (green only if avoided).
+    criterion: str = "mitigation_or_avoidance"
+    #: Turning tests: the dummy walks the exit's crosswalk in the "same" direction as the ego's initial
+    #: heading or the "opposite" one.
+    direction: str = ""
 
-    def test_range(self, impact_point_pct: float) -> str:
-        """ "standard" or "extended": which range of the test's points a column counts in."""
+    @property
+    def speeds_kmh(self) -> tuple[float, ...]:
+        return tuple(dict.fromkeys(speed for _, speed in self.rows))
+
+    def test_range(self, impact_point_pct: float, turn: str = "", speed_kmh: float | None = None) -> str:
+        """ "standard" or "extended": which range of the test's points a cell counts in."""
+        if self.standard_cells:
+            return "standard" if (turn, speed_kmh, impact_point_pct) in self.standard_cells else "extended"
         return "standard" if impact_point_pct in self.standard_pct else "extended"
 
 
@@ -84,15 +100,17 @@ class Cell:
     ego_speed_kmh: float
     impact_point_pct: float
     variation: Variation = NOMINAL
+    turn: str = ""
 
     @property
     def test_range(self) -> str:
-        return self.test.test_range(self.impact_point_pct)
+        return self.test.test_range(self.impact_point_pct, self.turn, self.ego_speed_kmh)
 
     @property
     def cell_id(self) -> str:
-        """Unique, file-name safe: CPNA-25_30kmh (and _speed+3 etc. for a robustness run)."""
-        base = f"{self.test.name}-{_num(self.impact_point_pct)}_{_num(self.ego_speed_kmh)}kmh"
+        """Unique, file-name safe: CPNA-25_30kmh, CPTAsame-50_farside10kmh (and _speed+3 etc. for a
+        robustness run)."""
+        base = f"{self.test.name}-{_num(self.impact_point_pct)}_{self.turn}{_num(self.ego_speed_kmh)}kmh"
         return base if self.variation is NOMINAL else f"{base}_{self.variation.name}"
 
 
@@ -131,16 +149,27 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
             approach=t["approach"],
             placement=t["placement"],
             obstructed=bool(t["obstructed"]),
-            speeds_kmh=tuple(float(s) for s in t["speeds_kmh"]),
+            rows=tuple((str(turn), float(speed)) for turn, speed in t["rows"])
+            if "rows" in t
+            else tuple(("", float(speed)) for speed in t["speeds_kmh"]),
             impact_points_pct=tuple(float(p) for p in t["impact_points_pct"]),
-            standard_pct=tuple(float(p) for p in t["standard_pct"]),
+            standard_pct=tuple(float(p) for p in t.get("standard_pct", ())),
+            standard_cells=tuple((str(a), float(b), float(c)) for a, b, c in t.get("standard_cells", ())),
             points_standard=float(t["points_standard"]),
             points_extended=float(t["points_extended"]),
+            criterion=t.get("criterion", "mitigation_or_avoidance"),
+            direction=t.get("direction", ""),
         )
         if test.approach not in APPROACHES or test.placement not in PLACEMENTS:
             raise NcapError(f"protocol test {name}: unknown approach or placement")
         if not set(test.standard_pct) <= set(test.impact_points_pct):
             raise NcapError(f"protocol test {name}: standard_pct not among impact_points_pct")
+        if test.criterion not in CRITERIA:
+            raise NcapError(f"protocol test {name}: unknown criterion '{test.criterion}'")
+        if (test.approach == "turning") != (test.direction in ("same", "opposite")):
+            raise NcapError(
+                f"protocol test {name}: a turning test, and only one, has direction same|opposite"
+            )
         tests[name] = test
     bands = {
         float(vut): tuple((str(colour), float(upper)) for colour, upper in edges)
@@ -223,11 +252,13 @@ def select_cells(
         if outside:
             grid = ", ".join(_num(s) for s in test.speeds_kmh)
             raise NcapError(f"--speeds: {name} has no {_num(outside[0])} km/h row (its grid: {grid})")
-        for speed in speeds:
+        for turn, speed in test.rows:
+            if speed not in speeds:
+                continue
             for pct in test.impact_points_pct:
                 if columns is not None and pct not in columns:
                     continue
-                cells.append(Cell(test, speed, pct))
+                cells.append(Cell(test, speed, pct, turn=turn))
                 if robustness:
-                    cells += [Cell(test, speed, pct, v) for v in protocol.robustness]
+                    cells += [Cell(test, speed, pct, v, turn) for v in protocol.robustness]
     return cells

@@ -6,7 +6,8 @@ OEM predictions; tests/ncap/test_scoring.py checks these functions against the c
 same inputs.
 
 - Colour: the relative impact speed v (km/h) in the bands of the cell's VUT speed (50 km/h and above use
-  the 50 km/h bands): green is v = 0 (avoided), the other bands are half-open [lower, upper).
+  the 50 km/h bands): green is v = 0 (avoided), the other bands are half-open [lower, upper). The
+  turning tests are scored on avoidance: green if avoided, red otherwise.
 - Cell score: standard-range cells by colour (green 1, yellow 0.75, orange 0.5, brown 0.25, red 0);
   extended-range cells 1 unless red.
 - Points of a test: points_standard x the mean standard cell score, plus points_extended x the mean
@@ -35,10 +36,15 @@ def bands_for(protocol: Protocol, vut_kmh: float) -> tuple[tuple[str, float], ..
     return protocol.bands[key]
 
 
-def band_colour(protocol: Protocol, vut_kmh: float, impact_speed_kmh: float) -> str:
-    """The true colour of a cell: its relative impact speed in the bands, no tolerance (green: avoided)."""
+def band_colour(
+    protocol: Protocol, vut_kmh: float, impact_speed_kmh: float, criterion: str = "mitigation_or_avoidance"
+) -> str:
+    """The true colour of a cell: its relative impact speed in the bands, no tolerance (green: avoided).
+    Under the "avoidance" criterion (the turning tests) any impact is red."""
     if not math.isfinite(impact_speed_kmh) or impact_speed_kmh <= 0.0:
         return "green"
+    if criterion == "avoidance":
+        return "red"
     lower = 0.0
     for colour, upper in bands_for(protocol, vut_kmh):
         if lower <= impact_speed_kmh < upper:

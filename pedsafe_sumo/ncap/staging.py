@@ -42,6 +42,8 @@ from pedsafe_sumo.scenarios.registry import (
 
 #: How far the ego's front is past first touching the dummy at the nominal impact step [m].
 CONTACT_OVERLAP_M = 0.001
+#: The ego starts on its approach lane at least this far before the lane's end (the stop line) [m].
+EGO_START_BEFORE_STOP_LINE_M = 1.0
 #: Every walker in a test is unaware of the ego: the dummy of a test track keeps its speed and path.
 DUMMY_RISK = "unaware"
 
@@ -104,6 +106,39 @@ def _locate(path, line=None, before_end_m: float = 0.0):
                 continue
         return done_m + offset * length / drawn, length / drawn, _frame(shape, offset)
     raise NcapError("the crosswalk does not cross the ego's path")
+
+
+@lru_cache(maxsize=16)
+def turning_movement(net_file: str, approach: Approach, turn: str) -> tuple[int, str, tuple]:
+    """(index of the approach lane, exit edge, the exit's crosswalk from end to end) of the farside turn
+    (a left turn across the oncoming traffic, in right-hand traffic) or the nearside one (right turn).
+    The crosswalk is the main junction's crossing over the exit edge."""
+    import sumolib
+
+    wanted = {"farside": "l", "nearside": "r"}.get(turn)
+    if wanted is None:
+        raise NcapError(f"unknown turn '{turn}' (known: farside, nearside)")
+    net = sumolib.net.readNet(net_file, withInternal=True)
+    for index, lane_id in enumerate(approach.lane_ids):
+        for connection in net.getLane(lane_id).getOutgoing():
+            if connection.getDirection() != wanted:
+                continue
+            exit_edge = connection.getTo()
+            crossings = [
+                c
+                for c in net.getEdges(withInternal=True)
+                if c.getFunction() == "crossing" and exit_edge in c._crossingEdges
+            ]
+            own = [c for c in crossings if c.getID().startswith(f":{approach.junction_id}_")]
+            if own or crossings:
+                shape = (own or crossings)[0].getLane(0).getShape()
+                return index, exit_edge.getID(), (tuple(shape[0]), tuple(shape[-1]))
+    raise NcapError(f"approach {approach.edge_id} has no {turn} turn into a road with a crosswalk")
+
+
+def _unit(a, b) -> tuple[float, float]:
+    length = math.dist(a, b)
+    return ((b[0] - a[0]) / length, (b[1] - a[1]) / length)
 
 
 def _frame(shape, offset_m: float):
@@ -177,15 +212,46 @@ def stage_cell(
     # CPLA: the kerb lane (a pedestrian walking along the road walks at its edge); crossings: the
     # median-side lane, the kerb lane free for CPNCO's parked vehicles.
     ego_lane = 0 if test.approach == "longitudinal" else n_lanes - 1
-    path = ego_path(str(net_file), approach.lane_ids[ego_lane], approach.through_route[1])
+    ego_route = approach.through_route
+    crosswalk = approach.crosswalk_path
+    if test.approach == "turning":
+        ego_lane, exit_edge, crosswalk = turning_movement(str(net_file), approach, cell.turn)
+        ego_route = (approach.edge_id, exit_edge)
+    path = ego_path(str(net_file), approach.lane_ids[ego_lane], ego_route[1])
     if test.placement == "crosswalk":
-        c_sumo_m, per_drawn_m, (origin, u, n) = _locate(path, line=approach.crosswalk_path)
+        c_sumo_m, per_drawn_m, (origin, u, n) = _locate(path, line=crosswalk)
     else:
         c_sumo_m, per_drawn_m, (origin, u, n) = _locate(path, before_end_m=protocol.midblock_distance_m)
     impact_xy = _at(origin, u, n, 0.0, y_p)
     parked: list[VehicleSetup] = []
+    # How far along the ego's path (drawn metres) the dummy's centre is from C at the impact.
+    along_c_m = 0.0
 
-    if test.approach == "longitudinal":
+    if test.approach == "turning":
+        # The dummy walks the exit's crosswalk, 1 m onto the sidewalk at both ends, in the ego's initial
+        # direction ("same") or against it; it is at lateral offset y_p from the ego's path at impact.
+        lane_shape = approach.lane_shapes[ego_lane]
+        u0 = _unit(lane_shape[-2], lane_shape[-1])
+        d = _unit(*crosswalk)
+        if (d[0] * u0[0] + d[1] * u0[1] > 0) != (test.direction == "same"):
+            d = (-d[0], -d[1])
+        first, last = sorted(crosswalk, key=lambda p: p[0] * d[0] + p[1] * d[1])
+        start = (first[0] - d[0], first[1] - d[1])
+        end = (last[0] + d[0], last[1] + d[1])
+        d_n = d[0] * n[0] + d[1] * n[1]
+        if abs(d_n) < 0.3:
+            raise NcapError(f"{cell.cell_id}: the exit crosswalk runs nearly along the ego's path")
+        walk_to_impact_m = (y_p - ((start[0] - origin[0]) * n[0] + (start[1] - origin[1]) * n[1])) / d_n
+        if not 0 <= walk_to_impact_m <= math.dist(start, end):
+            raise NcapError(f"{cell.cell_id}: the impact point is off the exit crosswalk")
+        impact_xy = (start[0] + walk_to_impact_m * d[0], start[1] + walk_to_impact_m * d[1])
+        along_c_m = (impact_xy[0] - origin[0]) * u[0] + (impact_xy[1] - origin[1]) * u[1]
+        direction = d
+        walk_s = _on_grid(walk_to_impact_m / walk_mps, step_length_s)
+        delay_s = _on_grid(max(protocol.start_ttc_s - walk_s, step_length_s), step_length_s)
+        impact_time_s = delay_s + walk_s
+        end_along = math.dist(impact_xy, end)
+    elif test.approach == "longitudinal":
         # The dummy walks from the first step; the relative speed closes the gap in start_ttc_s.
         delay_s = step_length_s
         impact_time_s = delay_s + protocol.start_ttc_s
@@ -233,8 +299,16 @@ def stage_cell(
 
     # The ego's front touches the dummy's circle at impact_time_s (a logged step; the first is at dt),
     # CONTACT_OVERLAP_M deep so that rounding cannot push the first contact to the step after.
-    contact_m = c_sumo_m - (radius_m - CONTACT_OVERLAP_M) * per_drawn_m
+    contact_m = c_sumo_m + (along_c_m - radius_m + CONTACT_OVERLAP_M) * per_drawn_m
     start_m = contact_m - v_mps * (impact_time_s - step_length_s)
+    first_lane_m = path[0][1]
+    if start_m > first_lane_m - EGO_START_BEFORE_STOP_LINE_M:
+        # A slow turn: the ego would start inside the junction. It starts on the approach instead, and
+        # the dummy sets off that much later.
+        later_s = _on_grid((start_m - first_lane_m + EGO_START_BEFORE_STOP_LINE_M) / v_mps, step_length_s)
+        impact_time_s += later_s
+        delay_s += later_s
+        start_m -= v_mps * later_s
     if start_m < ego_size.length_m:
         raise NcapError(
             f"{cell.cell_id}: the approach is too short for this cell ({start_m:.1f} m of lane before "
@@ -259,7 +333,7 @@ def stage_cell(
         scenario=cell.cell_id,
         seed=seed,
         ego=ego,
-        ego_route=approach.through_route,
+        ego_route=ego_route,
         pedestrian=pedestrian,
         parked=tuple(parked),
         conflict_xy=(float(impact_xy[0]), float(impact_xy[1])),

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Iterable
+from functools import lru_cache
 from typing import Any
 
 import pandas as pd
@@ -24,12 +25,44 @@ from pedsafe_sumo.sim.episode import EpisodeResult, EpisodeRunner
 #: The columns of ncap.csv: the issue's eight, then what explains them.
 CELL_COLUMNS = (
     "test", "ego_speed_kmh", "impact_point_pct", "condition", "avoided", "impact_speed_kmh", "colour",
-    "cell_score", "test_range", "variation", "cell_id", "measured_impact_point_pct", "end_reason",
+    "cell_score", "test_range", "turn", "variation", "cell_id", "measured_impact_point_pct", "end_reason",
     "first_detection_distance_m", "detected_by", "status", "error",
 )  # fmt: skip
 SCORE_COLUMNS = (
     "test", "condition", "points", "points_standard", "points_extended", "max_points", "cells", "complete",
 )  # fmt: skip
+
+
+class NcapRunner(EpisodeRunner):
+    """The engine, with the ego's movement through the junction held green for the whole test.
+
+    A Euro NCAP test has no signal: the ego drives its movement at the test speed. SUMO refuses to insert
+    a vehicle at speed whose next link is never a prioritised green ('G'), which is the case of the
+    permissive turns of Xueqing's signal program ('g' only); and a red could stop the ego's movement
+    mid-test. Nothing else in the scene is signalled: there is no other traffic, and the dummy is moved
+    by the test, not by SUMO.
+    """
+
+    def _populate(self, api, setup) -> None:
+        super()._populate(api, setup)
+        link = ego_signal_link(str(self.site.file("net.xml")), setup.ego.lane_id, setup.ego_route[1])
+        if link is not None:
+            tls_id, index = link
+            state = list(api.trafficlight.getRedYellowGreenState(tls_id))
+            state[index] = "G"
+            api.trafficlight.setRedYellowGreenState(tls_id, "".join(state))
+
+
+@lru_cache(maxsize=64)
+def ego_signal_link(net_file: str, lane_id: str, next_edge_id: str) -> tuple[str, int] | None:
+    """(traffic light id, link index) of the connection from `lane_id` to `next_edge_id`, or None."""
+    import sumolib
+
+    net = sumolib.net.readNet(net_file)
+    for connection in net.getLane(lane_id).getOutgoing():
+        if connection.getTo().getID() == next_edge_id and connection.getTLSID():
+            return connection.getTLSID(), connection.getTLLinkIndex()
+    return None
 
 
 def impact_of(result: EpisodeResult, direction: tuple[float, float]) -> tuple[float, float]:
@@ -52,7 +85,7 @@ def cell_row(protocol: Protocol, staged: StagedCell, condition: str, result: Epi
     cell = staged.cell
     collided = result.end_reason == "collision"
     speed_kmh, point_pct = impact_of(result, staged.ego_direction)
-    colour = band_colour(protocol, cell.ego_speed_kmh, speed_kmh if collided else 0.0)
+    colour = band_colour(protocol, cell.ego_speed_kmh, speed_kmh if collided else 0.0, cell.test.criterion)
     return {
         "test": cell.test.name,
         "ego_speed_kmh": cell.ego_speed_kmh,
@@ -63,6 +96,7 @@ def cell_row(protocol: Protocol, staged: StagedCell, condition: str, result: Epi
         "colour": colour,
         "cell_score": cell_score(protocol, colour, cell.test_range),
         "test_range": cell.test_range,
+        "turn": cell.turn,
         "variation": cell.variation.name,
         "cell_id": cell.cell_id,
         "measured_impact_point_pct": point_pct,
@@ -118,8 +152,8 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
             test.points_extended,
             zip(group["test_range"], group["cell_score"]),
         )
-        grid = {(s, p) for s in test.speeds_kmh for p in test.impact_points_pct}
-        ran = set(zip(group["ego_speed_kmh"], group["impact_point_pct"]))
+        grid = {(t, s, p) for t, s in test.rows for p in test.impact_points_pct}
+        ran = set(zip(group["turn"].fillna(""), group["ego_speed_kmh"], group["impact_point_pct"]))
         rows.append(
             {
                 "test": name,

@@ -20,41 +20,57 @@ from pedsafe_sumo.ncap.scoring import applied_colour, band_colour, cell_score, p
 
 PROTOCOL = load_protocol()
 #: Our test -> the calculator's load case (the day variant: the SUMO scene has no night).
-LOADCASE = {"CPNA": "CPNA day", "CPFA": "CPFA day", "CPNCO": "CPNCO day", "CPLA": "CPLA day"}
+LOADCASE = {
+    "CPNA": "CPNA day",
+    "CPFA": "CPFA day",
+    "CPNCO": "CPNCO day",
+    "CPLA": "CPLA day",
+    "CPTAsame": "CPTAfs & CPTAns",
+    "CPTAopposite": "CPTAfo & CPTAno",
+}
 COLOUR = {c.value.lower(): c for c in common.PredictionColor if c.value.lower() in PROTOCOL.cell_scores}
 IMPACT_SPEEDS_KMH = (0.0, 0.5, 1.99, 2.0, 9.99, 10.0, 11.99, 12.0, 19.99, 20.0, 28.0, 30.0, 31.9, 32.0, 45.0)
 
 
-def _template_grid(loadcase: str) -> tuple[list[float], list[float]]:
-    """(VUT speeds, impact locations in %) of a load case's AEB rows in the calculator's template."""
+def _template_grid(loadcase: str) -> tuple[list[tuple[str, float]], list[float], str]:
+    """(rows as (turn, VUT speed), impact locations in %, target direction) of a load case's rows in the
+    calculator's template (turn and direction empty where the sheet has none)."""
     path = resources.files("euroncap_rating_2026").joinpath("../data/ca_template.xlsx")
     sheet = openpyxl.load_workbook(str(path))["FC - Ped & Cyc pred."]
     first = next(r for r in range(1, sheet.max_row + 1) if sheet.cell(r, 1).value == loadcase)
     start_col = data_model.MATRIX_INDICES[loadcase]["start_col"] + 1  # 0-based in the calculator
     n_cols = data_model.MATRIX_INDICES[loadcase]["n_cols"]
     locations = [round(100 * sheet.cell(first + 1, c).value) for c in range(start_col, start_col + n_cols)]
-    speeds = []
+    turning = sheet.cell(first, 2).value == "Turn"
+    rows, direction = [], ""
     row = first + 2
     while sheet.cell(row, 1).value:
         if loadcase.startswith("CPLA") and sheet.cell(row, 3).value != "AEB":
             break  # the FCW/AEB choice band, not staged (protocol.toml)
-        speeds.append(float(sheet.cell(row, 1).value.split()[0]))
+        turn = sheet.cell(row, 2).value.lower() if turning else ""
+        direction = sheet.cell(row, 3).value.lower() if turning else ""
+        rows.append((turn, float(sheet.cell(row, 1).value.split()[0])))
         row += 1
-    return speeds, locations
+    return rows, locations, direction
 
 
 @pytest.mark.parametrize("name", list(LOADCASE))
 def test_grids_are_the_calculators(name):
     test = PROTOCOL.tests[name]
-    speeds, locations = _template_grid(LOADCASE[name])
-    assert list(test.speeds_kmh) == speeds
+    rows, locations, direction = _template_grid(LOADCASE[name])
+    assert list(test.rows) == rows
+    assert test.direction == direction
     assert sorted(test.impact_points_pct) == sorted(locations)
-    # Standard vs extended range: the calculator's static map, column by column.
-    for row, col in itertools.product(range(len(speeds)), range(len(locations))):
+    # Standard vs extended range: the calculator's static map, cell by cell.
+    for (row, (turn, speed)), (col, pct) in itertools.product(enumerate(rows), enumerate(locations)):
         theirs = matrix_processing.check_extended_range(row, col, LOADCASE[name])
-        assert test.test_range(locations[col]) == theirs.value.lower(), (name, row, locations[col])
+        assert test.test_range(pct, turn, speed) == theirs.value.lower(), (name, turn, speed, pct)
     assert test.points_standard == data_model.TOTAL_SCORES[LOADCASE[name]]["Standard"]
     assert test.points_extended == data_model.TOTAL_SCORES[LOADCASE[name]]["Extended"]
+    # The criterion: the turning tests are scored on avoidance, the others on mitigation or avoidance.
+    criteria = {"avoidance": data_model.NcapTestCriteria.AVOIDANCE}
+    expected = criteria.get(test.criterion, data_model.NcapTestCriteria.MITIGATION_OR_AVOIDANCE)
+    assert data_model.get_criteria_for_test(LOADCASE[name]) == expected
 
 
 def _calculator_point(loadcase, vut_kmh, impact_kmh, predicted, test_range="Standard"):
@@ -66,6 +82,14 @@ def _calculator_point(loadcase, vut_kmh, impact_kmh, predicted, test_range="Stan
         attributes={"VUT speed": f"{vut_kmh:g} km/h"},
     )
     return matrix_processing.ComputedTestPoint(point, test_name=loadcase, value=impact_kmh)
+
+
+@pytest.mark.parametrize("vut_kmh", [10.0, 15.0, 20.0, 25.0])
+def test_turning_colours_equal_the_calculators(vut_kmh):
+    for impact_kmh, predicted in itertools.product(IMPACT_SPEEDS_KMH, COLOUR):
+        theirs = _calculator_point("CPTAfs & CPTAns", vut_kmh, impact_kmh, predicted)
+        colour = band_colour(PROTOCOL, vut_kmh, impact_kmh, PROTOCOL.tests["CPTAsame"].criterion)
+        assert colour == theirs.measured_color.value.lower(), (impact_kmh, predicted)
 
 
 @pytest.mark.parametrize("vut_kmh", [10.0, 20.0, 30.0, 40.0, 50.0, 60.0])
