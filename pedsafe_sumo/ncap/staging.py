@@ -12,6 +12,11 @@ at lateral offset -W/2 from C, so impact point p % lies at lateral offset y_p = 
   `midblock_distance_m` before the stop line (CPNCO).
 - Longitudinal test (CPLA): the ego drives the kerb lane; the dummy walks ahead of it in its direction,
   at y_p, and is at C (`midblock_distance_m` before the stop line) at the nominal impact.
+- Turning tests (CPTA): the ego turns left (farside) or right (nearside) from the approach lane that has
+  the movement; C is where its path crosses the main junction's crosswalk over the exit road, and the
+  dummy walks that crosswalk (1 m onto the sidewalks at both ends) in the ego's initial direction
+  ("same") or against it ("opposite"), at lateral offset y_p from the ego's path at the impact. A slow
+  turn whose run-up would start inside the junction starts on the approach and the dummy later.
 Timing: without braking the ego's front reaches the dummy's circle exactly when the dummy's centre is at
 y_p (crossing) or at C (longitudinal); the test starts at least `start_ttc_s` before that. The engine
 logs from SUMO's insertion step (time dt), when the ego's front is at its depart position and moves
