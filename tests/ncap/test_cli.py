@@ -67,20 +67,30 @@ def test_results_already_written_are_refused_and_kept(tmp_path, capsys):
 def test_a_small_grid_writes_the_issues_files_and_any_cell_replays(tmp_path):
     out = tmp_path / "run"
     done = ncap(
-        "--out", str(out), "--tests", "CPNA-25,CPNA-75", "--speeds", "40", "--algorithm", "agents:NeverBrakes"
+        "--out",
+        str(out),
+        "--tests",
+        "CPNA-25,CPTAsame-50",
+        "--speeds",
+        "10",
+        "--algorithm",
+        "agents:NeverBrakes",
     )
     assert done.returncode == 0, done.stderr
     table = pd.read_csv(out / "ncap.csv")
     assert list(table.columns[: len(ISSUE_COLUMNS)]) == ISSUE_COLUMNS
-    assert len(table) == 4 and set(table["condition"]) == {"sv", "v2i"}
-    assert not table["avoided"].any() and (table["impact_speed_kmh"].round(6) == 40).all()
+    # CPNA-25 at 10 km/h, CPTAsame-50 farside and nearside at 10 km/h; each under SV and V2I.
+    assert len(table) == 6 and set(table["condition"]) == {"sv", "v2i"}
+    assert not table["avoided"].any() and (table["colour"] == "red").all()
+    assert (table["impact_speed_kmh"] - 10).abs().max() < 1.0
     scores = pd.read_csv(out / "ncap_scores.csv")
-    assert set(scores["test"]) == {"CPNA", "overall"} and (scores["points"] == 0).all()
+    assert set(scores["test"]) == {"CPNA", "CPTAsame", "overall"} and (scores["points"] == 0).all()
     assert (out / "figures" / "ncap_grid.png").stat().st_size > 0
-    assert len(list((out / "cases").glob("*.parquet"))) == 4
+    assert len(list((out / "cases").glob("*.parquet"))) == 6
 
+    # A turning cell replays too (the engine holding the ego's movement green, as the suite ran it).
     fcd = tmp_path / "cell.fcd.xml"
-    cell = table["cell_id"].iloc[0]
+    cell = "CPTAsame-50_nearside10kmh"
     replay = ncap(
         str(out), "--scenario", cell, "--episode", "0", "--condition", "v2i", "--export-fcd", str(fcd),
         module="pedsafe_sumo.replay",
