@@ -219,3 +219,28 @@ def test_every_test_stages_and_hits_where_it_should_on_a_second_site(tmp_path, m
     assert straight["impact_speed_kmh"].to_numpy() == pytest.approx(relative.to_numpy(), abs=1e-6)
     midblock = table[table["test"].isin(["CPNCO", "CPLA"])]
     assert (midblock["measured_impact_point_pct"] - midblock["impact_point_pct"]).abs().max() < 1e-6
+
+
+@pytest.mark.slow
+def test_the_same_seed_gives_the_same_results_and_the_staging_draws_nothing():
+    # The reference stack under V2I draws perception noise from the seed: the same seed repeats the run
+    # exactly; the staged world does not depend on the seed at all.
+    from pedsafe_sumo.control.reference import ReferenceStack
+
+    cells = select_cells(PROTOCOL, "CPNCO-25,CPLA-50", (60.0,))
+    runner = NcapRunner(SITE, load_params(), ReferenceStack)
+    try:
+        first = run_cells(runner, PROTOCOL, cells, conditions=("v2i",), seed=7)
+        again = run_cells(runner, PROTOCOL, cells, conditions=("v2i",), seed=7)
+        staged = [
+            stage_cell(PROTOCOL, runner.approach, SITE.file("net.xml"), c, s, STEP_S)
+            for c in cells
+            for s in (0, 7)
+        ]
+    finally:
+        runner.close()
+    assert first.equals(again)
+    assert (
+        staged[0].setup.pedestrian == staged[1].setup.pedestrian
+        and staged[0].setup.ego == staged[1].setup.ego
+    )
