@@ -261,7 +261,6 @@ def stage_cell(
         delay_s = step_length_s
         impact_time_s = delay_s + protocol.start_ttc_s
         direction = u
-        start_along = -walk_mps * (impact_time_s - delay_s)
         end_along = walk_mps * protocol.time_after_impact_s
     else:
         # Lateral offsets from C: the middle of the kerb-side sidewalk, and its mirror on the far side.
@@ -274,7 +273,7 @@ def stage_cell(
         walk_s = _on_grid(abs(y_p - start_left) / walk_mps, step_length_s)
         delay_s = _on_grid(max(protocol.start_ttc_s - walk_s, step_length_s), step_length_s)
         impact_time_s = delay_s + walk_s
-        start_along, end_along = -walk_mps * walk_s, abs(end_left - y_p)
+        end_along = abs(end_left - y_p)
         if test.obstructed:
             parked = _obstruction(protocol, approach, origin)
 
