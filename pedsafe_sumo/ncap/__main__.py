@@ -131,8 +131,23 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     with tqdm(total=len(cells) * len(conditions), unit="run", mininterval=1.0, file=sys.stderr) as bar:
 
         def on_result(cell, condition, result, row) -> None:
-            write_case(out / "cases", result)
-            episodes.append({**result.outcome, "episode": 0})
+            if result is None:  # the AD stack raised: recorded as an error, like the batch does
+                episodes.append(
+                    {
+                        "scenario": cell.cell_id,
+                        "condition": condition,
+                        "episode": 0,
+                        "seed": seed,
+                        "collision": False,
+                        "conflict": False,
+                        "sumo_collision": False,
+                        "status": "error",
+                        "error": row["error"],
+                    }
+                )
+            else:
+                write_case(out / "cases", result)
+                episodes.append({**result.outcome, "episode": 0})
             bar.update(1)
 
         try:
@@ -164,7 +179,11 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     _write(out / "ncap_scores.csv", lambda p: scores.to_csv(p, index=False))
     _write(out / "run.json", lambda p: p.write_text(json.dumps(run_info, indent=1, default=str) + "\n"))
     figure = grid_figure(table, out / "figures" / "ncap_grid.png")
-    print(f"{len(table)} runs in {wall_s:.1f} s; cases in {out / 'cases'}; figure {figure}")
+    n_error = int((table["status"] == "error").sum())
+    print(
+        f"{len(table)} runs in {wall_s:.1f} s ({n_error} error(s): see ncap.csv's error column); "
+        f"cases in {out / 'cases'}; figure {figure}"
+    )
     with pd.option_context("display.width", 120):
         print(scores.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     return 0

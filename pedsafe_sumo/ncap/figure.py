@@ -21,6 +21,10 @@ BAND_FILL = {
 }
 
 
+#: A run that raised has no colour.
+ERROR_FILL = "#b0b0b0"
+
+
 def grid_figure(table: pd.DataFrame, path: Path) -> Path:
     """One row of panels per test, one column per condition; writes `path` (PNG) and returns it."""
     import matplotlib
@@ -56,12 +60,12 @@ def grid_figure(table: pd.DataFrame, path: Path) -> Path:
                         (x, y),
                         1,
                         1,
-                        facecolor=BAND_FILL[cell["colour"]],
+                        facecolor=BAND_FILL.get(cell["colour"], ERROR_FILL),
                         edgecolor="black",
                         hatch="//" if cell["test_range"] == "extended" else None,
                     )
                 )
-                if not cell["avoided"]:
+                if not cell["avoided"] and cell["colour"] in BAND_FILL:
                     ax.text(x + 0.5, y + 0.5, f"{cell['impact_speed_kmh']:.0f}", ha="center", va="center")
             ax.set_xlim(0, len(points))
             ax.set_ylim(0, len(speeds))

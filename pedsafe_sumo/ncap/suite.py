@@ -20,6 +20,7 @@ import pandas as pd
 from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, Protocol
 from pedsafe_sumo.ncap.scoring import band_colour, cell_score, points_of_test
 from pedsafe_sumo.ncap.staging import StagedCell, spec_for, stage_cell
+from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeResult, EpisodeRunner
 
 #: The columns of ncap.csv: the issue's eight, then what explains them.
@@ -129,22 +130,53 @@ def run_cells(
         )
         spec = spec_for(cell, poles, staged.setup.time_limit_s)
         for condition in conditions:
-            result = runner.run(spec, condition, seed, setup=staged.setup)
-            row = cell_row(protocol, staged, condition, result)
+            try:
+                result = runner.run(spec, condition, seed, setup=staged.setup)
+            except SimulatorError:
+                raise  # SUMO itself failed: nothing after this would run
+            except Exception as exc:  # the AD stack under test failed: the cell has no result
+                result, row = None, error_row(cell, condition, exc)
+            else:
+                row = cell_row(protocol, staged, condition, result)
             rows.append(row)
             if on_result is not None:
                 on_result(cell, condition, result, row)
     return pd.DataFrame(rows, columns=list(CELL_COLUMNS))
 
 
+def error_row(cell: Cell, condition: str, exc: BaseException) -> dict[str, Any]:
+    """The ncap.csv row of a run that raised: no colour, no score; its test is then not complete."""
+    message = (str(exc).strip().splitlines() or [""])[0]
+    return {
+        "test": cell.test.name,
+        "ego_speed_kmh": cell.ego_speed_kmh,
+        "impact_point_pct": cell.impact_point_pct,
+        "condition": condition,
+        "avoided": False,
+        "impact_speed_kmh": math.nan,
+        "colour": "",
+        "cell_score": math.nan,
+        "test_range": cell.test_range,
+        "turn": cell.turn,
+        "variation": cell.variation.name,
+        "cell_id": cell.cell_id,
+        "measured_impact_point_pct": math.nan,
+        "end_reason": "",
+        "first_detection_distance_m": math.nan,
+        "detected_by": "",
+        "status": "error",
+        "error": f"{type(exc).__name__}: {message}",
+    }
+
+
 def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
     """Points per test and condition from the nominal cells (robustness runs are reported, not scored).
 
-    `complete` says whether every cell of the test's grid was run: points over a partial grid are the
-    calculator's formula applied to the cells that were run, not a rating.
+    `complete` says whether every cell of the test's grid was run without error: points over a partial
+    grid are the calculator's formula applied to the cells that were run, not a rating.
     """
     rows = []
-    nominal = table[table["variation"] == "nominal"]
+    nominal = table[(table["variation"] == "nominal") & (table["status"] == "ok")]
     for (name, condition), group in nominal.groupby(["test", "condition"], sort=False):
         test = protocol.tests[name]
         points = points_of_test(

@@ -15,6 +15,7 @@ from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.ncap.__main__ import main
 
 TESTS_DIR = Path(__file__).parent
+sys.path.insert(0, str(TESTS_DIR))  # agents:Class for --algorithm in-process
 ISSUE_COLUMNS = [
     "test", "ego_speed_kmh", "impact_point_pct", "condition", "avoided", "impact_speed_kmh", "colour",
     "cell_score",
@@ -99,3 +100,23 @@ def test_a_small_grid_writes_the_issues_files_and_any_cell_replays(tmp_path):
     assert "trajectory matches the log" in replay.stdout and "differs" not in replay.stdout
     text = fcd.read_text()
     assert "<fcd-export" in text and 'id="ego"' in text and 'id="ped"' in text
+
+
+@pytest.mark.slow
+def test_a_stack_that_raises_is_recorded_as_an_error_and_the_suite_goes_on(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(
+        ["--out", str(out), "--tests", "CPNA-50", "--speeds", "10,20", "--algorithm", "agents:RaisesAt20Kmh"]
+    )
+    assert code == 0
+    table = pd.read_csv(out / "ncap.csv").set_index(["cell_id", "condition"])
+    assert (table.loc["CPNA-50_20kmh", "status"] == "error").all()
+    assert table.loc["CPNA-50_20kmh", "error"].str.contains("ZeroDivisionError: the stack's bug").all()
+    assert (table.loc["CPNA-50_10kmh", "status"] == "ok").all()
+    assert not table.loc["CPNA-50_10kmh", "avoided"].any()  # it holds its speed: hit
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    errors = episodes[episodes["status"] == "error"]
+    assert len(errors) == 2 and not errors["collision"].any()
+    scores = pd.read_csv(out / "ncap_scores.csv")
+    assert not scores["complete"].any() and (scores["cells"] == 1).all()
+    assert "2 error(s)" in capsys.readouterr().out
