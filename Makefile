@@ -12,7 +12,7 @@ endif
 .PHONY: run test lint network clean-venv
 
 # The dev extra includes the cluster extra (Dask): the tests run a batch on a Dask LocalCluster.
-$(STAMP): pyproject.toml requirements.lock
+$(STAMP): pyproject.toml requirements.lock Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -c requirements.lock -e ".[dev]"
