@@ -369,8 +369,13 @@ def _place_poles(stage: Path, name: str, net, junction, corner: str, arm: str, p
     """The two poles, each at the first placement tried where the scenarios that use it can be hosted
     (pedsafe_sumo.network.hosting: its camera sees where their pedestrians start and most of their
     path, past the buildings and trees of the site); the first placement when none is better."""
-    from pedsafe_sumo.network.hosting import hosted_count
+    from pedsafe_sumo.network.hosting import _site_world, hosted_count
     from pedsafe_sumo.network.sites import Site
+    from pedsafe_sumo.scenarios.geometry import load_approach
+
+    # Both cache by site: a staging folder's name may come back in a later build of this process.
+    _site_world.cache_clear()
+    load_approach.cache_clear()
 
     first = [
         {"id": "rsu_camera_0", **place_roadside_unit(net, junction, corner, arm)},

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -197,18 +198,13 @@ def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
 def hosted_count(site, poles: list[dict], poly_file: str) -> int:
     """How many registered scenarios (default settings) the site would host under V2I with these poles
     (dicts as tools/build_network.py writes them); used by the build to place its poles."""
-    from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.perception.world import RoadsideUnit, load_static_occluders
-    from pedsafe_sumo.scenarios.geometry import load_approach
+    from pedsafe_sumo.perception.world import RoadsideUnit
     from pedsafe_sumo.scenarios.registry import SCENARIOS
     from pedsafe_sumo.units import sumo_angle_to_yaw_rad
 
-    params = load_params(None)
-    try:
-        approach = load_approach(site)
-    except ValueError:
+    params, approach, static = _site_world(site, poly_file)
+    if approach is None:
         return 0
-    static = load_static_occluders(site.directory / poly_file, params["perception"]["occluders"])
     units = {
         p["id"]: RoadsideUnit(
             id=p["id"],
@@ -221,3 +217,22 @@ def hosted_count(site, poles: list[dict], poly_file: str) -> int:
         for p in poles
     }
     return sum(hosting_problem(spec, approach, units, params, static) is None for spec in SCENARIOS.values())
+
+
+@lru_cache(maxsize=4)
+def _site_world(site, poly_file: str):
+    """(default parameters, the scenarios' approach or None, static occluders) of a site being built."""
+    from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.perception.world import load_static_occluders
+    from pedsafe_sumo.scenarios.geometry import load_approach
+
+    params = load_params(None)
+    try:
+        approach = load_approach(site)
+    except ValueError:
+        return params, None, None
+    return (
+        params,
+        approach,
+        load_static_occluders(site.directory / poly_file, params["perception"]["occluders"]),
+    )
