@@ -26,7 +26,14 @@ from pedsafe_sumo.safety.injury import (
     register_injury_model,
 )
 from pedsafe_sumo.safety.log import LogError
-from pedsafe_sumo.safety.stats import mcnemar_exact, paired_counts, paired_mcnemar, table_one, wilson_interval
+from pedsafe_sumo.safety.stats import (
+    mcnemar_exact,
+    paired_counts,
+    paired_mcnemar,
+    table_one,
+    wilson_interval,
+    zero_inflated_mean_interval,
+)
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s, ttc_steps_s
 
 __all__ = [
@@ -57,4 +64,5 @@ __all__ = [
     "table_one",
     "ttc_steps_s",
     "wilson_interval",
+    "zero_inflated_mean_interval",
 ]
