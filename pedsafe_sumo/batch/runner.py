@@ -207,6 +207,7 @@ def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
         collision=False,
         conflict=False,
         sumo_collision=False,
+        close_pass=False,
         detected_by="",
         ped_gender="",
         ped_risk="",
