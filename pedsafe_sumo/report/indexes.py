@@ -136,7 +136,8 @@ def sumo_collision_is_nullable(episodes: pd.DataFrame) -> bool:
     """Whether the run can say 'SUMO cannot see' (a nullable column, issue 12): older runs wrote a plain
     boolean, False also where SUMO could not have seen a collision."""
     column = episodes["sumo_collision"]
-    return column.dtype == object or str(column.dtype) == "boolean" or bool(column.isna().any())
+    # An error row's missing value says nothing: only rows that ran can hold SUMO's "cannot see".
+    return str(column.dtype) == "boolean" or bool(_ok(episodes)["sumo_collision"].isna().any())
 
 
 # ---------------------------------------------------------------- PET
@@ -250,14 +251,161 @@ def _median(values: np.ndarray) -> float:
     return float(np.median(values)) if values.size else math.nan
 
 
-def drac_threshold_of_run(run_info: Mapping | None) -> float:
-    """The DRAC threshold the run was made with (run.json parameters), else the defaults file's."""
+def proximity_model_of_run(run_info: Mapping | None):
+    """The proximity thresholds the run was made with (run.json parameters), else the defaults file's."""
     from pedsafe_sumo.safety.proximity import ProximityModel
 
     parameters = run_info.get("parameters") if isinstance(run_info, Mapping) else None
     try:
-        return ProximityModel.from_params(
-            parameters if isinstance(parameters, Mapping) else None
-        ).drac_threshold_mps2
+        return ProximityModel.from_params(parameters if isinstance(parameters, Mapping) else None)
     except (KeyError, TypeError, ValueError):
-        return ProximityModel.from_params(None).drac_threshold_mps2
+        return ProximityModel.from_params(None)
+
+
+# ---------------------------------------------------------------- the logs a run kept
+class KeptLogs:
+    """`find_log` for `pet_coverage`: an episode's log from steplogs/ (--keep-logs all, located through
+    the manifest) or else from cases/ (pairs with a collision or a conflict); None when neither kept it.
+    Keeps one step-log file in memory at a time."""
+
+    def __init__(self, run) -> None:
+        from pedsafe_sumo.io.run_store import MANIFEST_FILE, Manifest, RunStoreError
+
+        self.run = run
+        self.files: list[tuple[str, int, int, str]] = []
+        try:
+            manifest = Manifest.load(run.path / MANIFEST_FILE)
+        except RunStoreError:
+            manifest = None
+        if manifest is not None:
+            self.files = [
+                (r.scenario, r.first_episode, r.last_episode, r.steplog_file)
+                for r in manifest.chunks.values()
+                if r.steplog_file and (run.path / r.steplog_file).is_file()
+            ]
+        self._loaded: tuple[str, pd.DataFrame] | None = None
+
+    def _steps(self, name: str) -> pd.DataFrame:
+        if self._loaded is None or self._loaded[0] != name:
+            self._loaded = (name, pd.read_parquet(self.run.path / name, partitioning=None))
+        return self._loaded[1]
+
+    def __call__(self, scenario: str, condition: str, episode: int, seed: int) -> pd.DataFrame | None:
+        for file_scenario, first, last, name in self.files:
+            if file_scenario == scenario and first <= episode <= last:
+                steps = self._steps(name)
+                log = steps[(steps["condition"] == condition) & (steps["episode"] == episode)]
+                if len(log):
+                    return log.reset_index(drop=True)
+        case = self.run.case_path(scenario, condition, seed)
+        if case.is_file():
+            return pd.read_parquet(case, partitioning=None)
+        return None
+
+
+# ---------------------------------------------------------------- formatting
+def _num(value: float, digits: int = 2) -> str:
+    return "n/a" if value is None or not math.isfinite(float(value)) else f"{value:.{digits}f}"
+
+
+def _label(condition: str) -> str:
+    return {"sv": "SV", "v2i": "V2I"}.get(condition, condition)
+
+
+def contacts_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    header = ["scenario", "condition", "n", "stationary contacts", "collisions"]
+    return header, [
+        [r.scenario, _label(r.condition), str(r.n), str(r.contact_stationary), str(r.collision)]
+        for r in table.itertuples(index=False)
+    ]
+
+
+def agreement_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    header = [
+        "scenario",
+        "condition",
+        "n",
+        "SUMO null",
+        "compared",
+        "both",
+        "ours only",
+        "SUMO only",
+        "neither",
+    ]
+    header.append("agreement")
+    rows = [
+        [
+            r.scenario,
+            _label(r.condition),
+            str(r.n),
+            str(r.sumo_null),
+            str(r.compared),
+            str(r.both),
+            str(r.ours_only),
+            str(r.sumo_only),
+            str(r.neither),
+            "n/a" if not math.isfinite(r.agreement) else f"{100 * r.agreement:.1f}%",
+        ]
+        for r in table.itertuples(index=False)
+    ]
+    return header, rows
+
+
+PET_REASON_LABELS = {
+    REASON_EGO_STOPPED: "ego stood",
+    REASON_PED_STOPPED: "pedestrian stood",
+    REASON_ENDED: "log ended",
+    REASON_NOT_REACHED: "not reached",
+    REASON_NO_LOG: "no log",
+}
+
+
+def pet_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    header = ["scenario", "condition", "n", "PET defined", "share", *PET_REASON_LABELS.values()]
+    rows = [
+        [
+            str(r["scenario"]),
+            _label(r["condition"]),
+            str(r["n"]),
+            str(r["pet_defined"]),
+            "n/a" if not math.isfinite(r["share"]) else f"{100 * r['share']:.1f}%",
+            *(str(r[reason]) for reason in PET_REASON_LABELS),
+        ]
+        for r in table.to_dict("records")
+    ]
+    return header, rows
+
+
+def proximity_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    header = [
+        "scenario",
+        "condition",
+        "n",
+        "close passes [95% CI]",
+        "not Amini conflicts",
+        "median min clearance m",
+        "median speed there m/s",
+        "DRAC defined",
+        "DRAC over threshold",
+        "median DRAC m/s2",
+    ]
+    rows = []
+    for r in table.itertuples(index=False):
+        interval = (
+            f" [{r.close_pass_low:.4f}, {r.close_pass_high:.4f}]" if math.isfinite(r.close_pass_low) else ""
+        )
+        rows.append(
+            [
+                r.scenario,
+                _label(r.condition),
+                str(r.n),
+                f"{r.close_pass} ({_num(r.close_pass_rate, 4)}){interval}",
+                str(r.close_pass_not_conflict),
+                _num(r.min_clearance_median_m),
+                _num(r.ego_speed_at_min_clearance_median_mps),
+                str(r.drac_defined),
+                str(r.drac_over_threshold),
+                _num(r.drac_median_mps2),
+            ]
+        )
+    return header, rows
