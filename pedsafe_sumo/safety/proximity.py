@@ -92,7 +92,10 @@ def kinematic_arrays(log: Any) -> dict[str, np.ndarray]:
 
 def clearance_steps_m(log: Any) -> np.ndarray:
     """Per-step signed clearance between the ego rectangle and the pedestrian circle, m (<= 0: contact)."""
-    a = kinematic_arrays(log)
+    return _clearance(kinematic_arrays(log))
+
+
+def _clearance(a: dict[str, np.ndarray]) -> np.ndarray:
     return rectangle_circle_distance_m(
         a[steplog.EGO_X],
         a[steplog.EGO_Y],
@@ -119,7 +122,10 @@ def drac_from_ttc_mps2(ego_speed_mps, ttc_s) -> np.ndarray:
 
 def drac_steps_mps2(log: Any) -> np.ndarray:
     """Per-step DRAC of a log, m/s^2 (NaN where not defined, see `drac_from_ttc_mps2`)."""
-    a = kinematic_arrays(log)
+    return _drac(kinematic_arrays(log))
+
+
+def _drac(a: dict[str, np.ndarray]) -> np.ndarray:
     return drac_from_ttc_mps2(a[steplog.EGO_SPEED], ttc_steps_s(a))
 
 
@@ -133,7 +139,7 @@ def min_clearance_m(log: Any, last_step: int | None = None) -> tuple[float, floa
     """(minimum clearance in m, ego speed at that step in m/s) over the steps up to `last_step` (all if
     None); the first step on a tie."""
     a = kinematic_arrays(log)
-    clearance = clearance_steps_m(a)
+    clearance = _clearance(a)
     stop = len(clearance) if last_step is None else last_step + 1
     k = int(np.argmin(clearance[:stop]))
     return float(clearance[k]), float(a[steplog.EGO_SPEED][k])
@@ -162,9 +168,9 @@ def episode_proximity(log: Any, model: ProximityModel, last_step: int | None = N
     contact, as for the conflict measures; all steps when None)."""
     a = kinematic_arrays(log)
     stop = len(a[steplog.TIME]) if last_step is None else last_step + 1
-    clearance = clearance_steps_m(a)[:stop]
+    clearance = _clearance(a)[:stop]
     speed = a[steplog.EGO_SPEED][:stop]
-    drac = drac_steps_mps2(a)[:stop]
+    drac = _drac(a)[:stop]
     k = int(np.argmin(clearance))
     return ProximityResult(
         min_clearance_m=float(clearance[k]),
