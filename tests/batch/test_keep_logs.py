@@ -26,15 +26,13 @@ KEEP_ALL_ARGS = (
     "11",
     "--chunk-size",
     "2",
-    "--workers",
-    "1",
 )
 
 
 @pytest.fixture(scope="module")
 def kept_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("keep") / "all"
-    proc = batch(*KEEP_ALL_ARGS, "--keep-logs", "all", "--out", str(out))
+    proc = batch(*KEEP_ALL_ARGS, "--workers", "1", "--keep-logs", "all", "--out", str(out))
     assert proc.returncode == 0, proc.stderr[-2000:]
     return out, proc
 
@@ -118,3 +116,18 @@ def test_resume_reruns_a_chunk_whose_step_log_is_missing_and_refuses_another_kee
     )
     # the step logs are the uninterrupted run's (same content; the file re-run is byte for byte too)
     assert tree_digest(run / "steplogs") == tree_digest(reference / "steplogs")
+
+
+@pytest.mark.slow
+def test_dask_keeps_the_same_step_logs(kept_run, tmp_path):
+    pool_run, _ = kept_run
+    out = tmp_path / "dask"
+    proc = batch(*KEEP_ALL_ARGS, "--keep-logs", "all", "--cluster", "local:2", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    pd.testing.assert_frame_equal(
+        pd.read_parquet(out / "episodes.parquet"), pd.read_parquet(pool_run / "episodes.parquet")
+    )
+    pd.testing.assert_frame_equal(read_step_logs(out), read_step_logs(pool_run))
+    assert sorted(p.name for p in (out / "steplogs").iterdir()) == sorted(
+        p.name for p in (pool_run / "steplogs").iterdir()
+    )
