@@ -26,6 +26,7 @@ INDEX_COLUMNS = (
     "first_detection_distance_m",
     "first_detection_time_s",
     "detected_by",
+    "contact_stationary",
 )
 
 
@@ -37,8 +38,10 @@ def episode_indexes(
 ) -> dict[str, Any]:
     """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
 
-    Conflict measures and TTC are taken over the steps up to and including the first contact (all steps
-    without a collision): what follows a collision says nothing about the encounter. PET is 0 for an
+    A collision is contact while the ego moves (at STATIONARY_SPEED_MPS or faster); contact with a
+    standing ego is `contact_stationary`, neither a collision nor an injury. Conflict measures and TTC
+    are taken over the steps up to and including the first collision step (all steps without a
+    collision): what follows a collision says nothing about the encounter. PET is 0 for an
     episode with a collision (the two met), else computed from the whole trajectories. `conflict` is the
     raw flag; Table I counts `conflict and not collision` (`conflict_without_collision`).
     Values that do not exist are NaN (impact speed without a collision, measures without a candidate
@@ -62,4 +65,5 @@ def episode_indexes(
         "first_detection_distance_m": detection.distance_m,
         "first_detection_time_s": detection.time_s,
         "detected_by": detection.detected_by,
+        "contact_stationary": hit.contact_stationary,
     }
