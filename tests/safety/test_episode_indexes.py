@@ -15,7 +15,8 @@ DESIGN_COLUMNS = (
     "scenario condition episode seed ped_age ped_gender ped_risk ped_speed_mps ego_initial_speed_mps "
     "collision impact_speed_mps injury_probability conflict md_m tmd_s cs_mps conflict_probability "
     "min_ttc_s pet_s "
-    "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error"
+    "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error "
+    "contact_stationary"
 ).split()
 
 
@@ -76,9 +77,9 @@ def test_unknown_injury_model_is_an_error(near_miss_log):
 
 def test_values_have_parquet_friendly_types(near_miss_log):
     row = episode_indexes(near_miss_log, 30.0)
-    assert isinstance(row["collision"], bool) and isinstance(row["conflict"], bool)
+    assert all(isinstance(row[c], bool) for c in ("collision", "conflict", "contact_stationary"))
     assert isinstance(row["detected_by"], str)
-    others = set(INDEX_COLUMNS) - {"collision", "conflict", "detected_by"}
+    others = set(INDEX_COLUMNS) - {"collision", "conflict", "contact_stationary", "detected_by"}
     assert all(isinstance(row[c], float) and not isinstance(row[c], np.floating) for c in others)
 
 
@@ -111,8 +112,10 @@ def test_indexes_agree_with_each_other_on_random_encounters():
         row = episode_indexes(log, ped_age_years=rng.uniform(13, 90))
         # the reported step decides the flag
         assert row["conflict"] == (row["conflict_probability"] >= 0.425)
-        # TTC reaches 0 exactly when the footprint and circle touch
-        assert (row["min_ttc_s"] == 0.0) == row["collision"]
+        # TTC reaches 0 exactly when the footprint and circle touch; a touch of a standing ego (below
+        # 0.1 m/s) is a stationary contact, not a collision
+        assert (row["min_ttc_s"] == 0.0) == (row["collision"] or row["contact_stationary"])
+        assert not (row["collision"] and row["impact_speed_mps"] < 0.1)
         if row["collision"]:
             assert row["pet_s"] == 0.0 and 0.0 < row["injury_probability"] < 1.0
             counts["collision"] += 1

@@ -39,7 +39,8 @@ def test_each_scenario_runs_under_both_conditions_from_the_same_world(runner, na
     for condition, result in results.items():
         log = result.log
         assert set(REQUIRED_COLUMNS) <= set(log.columns)
-        assert result.end_reason in {"collision", "ego_passed", "pedestrian_crossed", "time_limit"}
+        assert result.end_reason in {"collision", "both_cleared", "ego_left_network", "time_limit"}
+        assert result.outcome["end_reason"] == result.end_reason
         # Steps of 0.05 s from the insertion step on; the ego starts at its drawn speed.
         assert log["time_s"].diff().dropna().round(6).eq(STEP_S).all()
         assert log["ego_speed_mps"].iloc[0] == pytest.approx(result.setup.ego.speed_mps, abs=1e-6)
@@ -86,17 +87,20 @@ def test_forced_collision_on_the_crosswalk_is_seen_by_us_and_by_sumo_at_the_same
     assert result.end_reason == "collision" and result.outcome["collision"]
     # The ego never braked: the impact speed is its initial speed.
     assert result.outcome["impact_speed_mps"] == pytest.approx(setup.ego.speed_mps, abs=1e-6)
-    assert result.outcome["sumo_collision"]
+    assert result.outcome["sumo_collision"] is True
     sumo = result.sumo_collision
     assert sumo["type"] == "crossing"
     assert sumo["ego_speed_mps"] == pytest.approx(result.outcome["impact_speed_mps"], abs=0.01)
-    assert abs(sumo["time_s"] - result.log["time_s"].iloc[-1]) <= STEP_S + 1e-9
+    # SUMO's 0.6 m box is centred on our 0.3 m circle: it sees the contact in the same step as we do
+    # (its box holds the circle, so never later; face-on to the bumper, not earlier either).
+    assert sumo["time_s"] == pytest.approx(result.log["time_s"].iloc[-1], abs=1e-9)
 
 
 @pytest.mark.slow
-def test_mid_block_collision_is_ours_alone_as_documented():
+def test_mid_block_collision_is_ours_alone_and_sumo_says_it_cannot_tell():
     """SUMO checks person-vehicle contact only where they share a lane, crosswalk or walking area; a
-    person moved across the road with moveToXY stays on the sidewalk lane, so SUMO misses it."""
+    person moved across the road with moveToXY stays on the sidewalk lane, so SUMO misses it: its
+    column is null (unknown), not False."""
     runner = EpisodeRunner(SITE, load_params(), load_agent_class("tests.sim.plugin_agents:NeverBrakes"))
     try:
         spec = get_scenario("jaywalking").with_overrides(
@@ -107,7 +111,8 @@ def test_mid_block_collision_is_ours_alone_as_documented():
         result = runner.run(spec, "sv", 0, setup=setup)
     finally:
         runner.close()
-    assert result.outcome["collision"] and not result.outcome["sumo_collision"]
+    assert result.outcome["collision"] and result.outcome["sumo_collision"] is None
+    assert not result.sumo_collision
 
 
 @pytest.mark.slow
