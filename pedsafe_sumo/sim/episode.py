@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianPose, PedestrianWalker, VehicleBodies
+from pedsafe_sumo.behaviour.sight import ego_in_sight
 from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
@@ -49,7 +50,6 @@ from pedsafe_sumo.perception import (
     load_static_occluders,
     perceive,
 )
-from pedsafe_sumo.perception.raycast import KIND_VEHICLE, cast_rays
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
@@ -77,10 +77,6 @@ EGO_ID = "ego"
 #: or walking area, and the nearest one is the same either way: 180 episodes of all three scenarios
 #: gave identical logs with 100 m and 10 m.
 PED_MATCH_RADIUS_M = 10.0
-#: Points of the ego a pedestrian looks for: along its centreline at these fractions of its half
-#: length (front, middle, rear) and at this fraction of its height (the glasshouse). One ray each.
-SIGHT_TARGETS_HALF_LENGTH = (0.9, 0.0, -0.9)
-SIGHT_TARGET_HEIGHT_FRACTION = 0.8
 
 #: A per-step observer for replay: `on_step(api, row)` gets SUMO's API handle, in the state of the step
 #: just logged, and that step's log row (a dict of the log columns).
@@ -168,42 +164,6 @@ def _is_crossing_or_walkingarea(edge_id: str) -> bool:
         return False
     tail = edge_id.rsplit("_", 1)[-1]
     return len(tail) > 1 and tail[0] in "cw" and tail[1:].isdigit()
-
-
-def ego_in_sight(snapshot: WorldSnapshot, ego_index: int, eye_xyz: tuple[float, float, float]) -> bool:
-    """Whether a pedestrian with eyes at `eye_xyz` sees the ego (vehicle `ego_index` of the snapshot).
-
-    One ray per point of SIGHT_TARGETS_HALF_LENGTH, cast through the same buildings, trees and vehicle
-    boxes the sensors see (pedestrian 0, the one looking, is skipped): the ego is in sight when any
-    ray's first hit is the ego's own box.
-    """
-    vehicles = snapshot.vehicles
-    cx, cy = vehicles.x_m[ego_index], vehicles.y_m[ego_index]
-    yaw, half_l = vehicles.yaw_rad[ego_index], 0.5 * vehicles.length_m[ego_index]
-    z = SIGHT_TARGET_HEIGHT_FRACTION * vehicles.height_m[ego_index]
-    fractions = np.asarray(SIGHT_TARGETS_HALF_LENGTH)
-    targets = np.column_stack(
-        (
-            cx + fractions * half_l * math.cos(yaw),
-            cy + fractions * half_l * math.sin(yaw),
-            np.full(len(fractions), z),
-        )
-    )
-    origin = np.broadcast_to(np.asarray(eye_xyz, dtype=float), targets.shape)
-    delta = targets - origin
-    distance = np.linalg.norm(delta, axis=1)
-    direction = delta / distance[:, None]
-    n = len(fractions)
-    hits = cast_rays(
-        snapshot,
-        np.ascontiguousarray(origin),
-        direction,
-        distance + 1e-6,
-        np.arange(n, dtype=np.int64),
-        np.ones(n, dtype=np.int64),
-        np.zeros(n, dtype=np.int64),
-    )
-    return bool(np.any((hits.kind == KIND_VEHICLE) & (hits.index == ego_index)))
 
 
 class EpisodeRunner:
