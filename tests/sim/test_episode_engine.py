@@ -91,9 +91,14 @@ def test_forced_collision_on_the_crosswalk_is_seen_by_us_and_by_sumo_at_the_same
     sumo = result.sumo_collision
     assert sumo["type"] == "crossing"
     assert sumo["ego_speed_mps"] == pytest.approx(result.outcome["impact_speed_mps"], abs=0.01)
-    # SUMO's 0.6 m box is centred on our 0.3 m circle: it sees the contact in the same step as we do
-    # (its box holds the circle, so never later; face-on to the bumper, not earlier either).
-    assert sumo["time_s"] == pytest.approx(result.log["time_s"].iloc[-1], abs=1e-9)
+    # SUMO's 0.6 m box is centred on our 0.3 m circle and holds it: SUMO sees the contact in the same
+    # step as we do, or earlier, and then only where a box corner reaches past the circle, by at most
+    # (sqrt(2) - 1) * 0.3 = 0.124 m: our clearance at SUMO's step is within that.
+    log = result.log
+    ours_s = log["time_s"].iloc[-1]
+    assert ours_s - STEP_S - 1e-9 <= sumo["time_s"] <= ours_s + 1e-9
+    at_sumo = log.loc[(log["time_s"] - sumo["time_s"]).abs() < 1e-6, "clearance_m"].iloc[0]
+    assert at_sumo <= (math.sqrt(2) - 1) * 0.3 + 1e-6
 
 
 @pytest.mark.slow
@@ -138,7 +143,8 @@ def test_reference_stack_brakes_for_a_perceived_pedestrian(runner):
     log = result.log
     assert log["braking"].any()
     braking_from = log.index[log["braking"]][0]
-    assert log["ego_speed_mps"].iloc[-1] < log["ego_speed_mps"].iloc[braking_from]
+    # It slowed down (the episode runs on until both cleared the conflict area, so it may speed up again).
+    assert log.loc[braking_from:, "ego_speed_mps"].min() < log["ego_speed_mps"].iloc[braking_from]
     # It braked only after seeing the pedestrian, and no sooner than the 0.4 s reaction time.
     first_seen = log.loc[log["perceived"], "time_s"].iloc[0]
     assert log.loc[braking_from, "time_s"] >= first_seen + 0.4 - 1e-9
@@ -180,7 +186,11 @@ def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_the_far_s
     spec = get_scenario("background_blending").with_overrides({"time_limit_s": "3.0"})
 
     def frames_seen(units: str, seed: int) -> int:
-        log = runner.run(spec.with_overrides({"roadside_units": units}), "v2i", seed).log
+        # An unaware pedestrian walks the same way whatever the ego does (a yielder would react to an
+        # ego that brakes sooner with another pole), so every pole set films the same motion.
+        setup = runner.draw_setup(spec, seed)
+        setup = dataclasses.replace(setup, pedestrian=dataclasses.replace(setup.pedestrian, risk="unaware"))
+        log = runner.run(spec.with_overrides({"roadside_units": units}), "v2i", seed, setup=setup).log
         return int(log["roadside_raw"].iloc[20:60].sum())
 
     corner = [frames_seen("rsu_camera_0", seed) for seed in range(12)]
