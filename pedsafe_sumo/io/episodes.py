@@ -33,14 +33,14 @@ CONDITION_ORDER = {"sv": 0, "v2i": 1}
 def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in."""
     table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
-    for column in BOOL_COLUMNS:
-        table[column] = table[column].fillna(False).astype(bool)
+    for column in BOOL_COLUMNS:  # a row without the flag (an error row, an older row) has it False
+        table[column] = table[column].astype(object).where(table[column].notna(), False).astype(bool)
     for column in NULLABLE_BOOL_COLUMNS:
         table[column] = table[column].astype("boolean")
     for column in INT_COLUMNS:
         table[column] = table[column].astype("int64")
     for column in STRING_COLUMNS:
-        table[column] = table[column].fillna("").astype(str)
+        table[column] = table[column].astype(object).where(table[column].notna(), "").astype(str)
     for column in FLOAT_COLUMNS:
         table[column] = table[column].astype(float)
     return sort_rows(table)
