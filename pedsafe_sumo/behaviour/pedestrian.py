@@ -84,6 +84,9 @@ class VehicleBodies:
     yaw_rad: np.ndarray
     length_m: np.ndarray
     width_m: np.ndarray
+    #: Half diagonals (circumscribed radii) of the footprints; computed when not given. The episode
+    #: loop passes them, rebuilt only when vehicles enter or leave, to keep the per-step cost down.
+    half_diagonal_m: np.ndarray | None = None
 
 
 def _conflict_point(path_xy: np.ndarray, ego_xy: tuple[float, float], ego_yaw_rad: float):
@@ -270,12 +273,25 @@ class PedestrianWalker:
     def _walks_into(self, bodies: VehicleBodies, s_from: float, s_to: float) -> bool:
         """Whether moving s_from -> s_to brings the body within `body_clearance_m` of a vehicle footprint
         and closer to it than before."""
-        (x0, y0, _), (x1, y1, _) = self.position(s_from), self.position(s_to)
-        r = self.params.radius_m
-        before = rectangle_circle_distance_m(
-            bodies.x_m, bodies.y_m, bodies.yaw_rad, bodies.length_m, bodies.width_m, x0, y0, r
+        x1, y1, _ = self.position(s_to)
+        r, margin = self.params.radius_m, self.params.body_clearance_m
+        # Cheap bound first (this runs every step): only footprints whose circumscribed circle comes
+        # within the margin of the body can be too close.
+        half_diagonal = bodies.half_diagonal_m
+        if half_diagonal is None:
+            half_diagonal = 0.5 * np.hypot(bodies.length_m, bodies.width_m)
+        dx, dy, reach = bodies.x_m - x1, bodies.y_m - y1, half_diagonal + (r + margin)
+        near = dx * dx + dy * dy <= reach * reach
+        if not near.any():
+            return False
+        x0, y0, _ = self.position(s_from)
+        box = (
+            bodies.x_m[near],
+            bodies.y_m[near],
+            bodies.yaw_rad[near],
+            bodies.length_m[near],
+            bodies.width_m[near],
         )
-        after = rectangle_circle_distance_m(
-            bodies.x_m, bodies.y_m, bodies.yaw_rad, bodies.length_m, bodies.width_m, x1, y1, r
-        )
-        return bool(np.any((after < self.params.body_clearance_m) & (after < before)))
+        before = rectangle_circle_distance_m(*box, x0, y0, r)
+        after = rectangle_circle_distance_m(*box, x1, y1, r)
+        return bool(np.any((after < margin) & (after < before)))

@@ -475,7 +475,7 @@ class EpisodeRunner:
         # Body sizes and colours of the vehicles in the last snapshot: they change only when a vehicle
         # enters or leaves, so they are rebuilt then, not every step.
         body_ids: tuple[str, ...] = ()
-        lengths = widths = heights = np.zeros(0)
+        lengths = widths = heights = half_diagonals = np.zeros(0)
         colours = np.zeros((0, 3))
         ego_index = -1
 
@@ -507,6 +507,7 @@ class EpisodeRunner:
                     body_ids = ids
                     sizes = np.array([dims[vid][:3] for vid in ids], dtype=float).reshape(-1, 3)
                     lengths, widths, heights = sizes[:, 0].copy(), sizes[:, 1].copy(), sizes[:, 2].copy()
+                    half_diagonals = 0.5 * np.hypot(lengths, widths)
                     colours = np.array([dims[vid][3] for vid in ids], dtype=float).reshape(-1, 3)
                     ego_index = ids.index(EGO_ID)
                 front_xy = np.array([results[vid][tc.VAR_POSITION] for vid in ids])
@@ -622,7 +623,7 @@ class EpisodeRunner:
 
                 t4 = clock()
                 api.vehicle.setSpeed(EGO_ID, target_mps)
-                bodies = VehicleBodies(centre_x, centre_y, yaw, lengths, widths)
+                bodies = VehicleBodies(centre_x, centre_y, yaw, lengths, widths, half_diagonals)
                 pose = walker.step(
                     self.step_length_s,
                     time_s,
