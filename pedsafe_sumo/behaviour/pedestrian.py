@@ -132,6 +132,7 @@ class PedestrianWalker:
         self.speed_mps = 0.0
         self._aware_since_s: float | None = None
         self._yielding = False  # reacted by yielding, and not yet resumed
+        self._hastening = False  # reacted by hastening, until across or the ego has passed
         self._seen_ego = False  # has had the ego in sight during this encounter
         self._ego_stopped_since_s: float | None = None
         self.state = "waiting"
@@ -223,7 +224,7 @@ class PedestrianWalker:
             moving = ego_speed_mps >= p.stopped_speed_mps
             time_to_path_s = front_gap_m / ego_speed_mps if moving else math.inf
             if ego_passed or across:
-                self._aware_since_s, self._yielding = None, False
+                self._aware_since_s, self._yielding, self._hastening = None, False, False
                 self._seen_ego = False  # the next encounter needs its own look
             else:
                 threatened = moving and time_to_path_s <= p.awareness_ttc_s and self._sees(sees_ego)
@@ -238,10 +239,10 @@ class PedestrianWalker:
                             self._yielding = True
                         else:
                             speed = min(p.walking_speed_mps * p.hasten_factor, p.max_speed_mps)
-                            state = "hastening"
+                            state, self._hastening = "hastening", True
                     else:
                         state = "reacting"
-                elif p.risk == "hasten" and self._aware_since_s is not None and moving:
+                elif self._hastening and moving:
                     # Once hastening, keep the pace until across or the ego has passed.
                     speed = min(p.walking_speed_mps * p.hasten_factor, p.max_speed_mps)
                     state = "hastening"

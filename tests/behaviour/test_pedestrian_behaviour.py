@@ -48,6 +48,19 @@ def test_hasten_speeds_up_after_the_reaction_time():
     assert pose.state == "hastening" and pose.speed_mps == pytest.approx(2.25)
 
 
+def test_a_threat_that_passes_within_the_reaction_time_leaves_a_hastener_at_their_pace():
+    walker = PedestrianWalker(PATH, BehaviourParams("hasten", 1.5))
+    # 0.5 s threatened (2.745 s to the body line): reacting, walking 0.75 m.
+    advance(walker, 0, 10, (0.0, 0.0), 10.0)
+    # Then the ego slows to 5 m/s: 27.45 / 5 = 5.5 s > 3 s, no threat; 1 s more at 1.5 m/s, not 2.25.
+    pose = advance(walker, 10, 30, (0.0, 0.0), 5.0)
+    assert walker.s_m == pytest.approx(0.75 + 1.5) and pose.state == "walking"
+    # Once hastening (after a full reaction time under threat), they keep the pace when the ego slows.
+    walker, _ = run("hasten", 1.5)  # 1 s reacting (1.5 m) + 0.5 s at 2.25 m/s = 2.625 m
+    pose = advance(walker, 30, 40, (0.0, 0.0), 5.0)  # 0.5 s more at 2.25 m/s
+    assert walker.s_m == pytest.approx(2.625 + 1.125) and pose.state == "hastening"
+
+
 def test_yield_stops_short_of_the_ego_flank():
     walker, pose = run("yield", 3.0)
     # 1 s reacting (1.5 m walked), then stands where they are: 1.5 m is short of the 3.8 m stand line.
