@@ -15,9 +15,12 @@ EPISODE_COLUMNS = (
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
     "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
+    # the proximity measure (issue 12; pedsafe_sumo.safety.proximity)
+    "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
+    # collision semantics and end conditions (issue 12; safety.collision, sim.episode)
     "contact_stationary", "end_reason",
 )  # fmt: skip
-BOOL_COLUMNS = ("collision", "conflict", "contact_stationary")
+BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
 #: check vehicle-person contact (a pedestrian off crossings and walking areas at the closest approach).
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)

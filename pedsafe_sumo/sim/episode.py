@@ -53,6 +53,7 @@ from pedsafe_sumo.perception import (
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.scenarios.geometry import load_approach
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
@@ -189,6 +190,7 @@ class EpisodeRunner:
         self.agent_class = agent_class
         self.step_length_s = step_length_s
         self.injury_model = injury_model
+        self.proximity_model = ProximityModel.from_params(params)
         data = load_site_data(site, params)
         self.approach = data.approach
         self.static = data.static
@@ -646,7 +648,9 @@ class EpisodeRunner:
         # closest approach. Elsewhere (mid-block: a person moved across the road stays logically on
         # its sidewalk lane, where SUMO never checks against vehicles) it is unknown, not False.
         sumo_witness = sumo_collision if _is_crossing_or_walkingarea(closest_edge) else None
-        indexes = episode_indexes(log, ped.age_years, injury_model=self.injury_model)
+        indexes = episode_indexes(
+            log, ped.age_years, injury_model=self.injury_model, proximity_model=self.proximity_model
+        )
         outcome = {
             "scenario": setup.scenario,
             "condition": condition,

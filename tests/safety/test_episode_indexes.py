@@ -16,6 +16,8 @@ DESIGN_COLUMNS = (
     "collision impact_speed_mps injury_probability conflict md_m tmd_s cs_mps conflict_probability "
     "min_ttc_s pet_s "
     "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error "
+    # the proximity measure's own columns (issue 12)
+    "min_clearance_m ego_speed_at_min_clearance_mps drac_mps2 close_pass "
     "contact_stationary"
 ).split()
 
@@ -77,9 +79,10 @@ def test_unknown_injury_model_is_an_error(near_miss_log):
 
 def test_values_have_parquet_friendly_types(near_miss_log):
     row = episode_indexes(near_miss_log, 30.0)
-    assert all(isinstance(row[c], bool) for c in ("collision", "conflict", "contact_stationary"))
+    flags = ("collision", "conflict", "close_pass", "contact_stationary")
+    assert all(isinstance(row[c], bool) for c in flags)
     assert isinstance(row["detected_by"], str)
-    others = set(INDEX_COLUMNS) - {"collision", "conflict", "contact_stationary", "detected_by"}
+    others = set(INDEX_COLUMNS) - {*flags, "detected_by"}
     assert all(isinstance(row[c], float) and not isinstance(row[c], np.floating) for c in others)
 
 
