@@ -57,6 +57,7 @@ class BehaviourParams:
     gap_startup_clearance_s: float = 3.0  # gap acceptance: start-up and clearance time t_s [s]
     stopped_speed_mps: float = 0.1  # a vehicle slower than this stands still [m/s]
     radius_m: float = 0.3  # the pedestrian's body circle [m]
+    avoids_bodies: bool = True  # False: a test-track dummy that keeps its path into a vehicle
 
     def __post_init__(self) -> None:
         if self.risk not in RISK_PREFERENCES:
@@ -262,7 +263,7 @@ class PedestrianWalker:
             new_s = max(target_s, self.s_m + speed * dt_s, 0.0)
         else:
             new_s = min(self.length_m, self.s_m + speed * dt_s)
-        if new_s != self.s_m and bodies is not None and len(bodies.x_m):
+        if new_s != self.s_m and p.avoids_bodies and bodies is not None and len(bodies.x_m):
             if self._walks_into(bodies, self.s_m, new_s):
                 new_s, speed, state = self.s_m, 0.0, "blocked"
         self.s_m = new_s

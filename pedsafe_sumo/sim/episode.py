@@ -696,4 +696,5 @@ class EpisodeRunner:
             gap_startup_clearance_s=p["gap_startup_clearance_s"],
             stopped_speed_mps=STATIONARY_SPEED_MPS,
             radius_m=ped.radius_m,
+            avoids_bodies=ped.avoids_vehicle_bodies,
         )

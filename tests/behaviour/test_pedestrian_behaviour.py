@@ -173,3 +173,13 @@ def test_bad_parameters_are_rejected():
         BehaviourParams("reckless", 1.4)
     with pytest.raises(ValueError, match="walking speed must be positive"):
         BehaviourParams("unaware", -1.0)
+
+
+def test_a_test_track_dummy_keeps_its_path_into_a_vehicle():
+    # The Euro NCAP dummy (avoids_bodies False) walks on into the standing ego of the body test:
+    # 10 s at 1.5 m/s would be 15 m, the path ends at 12 m.
+    ego = VehicleBodies(np.array([30.0]), np.array([1.02]), np.array([0.0]), np.array([4.5]), np.array([1.8]))
+    walker = PedestrianWalker(PATH, BehaviourParams("unaware", 1.5, avoids_bodies=False))
+    for k in range(200):
+        pose = walker.step(DT, k * DT, (30.0, 1.02), 0.0, 0.0, bodies=ego)
+    assert walker.finished and pose.state == "finished"
