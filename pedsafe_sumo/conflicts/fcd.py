@@ -69,7 +69,8 @@ def _number(element: ET.Element, name: str, path: Path, time_s: float, default: 
         value = float(text)
     except ValueError:
         raise FcdError(
-            f"{path}: {element.tag} '{element.get('id', '?')}' at t={time_s:g} s: {name}='{text}' is not a number"
+            f"{path}: {element.tag} '{element.get('id', '?')}' at t={time_s:g} s: "
+            f"{name}='{text}' is not a number"
         ) from None
     if not math.isfinite(value):
         raise FcdError(
@@ -84,15 +85,31 @@ def _users(elements: list[ET.Element], place_attr: str, path: Path, time_s: floa
     length, width = np.full(n, np.nan), np.full(n, np.nan)
     ids, types, places = [], [], []
     for i, e in enumerate(elements):
-        ids.append(e.get("id", ""))
-        types.append(e.get("type", ""))
-        places.append(e.get(place_attr, ""))
-        x[i] = _number(e, "x", path, time_s)
-        y[i] = _number(e, "y", path, time_s)
-        angle[i] = _number(e, "angle", path, time_s)
-        speed[i] = _number(e, "speed", path, time_s, default=0.0)
-        length[i] = _number(e, "length", path, time_s, default=math.nan)
-        width[i] = _number(e, "width", path, time_s, default=math.nan)
+        a = e.attrib
+        ids.append(a.get("id", ""))
+        types.append(a.get("type", ""))
+        places.append(a.get(place_attr, ""))
+        try:  # the fast path; the checks below name the attribute when it fails
+            x[i], y[i], angle[i] = float(a["x"]), float(a["y"]), float(a["angle"])
+            speed[i] = float(a.get("speed", 0.0))
+            if "length" in a:
+                length[i] = float(a["length"])
+            if "width" in a:
+                width[i] = float(a["width"])
+        except (KeyError, ValueError):
+            for name in ("x", "y", "angle"):
+                _number(e, name, path, time_s)
+            for name in ("speed", "length", "width"):
+                _number(e, name, path, time_s, default=0.0)
+    for name, values in (("x", x), ("y", y), ("angle", angle), ("speed", speed)):
+        if not np.all(np.isfinite(values)):
+            k = int(np.flatnonzero(~np.isfinite(values))[0])
+            raise FcdError(f"{path}: {elements[k].tag} '{ids[k]}' at t={time_s:g} s: {name} is not finite")
+    for name, values in (("length", length), ("width", width)):
+        bad = ~np.isnan(values) & ~(values > 0)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise FcdError(f"{path}: {elements[k].tag} '{ids[k]}' at t={time_s:g} s: {name} must be positive")
     return RoadUsers(ids, types, x, y, angle, speed, places, length, width)
 
 

@@ -99,11 +99,10 @@ class _Open:
 
     vehicle_type: str
     person_type: str
-    values: list[tuple[float, ...]] = field(default_factory=list)
-    vehicle_lanes: list[str] = field(default_factory=list)
-    person_edges: list[str] = field(default_factory=list)
-    vehicle_speeds: list[float] = field(default_factory=list)
-    person_speeds: list[float] = field(default_factory=list)
+    #: per step: the log columns (_STEP_COLUMNS), then the vehicle's and the person's speed from the FCD
+    values: list[list[float]] = field(default_factory=list)
+    #: per step: the vehicle's lane and the person's edge from the FCD
+    places: list[tuple[str, str]] = field(default_factory=list)
 
 
 #: Finds the lane and the crossing at a point: (x_m, y_m) -> (lane_id, crossing_id); "" where none.
@@ -147,33 +146,35 @@ class InteractionTracker:
             p_yaw = sumo_angle_to_yaw_rad(persons.angle_deg)
             pvx, pvy = persons.speed_mps * np.cos(p_yaw), persons.speed_mps * np.sin(p_yaw)
             tree = cKDTree(np.column_stack((persons.x_m, persons.y_m)))
-            for i, hits in enumerate(tree.query_ball_point(np.column_stack((cx, cy)), self.radius_m)):
-                for j in hits:
-                    key = (vehicles.ids[i], persons.ids[j])
-                    near.add(key)
-                    record = self.open.get(key)
-                    if record is None:
-                        record = self.open[key] = _Open(vehicles.types[i], persons.types[j])
-                    record.values.append(
-                        (
-                            step.time_s,
-                            cx[i],
-                            cy[i],
-                            yaw[i],
-                            max(vehicles.speed_mps[i], 0.0),
-                            length[i],
-                            width[i],
-                            persons.x_m[j],
-                            persons.y_m[j],
-                            pvx[j],
-                            pvy[j],
-                            radius[j],
-                        )
-                    )
-                    record.vehicle_lanes.append(vehicles.places[i])
-                    record.person_edges.append(persons.places[j])
-                    record.vehicle_speeds.append(float(vehicles.speed_mps[i]))
-                    record.person_speeds.append(float(persons.speed_mps[j]))
+            hits = tree.query_ball_point(np.column_stack((cx, cy)), self.radius_m)
+            vi = np.repeat(np.arange(len(vehicles)), [len(h) for h in hits])
+            pj = np.fromiter((j for h in hits for j in h), dtype=int, count=len(vi))
+            rows = np.column_stack(
+                (
+                    np.full(len(vi), step.time_s),
+                    cx[vi],
+                    cy[vi],
+                    yaw[vi],
+                    np.maximum(vehicles.speed_mps[vi], 0.0),
+                    length[vi],
+                    width[vi],
+                    persons.x_m[pj],
+                    persons.y_m[pj],
+                    pvx[pj],
+                    pvy[pj],
+                    radius[pj],
+                    vehicles.speed_mps[vi],
+                    persons.speed_mps[pj],
+                )
+            ).tolist()
+            for i, j, row in zip(vi.tolist(), pj.tolist(), rows):
+                key = (vehicles.ids[i], persons.ids[j])
+                near.add(key)
+                record = self.open.get(key)
+                if record is None:
+                    record = self.open[key] = _Open(vehicles.types[i], persons.types[j])
+                record.values.append(row)
+                record.places.append((vehicles.places[i], persons.places[j]))
         for key in [k for k in self.open if k not in near]:
             self._close(key)
 
@@ -222,12 +223,12 @@ def interaction_row(
         "time_s": float(t[k]),
         "x_m": x_m,
         "y_m": y_m,
-        "vehicle_lane": record.vehicle_lanes[k],
-        "person_edge": record.person_edges[k],
+        "vehicle_lane": record.places[k][0],
+        "person_edge": record.places[k][1],
         "lane_id": lane_id,
         "crossing_id": crossing_id,
-        "vehicle_speed_mps": record.vehicle_speeds[k],
-        "person_speed_mps": record.person_speeds[k],
+        "vehicle_speed_mps": float(table[k, len(_STEP_COLUMNS)]),
+        "person_speed_mps": float(table[k, len(_STEP_COLUMNS) + 1]),
         "min_clearance_m": m.min_clearance_m,
         "collision": m.collision,
         "contact_time_s": at(m.contact_step),

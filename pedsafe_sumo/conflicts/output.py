@@ -149,19 +149,23 @@ class SsmWriter(_Staged):
         if not self.keeps(row):
             return
         self.kept += 1
+        flag = {True: "true", False: "false"}
+        r = {k: (_value(v, 3) if isinstance(v, float) else v) for k, v in row.items()}
         lines = [
             f"    <conflict begin={quoteattr(_value(row['begin_s']))} end={quoteattr(_value(row['end_s']))} "
             f"ego={quoteattr(row['vehicle_id'])} foe={quoteattr(row['person_id'])} "
             f"egoType={quoteattr(row['vehicle_type'])} foeType={quoteattr(row['person_type'])}>",
-            f'        <minTTC time="{_value(row["ttc_time_s"])}" position="{_position(row["ttc_x_m"], row["ttc_y_m"])}" '
-            f'value="{_value(row["ttc_s"])}"/>',
+            f'        <minTTC time="{_value(row["ttc_time_s"])}" '
+            f'position="{_position(row["ttc_x_m"], row["ttc_y_m"])}" value="{_value(row["ttc_s"])}"/>',
             f'        <maxDRAC value="{_value(row["drac_mps2"])}"/>',
-            f'        <PET position="{_position(row["pet_x_m"], row["pet_y_m"])}" value="{_value(row["pet_s"])}"/>',
-            f'        <minClearance time="{_value(row["time_s"])}" position="{_position(row["x_m"], row["y_m"])}" '
-            f'value="{_value(row["min_clearance_m"], 3)}" collision="{str(row["collision"]).lower()}"/>',
-            f'        <amini time="{_value(row["conflict_time_s"])}" md="{_value(row["md_m"], 3)}" '
-            f'tmd="{_value(row["tmd_s"], 3)}" cs="{_value(row["cs_mps"], 3)}" '
-            f'probability="{_value(row["conflict_probability"], 4)}" conflict="{str(row["conflict"]).lower()}"/>',
+            f'        <PET position="{_position(row["pet_x_m"], row["pet_y_m"])}" '
+            f'value="{_value(row["pet_s"])}"/>',
+            f'        <minClearance time="{_value(row["time_s"])}" '
+            f'position="{_position(row["x_m"], row["y_m"])}" '
+            f'value="{r["min_clearance_m"]}" collision="{flag[bool(row["collision"])]}"/>',
+            f'        <amini time="{_value(row["conflict_time_s"])}" md="{r["md_m"]}" tmd="{r["tmd_s"]}" '
+            f'cs="{r["cs_mps"]}" probability="{_value(row["conflict_probability"], 4)}" '
+            f'conflict="{flag[bool(row["conflict"])]}"/>',
             "    </conflict>",
         ]
         self._handle.write("\n".join(lines) + "\n")

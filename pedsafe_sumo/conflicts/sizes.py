@@ -38,7 +38,7 @@ def read_vtypes(path: str | Path) -> dict[str, TypeSize]:
                 except ValueError:
                     raise TypesError(
                         f"{path}: vType '{element.get('id')}' has a length or width that is not a number"
-                    )
+                    ) from None
                 if (math.isfinite(length) and length <= 0) or (math.isfinite(width) and width <= 0):
                     raise TypesError(
                         f"{path}: vType '{element.get('id')}' must have a positive length and width"
