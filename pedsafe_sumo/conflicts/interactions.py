@@ -15,6 +15,7 @@ person's velocity its speed along its angle.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -44,6 +45,9 @@ _STEP_COLUMNS = (
     steplog.PED_VY,
     steplog.PED_RADIUS,
 )
+
+#: Numbers held per step of an open interaction: the log columns and the two FCD speeds.
+_ROW_WIDTH = len(_STEP_COLUMNS) + 2
 
 #: The output columns, in order (docs/conflicts.md defines each).
 ROW_COLUMNS = (
@@ -99,8 +103,8 @@ class _Open:
 
     vehicle_type: str
     person_type: str
-    #: per step: the log columns (_STEP_COLUMNS), then the vehicle's and the person's speed from the FCD
-    values: list[list[float]] = field(default_factory=list)
+    #: per step, flat: the log columns (_STEP_COLUMNS), then the vehicle's and the person's FCD speed
+    values: array = field(default_factory=lambda: array("d"))
     #: per step: the vehicle's lane and the person's edge from the FCD
     places: list[tuple[str, str]] = field(default_factory=list)
 
@@ -173,7 +177,7 @@ class InteractionTracker:
                 record = self.open.get(key)
                 if record is None:
                     record = self.open[key] = _Open(vehicles.types[i], persons.types[j])
-                record.values.append(row)
+                record.values.extend(row)
                 record.places.append((vehicles.places[i], persons.places[j]))
         for key in [k for k in self.open if k not in near]:
             self._close(key)
@@ -192,7 +196,7 @@ def interaction_row(
     vehicle_id: str, person_id: str, record: _Open, place: PlaceLookup | None
 ) -> dict[str, Any]:
     """The output row of one finished interaction (ROW_COLUMNS)."""
-    table = np.asarray(record.values, dtype=float)
+    table = np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH)
     log = {name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)}
     m = interaction_measures(log)
     t = log[steplog.TIME]
