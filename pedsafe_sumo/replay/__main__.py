@@ -100,12 +100,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="FILE",
         help="write the episode as SUMO FCD XML (headless, no window)",
     )
-    parser.add_argument(
-        "--export-xosc",
-        type=Path,
-        metavar="FILE",
-        help="write the episode as ASAM OpenSCENARIO XML, its road as OpenDRIVE beside it (headless)",
-    )
     return parser.parse_args(argv)
 
 
@@ -116,12 +110,6 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         args.at = "collision"
     if args.screenshot is not None and args.export_fcd is not None:
         raise UsageError("--screenshot and --export-fcd are separate runs: give one of them")
-    if args.export_xosc is not None and (args.screenshot is not None or args.export_fcd is not None):
-        raise UsageError("--export-xosc is a run of its own: give it without --screenshot and --export-fcd")
-    if args.export_xosc is not None and args.export_xosc.suffix.lower() != ".xosc":
-        raise UsageError(
-            f"--export-xosc writes OpenSCENARIO: give a file name ending in .xosc, got {args.export_xosc}"
-        )
     if args.delay is not None and (not math.isfinite(args.delay) or args.delay < 0):
         raise UsageError(f"--delay must be a number of milliseconds >= 0, got {args.delay:g}")
     if not math.isfinite(args.view_width) or args.view_width <= 0:
@@ -209,9 +197,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.export_fcd is not None:
         say_header(logged, print)
         return export_fcd(logged, args.export_fcd, print)
-    if args.export_xosc is not None:
-        say_header(logged, print)
-        return export_xosc(logged, args.export_xosc, print)
 
     has_display = bool(os.environ.get("DISPLAY"))
     can_start_xvfb = (
@@ -250,38 +235,6 @@ def say_header(logged: LoggedEpisode, say) -> None:
 
 def _silent(*_args, **_kwargs) -> None:
     pass
-
-
-def export_xosc(logged: LoggedEpisode, path: Path, say) -> int:
-    """The episode as OpenSCENARIO + OpenDRIVE (pedsafe_sumo/replay/xosc.py), checked like --export-fcd."""
-    from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
-
-    runner = EpisodeRunner(logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s)
-    try:
-        setup = episode_setup(runner, logged, say)
-        check = _trajectory_check(logged, say)
-        path_xy = setup.pedestrian.path_xy
-        heading_rad = math.atan2(path_xy[1][1] - path_xy[0][1], path_xy[1][0] - path_xy[0][0])
-        ped = setup.pedestrian
-        recorder = TrackRecorder(ped.radius_m, ped.height_m, ped.clothing_rgb, heading_rad)
-        result = runner.run(
-            logged.spec, logged.condition, logged.seed, setup=setup, on_step=chain(check, recorder)
-        )
-    except SimulatorError as exc:
-        return error(str(exc), 1)
-    finally:
-        runner.close()
-    try:
-        xosc_path, xodr_path = write_xosc(
-            recorder, logged.site.file("net.xml"), path, f"pedsafe_sumo replay of {logged.describe()}"
-        )
-    except (RuntimeError, OSError) as exc:
-        return error(str(exc), 1)
-    say(
-        f"wrote {xosc_path} and {xodr_path}: {recorder.steps} steps, "
-        f"{len(recorder.whole_episode_vehicles())} vehicles"
-    )
-    return _verdict(logged, check, result, say)
 
 
 def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
