@@ -24,7 +24,11 @@ class PlaceFinder:
         if not path.is_file():
             raise NetError(f"network file not found: {path}")
         try:
-            self.net = sumolib.net.readNet(str(path), withInternal=True, withPedestrianConnections=True)
+            # lxml=False: sumolib's lxml reader (used whenever lxml is installed) did not link crossings to
+            # the edges they cross in our tests (sumolib 1.28); the SAX reader does.
+            self.net = sumolib.net.readNet(
+                str(path), withInternal=True, withPedestrianConnections=True, lxml=False
+            )
         except Exception as exc:  # sumolib raises whatever its SAX parser raises on a broken file
             raise NetError(f"cannot read network {path}: {exc}") from None
         if not self.net.getEdges():
