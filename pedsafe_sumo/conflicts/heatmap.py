@@ -76,7 +76,7 @@ def heatmap_figure(table: pd.DataFrame, net, title: str, every_interaction: bool
             cells,
             ax=ax,
             shrink=0.7,
-            label="interactions per cell" if every_interaction else "conflicts per cell",
+            label="interactions per cell" if every_interaction else "conflicts and contacts per cell",
         )
     hits = table[table["collision"].astype(bool)]
     if len(hits):
