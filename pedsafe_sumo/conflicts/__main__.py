@@ -62,6 +62,14 @@ def run(args: argparse.Namespace) -> dict[str, float]:
     if not args.fcd.is_file():
         raise UsageError(f"FCD file not found: {args.fcd}")
     section = load_params(args.params)["conflicts"]
+    for key, value in section.items():
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+            or value <= 0
+        ):
+            raise UsageError(f"parameter conflicts.{key} must be a positive number, got {value!r}")
     radius_m = section["interaction_radius_m"] if args.radius is None else args.radius
     if not math.isfinite(radius_m) or radius_m <= 0:
         raise UsageError(f"--radius must be a positive number of metres, got {radius_m:g}")

@@ -155,8 +155,14 @@ def test_bad_input_one_line_exit_2_and_earlier_output_kept(scene, tmp_path, caps
     no_xy.write_text(
         '<fcd-export><timestep time="0"><vehicle id="v" lon="1" lat="2" angle="0"/></timestep></fcd-export>'
     )
+    negative = tmp_path / "negative.toml"
+    negative.write_text("[conflicts]\nvehicle_length_m = -1\n")
+    typo = tmp_path / "typo.toml"
+    typo.write_text("[conflicts]\nvehicle_lenth_m = 5\n")
     cases = [
         ([tmp_path / "missing.xml", "--out", out], "not found"),
+        ([fcd, "--out", out, "--params", negative], "conflicts.vehicle_length_m must be a positive number"),
+        ([fcd, "--out", out, "--params", typo], "unknown parameter 'conflicts.vehicle_lenth_m'"),
         ([broken, "--out", out], "not well-formed"),
         ([not_fcd, "--out", out], "not SUMO FCD"),
         ([no_xy, "--out", out], "no 'x' attribute"),
