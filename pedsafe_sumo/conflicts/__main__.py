@@ -38,6 +38,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--net", type=Path, metavar="NET.xml", help="the network: adds lane_id and crossing_id"
     )
     parser.add_argument(
+        "--site",
+        metavar="NAME_OR_PATH",
+        help="a pedsafe_sumo site (name or folder) whose network is the --net",
+    )
+    parser.add_argument(
         "--types",
         type=Path,
         action="append",
@@ -54,6 +59,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def site_net(net: Path | None, site: str | None) -> Path | None:
+    """The network file: --net, or the one of --site (UsageError when both are given or the site is bad)."""
+    if site is None:
+        return net
+    if net is not None:
+        raise UsageError("give --net or --site, not both")
+    from pedsafe_sumo.network.sites import SiteError, resolve_site
+
+    try:
+        return resolve_site(site, verify=False).file("net.xml")
+    except SiteError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def run(args: argparse.Namespace) -> dict[str, float]:
     if args.out.suffix.lower() not in TABLE_SUFFIXES:
         raise UsageError(f"--out must end in .csv or .parquet, got {args.out}")
@@ -61,6 +80,7 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         raise UsageError(f"--ssm writes XML: give a file name ending in .xml, got {args.ssm}")
     if not args.fcd.is_file():
         raise UsageError(f"FCD file not found: {args.fcd}")
+    args.net = site_net(args.net, args.site)
     section = load_params(args.params)["conflicts"]
     for key, value in section.items():
         if (

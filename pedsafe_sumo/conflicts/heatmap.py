@@ -100,7 +100,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "table", type=Path, help="output of python -m pedsafe_sumo.conflicts (.csv or .parquet)"
     )
-    parser.add_argument("--net", type=Path, required=True, help="the SUMO network the FCD ran on")
+    parser.add_argument("--net", type=Path, help="the SUMO network the FCD ran on")
+    parser.add_argument(
+        "--site", metavar="NAME_OR_PATH", help="a pedsafe_sumo site whose network is the --net"
+    )
     parser.add_argument("--out", type=Path, required=True, help="figure file (.png, .pdf or .svg)")
     parser.add_argument("--title", default="Pedestrian conflicts", help="figure title")
     parser.add_argument("--all", action="store_true", help="count every interaction, not only conflicts")
@@ -109,6 +112,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.out.suffix.lower() not in (".png", ".pdf", ".svg"):
             raise ValueError(f"--out must end in .png, .pdf or .svg, got {args.out}")
         table = read_table(args.table)
+        from pedsafe_sumo.conflicts.__main__ import site_net
+        from pedsafe_sumo.settings import UsageError
+
+        try:
+            args.net = site_net(args.net, args.site)
+        except UsageError as exc:
+            raise ValueError(str(exc)) from None
+        if args.net is None:
+            raise ValueError("give the network: --net NET.xml or --site NAME_OR_PATH")
         from pedsafe_sumo.conflicts.places import NetError, PlaceFinder
 
         try:

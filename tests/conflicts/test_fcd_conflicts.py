@@ -170,6 +170,8 @@ def test_bad_input_one_line_exit_2_and_earlier_output_kept(scene, tmp_path, caps
         ([fcd, "--out", out, "--radius", "-1"], "--radius"),
         ([fcd, "--out", out, "--types", tmp_path / "nope.xml"], "types file not found"),
         ([fcd, "--out", out, "--net", tmp_path / "nope.net.xml"], "network file not found"),
+        ([fcd, "--out", out, "--site", tmp_path / "nosite"], "nosite"),
+        ([fcd, "--out", out, "--site", "xueqing", "--net", tmp_path / "a.net.xml"], "not both"),
     ]
     for args, words in cases:
         assert run(*args) == 2, args

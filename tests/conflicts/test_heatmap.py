@@ -26,7 +26,7 @@ def test_heatmap_draws_the_net_and_the_conflicts(tmp_path):
         + [(100.0, 100.0, False, False)] * 50
     )
     out = tmp_path / "map.png"
-    assert main([str(table(tmp_path / "t.csv", rows)), "--net", str(NET), "--out", str(out)]) == 0
+    assert main([str(table(tmp_path / "t.csv", rows)), "--site", "xueqing", "--out", str(out)]) == 0
     image = matplotlib.image.imread(out)[..., :3]
     assert (np.abs(image - 1.0).max(axis=-1) > 0.05).mean() > 0.02  # lanes and cells drawn, not blank
     # the contact marker's blue (#0050d0) is there
@@ -42,6 +42,8 @@ def test_heatmap_bad_input_exit_2(tmp_path, capsys):
         ([str(bad), "--net", str(NET), "--out", str(tmp_path / "m.png")], "not a conflicts table"),
         ([str(good), "--net", str(tmp_path / "no.net.xml"), "--out", str(tmp_path / "m.png")], "network"),
         ([str(good), "--net", str(NET), "--out", str(tmp_path / "m.txt")], "--out"),
+        ([str(good), "--out", str(tmp_path / "m.png")], "--net NET.xml or --site"),
+        ([str(good), "--site", str(tmp_path / "nosite"), "--out", str(tmp_path / "m.png")], "nosite"),
     ):
         assert main(args) == 2
         err = capsys.readouterr().err
