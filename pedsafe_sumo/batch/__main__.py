@@ -42,10 +42,12 @@ from pedsafe_sumo.io.run_store import (
     RUN_FILE,
     STATE_COMPLETE,
     STATE_RUNNING,
+    STEPLOGS_DIR,
     RunStoreError,
     holds_run,
     read_json,
 )
+from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS, KEEP_LOGS_CHOICES
 from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
@@ -66,6 +68,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "set": [],
     "algorithm": DEFAULT_ALGORITHM,
     "chunk_size": None,
+    "keep_logs": KEEP_EVENTS,
 }
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
 IDENTITY_KEYS = (
@@ -167,6 +170,14 @@ def parse_args(argv):
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--keep-logs",
+        dest="keep_logs",
+        choices=KEEP_LOGS_CHOICES,
+        help="which per-step logs to keep: 'events' = both conditions of every pair with a collision or "
+        "a conflict, in cases/; 'all' = those and every episode's log, one Parquet file per chunk in "
+        f"steplogs/ [{KEEP_EVENTS}]",
+    )
     return parser.parse_args(argv)
 
 
@@ -235,6 +246,12 @@ def prepare(args) -> Plan:
         if args.out is None:
             raise UsageError("--resume needs --out DIR, the run directory to continue")
         recorded = _recorded_run(args.out)
+        kept = recorded["arguments"].get("keep_logs", KEEP_EVENTS)
+        if explicit.get("keep_logs", kept) != kept:
+            raise UsageError(
+                f"{args.out} was started with --keep-logs {kept}; a resumed run keeps the same logs "
+                "(leave the flag out or repeat its value)"
+            )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **recorded["arguments"], **explicit}
     else:
         if args.out is not None and holds_run(args.out):
@@ -289,7 +306,15 @@ def prepare(args) -> Plan:
     }
     scenario_overrides, _ = parse_set(arguments["set"])
     versions = worker_versions()
-    config = WorkerConfig(reference, params, scenario_overrides, arguments["algorithm"], digests, versions)
+    config = WorkerConfig(
+        reference,
+        params,
+        scenario_overrides,
+        arguments["algorithm"],
+        digests,
+        versions,
+        keep_logs=arguments["keep_logs"],
+    )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
     plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded)
@@ -332,6 +357,7 @@ def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
         "chunks_total": chunks_total,
         "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
         "arguments": plan.arguments,
+        "keep_logs": plan.arguments["keep_logs"],
         "workers": backend.n_workers,
         "executor": backend.description,
         "versions": _versions(),
@@ -375,7 +401,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run(plan: Plan, backend, argv: list[str]) -> int:
-    run_dir = BatchRunDirectory(plan.out)
+    run_dir = BatchRunDirectory(plan.out, plan.arguments["keep_logs"])
     if plan.recorded is None:
         if plan.identity["chunk_size_pairs"] is None:
             size = auto_chunk_size(plan.identity["episodes_per_scenario"], backend.n_workers)
@@ -461,6 +487,8 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s), left out of "
         f"the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
     )
+    if plan.arguments["keep_logs"] == KEEP_ALL:
+        print(f"every episode's step log: {len(chunks)} file(s) in {plan.out / STEPLOGS_DIR}")
     if backend.worker_deaths:
         print(
             f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "

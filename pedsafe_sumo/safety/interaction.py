@@ -4,9 +4,10 @@ An interaction is a stretch of steps at which one vehicle and one pedestrian are
 per-step log follows the contract of `pedsafe_sumo.safety.log` (the vehicle in the ego's columns). The
 detection flags mean nothing outside an episode: a log without them gets them all False.
 
-The rules are those of `episode_indexes`: TTC, DRAC and the conflict measures are taken over the steps up
-to and including the first contact, PET is 0 for an interaction with a contact. So an episode's log gives
-back its row of `episodes.parquet` (tests/conflicts/test_replay_roundtrip.py).
+The rules are those of `episode_indexes`: TTC, the conflict and the proximity measures (minimum clearance,
+DRAC: `pedsafe_sumo.safety.proximity`) are taken over the steps up to and including the first contact,
+PET is 0 for an interaction with a contact. So an episode's log gives back its row of `episodes.parquet`
+(tests/replay/test_conflicts_roundtrip.py).
 """
 
 from __future__ import annotations
@@ -17,10 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.safety import log as steplog
-from pedsafe_sumo.safety.collision import clearance_m, detect_collision
+from pedsafe_sumo.safety.collision import detect_collision
 from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
-from pedsafe_sumo.safety.drac import max_drac_mps2
+from pedsafe_sumo.safety.proximity import default_proximity_model, episode_proximity, kinematic_arrays
 from pedsafe_sumo.safety.surrogates import pet_s, ttc_steps_s
 
 
@@ -29,7 +29,7 @@ class InteractionMeasures:
     collision: bool
     #: first step in contact; None without a contact
     contact_step: int | None
-    #: smallest signed clearance between footprint and circle over the interaction, m (<= 0: contact)
+    #: smallest signed clearance between footprint and circle up to the first contact, m (<= 0: contact)
     min_clearance_m: float
     #: step of the smallest clearance (the first on a tie)
     min_clearance_step: int
@@ -47,21 +47,11 @@ class InteractionMeasures:
     conflict_step: int | None
 
 
-def with_default_flags(log: Any) -> dict[str, np.ndarray]:
-    """A validated log whose missing detection flags are filled with False."""
-    columns = dict(log) if not hasattr(log, "columns") else {c: log[c].to_numpy() for c in log.columns}
-    n = len(np.asarray(columns[steplog.TIME])) if steplog.TIME in columns else 0
-    for name in steplog.BOOLEAN_COLUMNS:
-        columns.setdefault(name, np.zeros(n, dtype=bool))
-    return steplog.as_arrays(columns)
-
-
 def interaction_measures(log: Any, conflict_model: ConflictModel = AMINI_2022) -> InteractionMeasures:
     """All measures of one interaction's per-step log (see the module docstring for the rules)."""
-    arrays = with_default_flags(log)
+    arrays = kinematic_arrays(log)
     hit = detect_collision(arrays)
-    clearance = clearance_m(arrays)
-    k_clear = int(np.argmin(clearance))
+    proximity = episode_proximity(arrays, default_proximity_model(), hit.step)
     ttc = ttc_steps_s(arrays)
     if hit.step is not None:
         ttc = ttc[: hit.step + 1]
@@ -70,12 +60,12 @@ def interaction_measures(log: Any, conflict_model: ConflictModel = AMINI_2022) -
     return InteractionMeasures(
         collision=hit.collided,
         contact_step=hit.step,
-        min_clearance_m=float(clearance[k_clear]),
-        min_clearance_step=k_clear,
+        min_clearance_m=proximity.min_clearance_m,
+        min_clearance_step=proximity.step,
         ttc_s=float(ttc[k_ttc]) if k_ttc is not None else math.nan,
         ttc_step=k_ttc,
         pet_s=0.0 if hit.collided else pet_s(arrays),
-        drac_mps2=max_drac_mps2(arrays, last_step=hit.step),
+        drac_mps2=proximity.drac_mps2,
         conflict=conflict.conflict,
         md_m=conflict.md_m,
         tmd_s=conflict.tmd_s,

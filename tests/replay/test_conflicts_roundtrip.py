@@ -22,7 +22,7 @@ from pedsafe_sumo.replay.rundir import load_logged_episode
 from pedsafe_sumo.sim.episode import EGO_ID, PED_ID, EpisodeRunner
 
 #: Index columns compared; both sides NaN counts as equal.
-COMPARED = ("md_m", "tmd_s", "cs_mps", "conflict_probability", "pet_s")
+COMPARED = ("md_m", "tmd_s", "cs_mps", "conflict_probability", "pet_s", "min_clearance_m", "drac_mps2")
 #: FCD positions and angles carry 6 decimals: measures agree to well below a millimetre / millisecond.
 TOLERANCE = 1e-4
 
