@@ -36,8 +36,9 @@ from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, auto_chunk_size, plan_c
 from pedsafe_sumo.batch.executors import BatchError, make_backend
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
-from pedsafe_sumo.batch.runner import ERROR_STATUS, WorkerConfig, site_file_digests, worker_versions
+from pedsafe_sumo.batch.runner import WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
     RUN_FILE,
     STATE_COMPLETE,
@@ -48,6 +49,7 @@ from pedsafe_sumo.io.run_store import (
 )
 from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError
+from pedsafe_sumo.safety.stats import ERROR_STATUS
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
@@ -65,7 +67,19 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "set": [],
     "algorithm": DEFAULT_ALGORITHM,
     "chunk_size": None,
+    "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
 }
+#: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
+#: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
+#: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
+MAX_EPISODES = 1_000_000
+#: Run seeds are stored in run.json and compared as 64-bit integers.
+MAX_SEED = 2**63 - 1
+#: Local worker processes (one SUMO each, about 150 MB): 256 need about 40 GB, beyond one machine;
+#: more workers belong on a cluster (--cluster).
+MAX_WORKERS = 256
+#: A chunk's rows and case logs are held by its worker and rerun whole after a kill.
+MAX_CHUNK_PAIRS = 10_000
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
 IDENTITY_KEYS = (
     "site",
@@ -166,6 +180,14 @@ def parse_args(argv):
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--agent-timeout",
+        type=float,
+        dest="agent_timeout",
+        metavar="SECONDS",
+        help="time limit of each run_step call of the AD stack: an episode whose stack exceeds it ends "
+        f"with status timeout, and the batch goes on [{DEFAULT_AGENT_TIMEOUT_S:g}]",
+    )
     return parser.parse_args(argv)
 
 
@@ -208,6 +230,16 @@ def _lookup(data: Any, dotted: str) -> Any:
     return data
 
 
+def _is_foreign(out: Path) -> bool:
+    """Whether `out` is an existing directory with something in it and no run of ours (holds_run)."""
+    if not out.is_dir():
+        return False
+    try:
+        return next(out.iterdir(), None) is not None
+    except OSError:  # unreadable: certainly not ours to write into
+        return True
+
+
 def _recorded_run(out: Path) -> dict[str, Any]:
     try:
         recorded = read_json(out / RUN_FILE)
@@ -226,6 +258,8 @@ def prepare(args) -> Plan:
         raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers is not None and args.workers > MAX_WORKERS:
+        raise UsageError(f"--workers must be at most {MAX_WORKERS}, got {args.workers} (more: use --cluster)")
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} is a file, not a run directory")
     explicit = _explicit_arguments(args)
@@ -242,6 +276,11 @@ def prepare(args) -> Plan:
                 f"output directory {args.out} already holds a run ({state}); continue it with --resume "
                 "or choose another --out"
             )
+        if args.out is not None and _is_foreign(args.out):
+            raise UsageError(
+                f"--out {args.out} is a directory that is not empty and holds no run: choose a new or "
+                "empty directory (nothing in it is touched)"
+            )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **explicit}
     scenario = arguments["scenario"]
     if scenario is None:
@@ -254,10 +293,24 @@ def prepare(args) -> Plan:
     conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
     if arguments["episodes"] < 1:
         raise UsageError(f"--episodes must be at least 1, got {arguments['episodes']}")
+    if arguments["episodes"] > MAX_EPISODES:
+        raise UsageError(
+            f"--episodes must be at most {MAX_EPISODES:,} per scenario, got {arguments['episodes']}"
+        )
     if arguments["seed"] < 0:
         raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
+    if arguments["seed"] > MAX_SEED:
+        raise UsageError(f"--seed must be at most 2**63 - 1, got {arguments['seed']}")
     if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
         raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
+    if arguments["chunk_size"] is not None and arguments["chunk_size"] > MAX_CHUNK_PAIRS:
+        raise UsageError(
+            f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
+        )
+    try:
+        agent_timeout_s = check_timeout_s(arguments["agent_timeout"])
+    except (TypeError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
     site = get_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
     specs, params = configure(scenarios, params_file, arguments["set"])
@@ -279,7 +332,9 @@ def prepare(args) -> Plan:
     }
     scenario_overrides, _ = parse_set(arguments["set"])
     versions = worker_versions()
-    config = WorkerConfig(site.name, params, scenario_overrides, arguments["algorithm"], digests, versions)
+    config = WorkerConfig(
+        site.name, params, scenario_overrides, arguments["algorithm"], digests, versions, agent_timeout_s
+    )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
     plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded)
@@ -328,6 +383,7 @@ def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
         "wall_time_s": None,
         "episodes_per_s": None,
         "n_error": None,
+        "n_timeout": None,
         "cases_written": None,
     }
 
@@ -430,7 +486,8 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
     table = run_dir.finalize(chunks)
     session.update(wall_time_s=round(session_wall_s, 3), worker_deaths=backend.worker_deaths)
     wall_s = sum(run_dir.session_wall_times_s(run_info["sessions"]))
-    n_error = int((table["status"] == ERROR_STATUS).sum())
+    n_timeout = int((table["status"] == TIMEOUT_STATUS).sum())
+    n_error = int((table["status"] == ERROR_STATUS).sum()) + n_timeout
     cases_written = len(list(run_dir.cases_dir.glob("*.parquet")))
     run_info.update(
         state=STATE_COMPLETE,
@@ -438,6 +495,7 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         wall_time_s=round(wall_s, 3),
         episodes_per_s=round(total / wall_s, 3) if wall_s > 0 else None,
         n_error=n_error,
+        n_timeout=n_timeout,
         cases_written=cases_written,
     )
     run_dir.save_run_info(run_info)
@@ -446,8 +504,8 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
     ran_rows = total - done_rows
     rate = f" ({ran_rows / session_wall_s:.1f} episodes/s)" if ran_rows and session_wall_s > 0 else ""
     print(
-        f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s), left out of "
-        f"the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
+        f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s) ({n_timeout} "
+        f"timeout(s)), left out of the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
     )
     if backend.worker_deaths:
         print(

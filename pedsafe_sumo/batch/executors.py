@@ -44,6 +44,8 @@ PAIR_ATTEMPTS_ALONE = 2
 #: Pool breaks in a row in which no chunk had even started before the batch gives up.
 MAX_STARTUP_DEATHS = 3
 LOCAL_CLUSTER_PREFIX = "local:"
+#: Most Dask workers local:N starts (one SUMO process each, as --workers; the same bound).
+MAX_LOCAL_CLUSTER_WORKERS = 256
 CLUSTER_EXTRA_HINT = "Dask is not installed: install the cluster extra, pip install 'pedsafe_sumo[cluster]'"
 
 
@@ -217,6 +219,11 @@ def parse_cluster_address(text: str) -> tuple[str, int]:
         count = text[len(LOCAL_CLUSTER_PREFIX) :]
         if not count.isdigit() or int(count) < 1:
             raise UsageError(f"--cluster local:N needs a number of workers N >= 1, got '{text}'")
+        if int(count) > MAX_LOCAL_CLUSTER_WORKERS:
+            raise UsageError(
+                f"--cluster local:N starts at most {MAX_LOCAL_CLUSTER_WORKERS} local workers, got '{text}' "
+                "(more: start a Dask cluster and give its scheduler's address)"
+            )
         return "local", int(count)
     scheme, sep, rest = text.partition("://")
     if not sep or not rest or scheme not in ("tcp", "tls", "ws", "wss", "inproc", "ucx"):

@@ -16,7 +16,7 @@ import pandas as pd
 
 from pedsafe_sumo.batch.chunks import Chunk
 from pedsafe_sumo.batch.executors import BatchError
-from pedsafe_sumo.batch.runner import ERROR_STATUS, ChunkOutput
+from pedsafe_sumo.batch.runner import ChunkOutput
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
 from pedsafe_sumo.io.run_store import (
@@ -38,6 +38,7 @@ from pedsafe_sumo.io.run_store import (
     write_bytes_atomic,
     write_json_atomic,
 )
+from pedsafe_sumo.safety.stats import FAILED_STATUSES
 from pedsafe_sumo.settings import UsageError
 
 try:
@@ -146,7 +147,7 @@ class BatchRunDirectory:
                 file=f"{PARTS_DIR}/{name}",
                 rows=len(table),
                 sha256=sha256_bytes(data),
-                n_error=int((table["status"] == ERROR_STATUS).sum()),
+                n_error=int(table["status"].isin(FAILED_STATUSES).sum()),
                 session=session,
                 completed_utc=utc_now(),
                 session_elapsed_s=round(session_elapsed_s, 3),

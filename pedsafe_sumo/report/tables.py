@@ -161,7 +161,7 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 TABLE_ONE_TITLE = (
     "Table I: collision rate, mean injury probability P_I, conflict rate (conflict without collision)\n"
     "95% intervals: Wilson for the rates, Student t for the mean P_I; n = episodes counted, "
-    "errors = episodes with status 'error' (left out)"
+    "errors = episodes with status 'error' or 'timeout' (left out)"
 )
 PAIRED_TITLE = (
     "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"

@@ -12,6 +12,10 @@ from pedsafe_sumo.safety.conflict import conflict_without_collision
 
 TABLE_INPUT_COLUMNS = ("scenario", "condition", "collision", "injury_probability", "conflict", "status")
 ERROR_STATUS = "error"
+TIMEOUT_STATUS = "timeout"
+#: Statuses of episodes that did not run to their end (an error, or an AD stack past its per-step time
+#: limit): counted apart in n_error and left out of every rate and of the paired tests.
+FAILED_STATUSES = (ERROR_STATUS, TIMEOUT_STATUS)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -74,17 +78,17 @@ def _mean_interval(values: np.ndarray, confidence: float) -> tuple[float, float,
 def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     """The paper's Table I, one row per scenario and condition (in order of first appearance).
 
-    Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error", left
-    out), collision_rate with collision_low/high (Wilson), injury_mean with injury_low/high (Student t
-    on the per-episode P_I), conflict_rate with conflict_low/high (Wilson), where a conflict counts only
-    in an episode without a collision.
+    Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error" or
+    "timeout", left out), collision_rate with collision_low/high (Wilson), injury_mean with
+    injury_low/high (Student t on the per-episode P_I), conflict_rate with conflict_low/high (Wilson),
+    where a conflict counts only in an episode without a collision.
     """
     missing = [c for c in TABLE_INPUT_COLUMNS if c not in episodes.columns]
     if missing:
         raise ValueError(f"episodes lack column(s): {', '.join(missing)}")
     rows = []
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
-        errors = (group["status"] == ERROR_STATUS).to_numpy()
+        errors = group["status"].isin(FAILED_STATUSES).to_numpy()
         ok = group[~errors]
         n = len(ok)
         collisions = ok["collision"].to_numpy(dtype=bool)
@@ -116,7 +120,8 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
 def paired_mcnemar(episodes: pd.DataFrame, outcome: str = "collision") -> pd.DataFrame:
     """Per scenario, the exact McNemar test of a binary outcome between the paired sv and v2i episodes.
 
-    Pairs are matched on (scenario, episode); a pair where either side has status "error" is dropped.
+    Pairs are matched on (scenario, episode); a pair where either side has status "error" or "timeout"
+    is dropped.
     Columns: scenario, n_pairs, both, sv_only, v2i_only, neither, p_value.
     """
     missing = [
@@ -135,7 +140,7 @@ def paired_mcnemar(episodes: pd.DataFrame, outcome: str = "collision") -> pd.Dat
         pairs = sides["sv"][["status", outcome]].merge(
             sides["v2i"][["status", outcome]], left_index=True, right_index=True, suffixes=("_sv", "_v2i")
         )
-        pairs = pairs[(pairs["status_sv"] != ERROR_STATUS) & (pairs["status_v2i"] != ERROR_STATUS)]
+        pairs = pairs[~pairs["status_sv"].isin(FAILED_STATUSES) & ~pairs["status_v2i"].isin(FAILED_STATUSES)]
         both, sv_only, v2i_only, neither = paired_counts(pairs[f"{outcome}_sv"], pairs[f"{outcome}_v2i"])
         rows.append(
             {

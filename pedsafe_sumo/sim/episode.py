@@ -30,6 +30,7 @@ import pandas as pd
 
 from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker
 from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
+from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
 from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
@@ -158,9 +159,12 @@ class EpisodeRunner:
         injury_model: str = "saade2020",
         gui_settings_file: Path | None = None,
         gui_options: Sequence[str] = (),
+        agent_timeout_s: float = DEFAULT_AGENT_TIMEOUT_S,
     ) -> None:
         """`gui_settings_file` replaces the site's sumo-gui view settings and `gui_options` are added to
-        the sumo-gui command line (replay: window size, labels); both are ignored headless."""
+        the sumo-gui command line (replay: window size, labels); both are ignored headless.
+        `agent_timeout_s` limits each run_step call (pedsafe_sumo.control.timeout)."""
+        self.agent_timeout_s = check_timeout_s(agent_timeout_s)
         self.site = site
         self.gui_settings_file = gui_settings_file or site.file("view.xml")
         self.gui_options = tuple(gui_options)
@@ -464,6 +468,8 @@ class EpisodeRunner:
         end_reason = "time_limit"
         pose = walker.step(0.0, 0.0, (0.0, 0.0), 0.0, 0.0)  # position at the start of the path
         _move_pedestrian(api, pose)
+        # run_step under the per-step time limit: AgentTimeoutError ends the episode (status "timeout").
+        run_step = guard_step(agent.run_step, self.agent_timeout_s).start()
         try:
             while True:
                 t0 = clock()
@@ -533,7 +539,7 @@ class EpisodeRunner:
                     tuple(reported),
                     self.step_length_s,
                 )
-                command: Command = agent.run_step(observation, time_s)
+                command: Command = run_step(observation, time_s)
                 target_mps = max(0.0, float(command.target_speed_mps))
                 t3 = clock()
                 timings["agent_s"] += t3 - t2
@@ -596,7 +602,9 @@ class EpisodeRunner:
                 api.simulation.step()
                 timings["sumo_s"] += clock() - t4
         finally:
-            agent.close()
+            run_step.stop()
+            if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
+                agent.close()
 
         # SUMO may register a collision in the step after ours (it checks after moving).
         if end_reason == "collision" and not sumo_collision:
