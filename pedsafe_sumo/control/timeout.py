@@ -14,8 +14,9 @@ in one of two ways, chosen once per episode by `guard_step`:
   ends. Cost: one hand-over between threads per step.
 
 Either way the episode ends with status "timeout" and the message of AgentTimeoutError; the batch goes on.
-A stack stuck in native code that never returns to the interpreter (and holds the GIL) cannot be
-interrupted by either: such a worker has to be killed, which the batch survives as a worker death.
+A stack stuck in native code that never returns to the interpreter (and holds the GIL), or one that
+catches BaseException around its hang, cannot be interrupted by either: such a worker has to be killed,
+which the batch survives as a worker death.
 """
 
 from __future__ import annotations
@@ -41,6 +42,11 @@ StepFunction = Callable[[Any, float], Any]
 
 class AgentTimeoutError(RuntimeError):
     """run_step exceeded the per-step time limit; the message says when and how long."""
+
+
+class _StillRunning(BaseException):  # noqa: N818 - never seen outside this module
+    """Raised again every RETRY_S after the limit: a BaseException, so that a stack's `except Exception`
+    (which swallowed the first AgentTimeoutError) does not swallow it too."""
 
 
 def check_timeout_s(timeout_s: float) -> float:
@@ -76,8 +82,11 @@ class _AlarmGuard:
         if self._active:
             # Fire again every RETRY_S until run_step gives up: a stack that swallows the exception
             # (a broad `except`) is interrupted again, and the step counts as timed out anyway.
+            again = self._fired
             self._fired = True
             signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+            if again:
+                raise _StillRunning
             raise AgentTimeoutError(_message(self.timeout_s, self._time_s))
 
     def start(self) -> _AlarmGuard:
@@ -100,12 +109,14 @@ class _AlarmGuard:
         signal.setitimer(signal.ITIMER_REAL, self.timeout_s)
         try:
             command = self._step(observation, time_s)
+        except _StillRunning:
+            command = None
         finally:
             self._active = False
             signal.setitimer(signal.ITIMER_REAL, 0.0)
             if self._fired:
                 self.timed_out = True
-        if self.timed_out:  # the stack caught the AgentTimeoutError and returned late
+        if self.timed_out:  # the stack caught the AgentTimeoutError and returned late, or was stopped again
             raise AgentTimeoutError(_message(self.timeout_s, time_s))
         return command
 
