@@ -29,14 +29,14 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, auto_chunk_size, plan_chunks
-from pedsafe_sumo.batch.executors import BatchError, make_backend
+from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, Chunk, auto_chunk_size, plan_chunks
+from pedsafe_sumo.batch.executors import BatchError, DaskBackend, ProcessPoolBackend, make_backend
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
-from pedsafe_sumo.batch.runner import WorkerConfig, site_file_digests, worker_versions
+from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
@@ -54,6 +54,10 @@ from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
+if TYPE_CHECKING:
+    import pandas as pd
+
+Backend = DaskBackend | ProcessPoolBackend
 DEFAULT_EPISODES = 100
 #: The arguments that decide a run's results (and its chunk layout), with their defaults. run.json
 #: records them; --resume takes them from there, and a flag given again must repeat its value.
@@ -134,11 +138,11 @@ def _versions() -> dict[str, str]:
 class _OneLineParser(argparse.ArgumentParser):
     """argparse whose errors are one line on stderr (exit 2), like every other bad input."""
 
-    def error(self, message: str):
+    def error(self, message: str) -> NoReturn:
         self.exit(2, f"error: {message} (see --help)\n")
 
 
-def parse_args(argv):
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", help=f"{', '.join(SCENARIOS)} or all (required unless --resume)")
     parser.add_argument("--condition", help="sv, v2i or both (paired: same seed) [both]")
@@ -204,7 +208,7 @@ class Plan:
     recorded: dict[str, Any] | None  # run.json of the run being resumed
 
 
-def _explicit_arguments(args) -> dict[str, Any]:
+def _explicit_arguments(args: argparse.Namespace) -> dict[str, Any]:
     given = {name: getattr(args, name) for name in RUN_ARGUMENT_DEFAULTS if getattr(args, name) is not None}
     if "params" in given:
         given["params"] = str(Path(given["params"]).resolve())
@@ -252,7 +256,7 @@ def _recorded_run(out: Path) -> dict[str, Any]:
     return recorded
 
 
-def prepare(args) -> Plan:
+def prepare(args: argparse.Namespace) -> Plan:
     """Check everything about the command and its input files; writes nothing."""
     if args.workers is not None and args.cluster:
         raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
@@ -362,7 +366,7 @@ def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:
             raise UsageError(f"{plan.out} was started with {name} {was}, this is {now}: resume it with {was}")
 
 
-def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
+def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any]:
     identity = plan.identity
     chunks_total = len(plan.scenarios) * math.ceil(
         identity["episodes_per_scenario"] / identity["chunk_size_pairs"]
@@ -418,7 +422,7 @@ def main(argv: list[str] | None = None) -> int:
         backend.close()
 
 
-def run(plan: Plan, backend, argv: list[str]) -> int:
+def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
     run_dir = BatchRunDirectory(plan.out)
     if plan.recorded is None:
         if plan.identity["chunk_size_pairs"] is None:
@@ -476,7 +480,7 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         total=total, initial=done_rows, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr
     ) as bar:
 
-        def on_chunk_done(chunk, output) -> None:
+        def on_chunk_done(chunk: Chunk, output: ChunkOutput) -> None:
             if run_dir.record(chunk, output, session_index, time.perf_counter() - started):
                 bar.update(chunk.n_rows)
 
@@ -517,7 +521,7 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
     return 0
 
 
-def print_table(table) -> None:
+def print_table(table: pd.DataFrame) -> None:
     from pedsafe_sumo.safety.stats import table_one
 
     summary = table_one(table)

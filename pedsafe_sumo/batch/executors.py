@@ -32,6 +32,7 @@ from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
+from typing import Any
 
 from pedsafe_sumo.batch.chunks import Chunk, Task
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, error_row, init_pool_worker, run_chunk
@@ -61,7 +62,7 @@ WORKER_DIED_MESSAGE = (
 )
 
 
-def worker_died_rows(task: Task) -> list[dict]:
+def worker_died_rows(task: Task) -> list[dict[str, Any]]:
     """Error rows of a pair whose worker process died every time it ran."""
     return [error_row(task, condition, WORKER_DIED_MESSAGE) for condition in task.conditions]
 
@@ -144,7 +145,7 @@ class ProcessPoolBackend:
                 initargs=(str(progress_dir),),
             )
             try:
-                futures: dict[Future, Chunk] = {
+                futures: dict[Future[ChunkOutput], Chunk] = {
                     pool.submit(run_chunk, config, chunk.key, chunk.tasks): chunk for chunk in chunks
                 }
                 for future in as_completed(futures):
@@ -241,8 +242,8 @@ class DaskBackend:
         self.target, self.local_workers = parse_cluster_address(address)
         self.worker_deaths = 0
         self.notes: list[str] = []
-        self._client = None
-        self._cluster = None
+        self._client: Any = None  # distributed.Client (imported only when used)
+        self._cluster: Any = None
 
     @property
     def description(self) -> str:
@@ -312,11 +313,11 @@ class DaskBackend:
         # Keys unique to this session: a resumed batch on a long-lived cluster never meets its past tasks.
         token = uuid.uuid4().hex[:12]
         #: future -> (chunk, index of the pair within the chunk, or None for the whole chunk)
-        owners: dict = {}
+        owners: dict[Any, tuple[Chunk, int | None]] = {}
         #: chunk key -> outputs of its pairs so far, when the chunk had to be split
         split: dict[str, list[ChunkOutput | None]] = {}
 
-        def submit(chunk: Chunk, pair: int | None):
+        def submit(chunk: Chunk, pair: int | None) -> Any:
             tasks = chunk.tasks if pair is None else (chunk.tasks[pair],)
             key = f"pedsafe-{token}-{chunk.key}" + ("" if pair is None else f"-pair{pair}")
             future = client.submit(run_chunk, config, chunk.key, tasks, key=key, pure=False)
@@ -351,8 +352,8 @@ class DaskBackend:
             parts[pair] = output
             if all(p is not None for p in parts):
                 del split[chunk.key]
-                on_done(chunk, merge_outputs(parts))
+                on_done(chunk, merge_outputs([p for p in parts if p is not None]))
 
 
-def make_backend(cluster: str | None, workers: int):
+def make_backend(cluster: str | None, workers: int) -> DaskBackend | ProcessPoolBackend:
     return DaskBackend(cluster) if cluster else ProcessPoolBackend(workers)

@@ -44,7 +44,7 @@ from pedsafe_sumo.settings import UsageError
 try:
     import fcntl
 except ImportError:  # pragma: no cover - not POSIX: no lock, one driver per directory is then on the user
-    fcntl = None
+    fcntl = None  # type: ignore[assignment]
 
 
 def utc_now() -> str:
@@ -57,7 +57,7 @@ class BatchRunDirectory:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
         self.manifest = Manifest(self.path / MANIFEST_FILE)
-        self._lock_handle = None
+        self._lock_handle: Any = None
 
     @property
     def cases_dir(self) -> Path:

@@ -92,7 +92,7 @@ class ChunkOutput:
 # One runner per worker process. The lock serialises chunks in a process: a Dask worker started with
 # more than one thread would otherwise drive the process's single SUMO from two threads at once.
 _SUMO_LOCK = threading.Lock()
-_RUNNER = None
+_RUNNER: Any = None  # an EpisodeRunner (imported lazily: the driver never builds one)
 _RUNNER_FINGERPRINT = ""
 _RUNNER_CONFIG: WorkerConfig | None = None
 #: Set by the process pool's initializer: where this worker notes the chunk it has started.
@@ -175,7 +175,7 @@ def check_environment(config: WorkerConfig) -> None:
             )
 
 
-def _runner_for(config: WorkerConfig):
+def _runner_for(config: WorkerConfig) -> Any:
     global _RUNNER, _RUNNER_FINGERPRINT, _RUNNER_CONFIG
     fingerprint = config.fingerprint
     if _RUNNER is not None and _RUNNER_FINGERPRINT == fingerprint:

@@ -214,7 +214,8 @@ def params_from_record(recorded: Any, notes: list[str]) -> dict[str, Any]:
     if not isinstance(recorded, dict):
         raise ReplayError("run.json's 'parameters' is not a table")
     params = load_params()
-    added, dropped = [], []
+    added: list[str] = []
+    dropped: list[str] = []
 
     def overlay(base: dict, record: dict, where: str) -> None:
         for key, value in record.items():
@@ -270,7 +271,7 @@ def _version_notes(run_info: dict[str, Any]) -> list[str]:
     from pedsafe_sumo import __version__
 
     notes = []
-    versions = run_info.get("versions") if isinstance(run_info.get("versions"), dict) else {}
+    versions: dict[str, Any] = run_info["versions"] if isinstance(run_info.get("versions"), dict) else {}
     sumo_then, sumo_now = versions.get("sumo"), sumolib.version.gitDescribe()
     if sumo_then and sumo_then != sumo_now:
         notes.append(f"the run used SUMO {sumo_then}, this is SUMO {sumo_now}: trajectories may differ")

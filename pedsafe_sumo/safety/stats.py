@@ -9,6 +9,7 @@ import pandas as pd
 from scipy import stats
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
+from pedsafe_sumo.safety.geometry import FloatOrArray
 
 TABLE_INPUT_COLUMNS = ("scenario", "condition", "collision", "injury_probability", "conflict", "status")
 ERROR_STATUS = "error"
@@ -50,7 +51,7 @@ def mcnemar_exact(b: int, c: int) -> float:
     return float(min(1.0, 2.0 * stats.binom.cdf(min(b, c), b + c, 0.5)))
 
 
-def paired_counts(sv, v2i) -> tuple[int, int, int, int]:
+def paired_counts(sv: FloatOrArray, v2i: FloatOrArray) -> tuple[int, int, int, int]:
     """Counts of a paired binary outcome: (both, sv only, v2i only, neither)."""
     sv, v2i = np.asarray(sv, dtype=bool), np.asarray(v2i, dtype=bool)
     if sv.shape != v2i.shape:

@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -204,10 +206,10 @@ class ScenarioSpec:
                     f"scenario '{self.name}': {key} must be at most {bound:g} ({why}), got {value:g}"
                 )
 
-    def with_overrides(self, overrides: dict[str, str | float]) -> ScenarioSpec:
+    def with_overrides(self, overrides: Mapping[str, str | float]) -> ScenarioSpec:
         """A copy with fields replaced from --set key=value pairs (values parsed as numbers)."""
         names = {f.name for f in dataclasses.fields(self)} - {"name", "description"}
-        changes = {}
+        changes: dict[str, Any] = {}
         for key, value in overrides.items():
             if key not in names:
                 raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
@@ -436,13 +438,13 @@ def draw_episode(
         front_pos = ego_size.length_m
     ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size)
     pedestrian = PedestrianSetup(
-        path_xy=tuple(tuple(float(c) for c in p) for p in path),
+        path_xy=tuple((float(p[0]), float(p[1])) for p in path),
         start_delay_s=start_delay_s,
         age_years=float(pedestrian_traits["age_years"]),
         gender=str(pedestrian_traits["gender"]),
         risk=str(pedestrian_traits["risk"]),
         walking_speed_mps=float(pedestrian_traits["walking_speed_mps"]),
-        clothing_rgb=tuple(int(c) for c in clothing),
+        clothing_rgb=(int(clothing[0]), int(clothing[1]), int(clothing[2])),
         radius_m=radius_m,
         height_m=height_m,
     )

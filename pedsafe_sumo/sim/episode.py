@@ -342,23 +342,23 @@ class EpisodeRunner:
             api.vehicletype.setHeight("background", size.height_m)
             api.vehicletype.setImperfection("background", 0.0)
             api.vehicletype.setMaxSpeed("background", 55.56)
-        for vehicle in setup.background:
-            route_id = "bg_" + "|".join(vehicle.route)
+        for bg in setup.background:
+            route_id = "bg_" + "|".join(bg.route)
             if route_id not in self._routes_added:
-                api.route.add(route_id, list(vehicle.route))
+                api.route.add(route_id, list(bg.route))
                 self._routes_added.add(route_id)
             api.vehicle.add(
-                vehicle.vehicle_id,
+                bg.vehicle_id,
                 route_id,
                 typeID="background",
-                depart=repr(vehicle.depart_s),
-                departLane=str(vehicle.lane_index),
-                departPos=repr(vehicle.depart_pos_m),
+                depart=repr(bg.depart_s),
+                departLane=str(bg.lane_index),
+                departPos=repr(bg.depart_pos_m),
                 # The fastest safe speed: a lognormal-tail desired speed (30+ m/s) just before a junction
                 # would be refused by SUMO; the speed factor set on departure brings it up afterwards.
                 departSpeed="max",
             )
-            api.vehicle.setColor(vehicle.vehicle_id, (*vehicle.colour_rgb, 255))
+            api.vehicle.setColor(bg.vehicle_id, (*bg.colour_rgb, 255))
         ped = setup.pedestrian
         api.vehicletype.copy("DEFAULT_PEDTYPE", "ped_type")
         api.vehicletype.setWidth("ped_type", 2 * ped.radius_m)
