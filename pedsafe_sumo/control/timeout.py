@@ -5,9 +5,9 @@ episode, not hold its batch forever. Python cannot interrupt a thread from outsi
 in one of two ways, chosen once per episode by `guard_step`:
 
 * In a process's main thread (the process-pool workers, the episode and replay CLIs): a real-time
-  interval timer (signal.setitimer, SIGALRM) armed before each call and disarmed after it. When it
-  fires, its handler raises AgentTimeoutError inside run_step, even in the middle of time.sleep. Cost: two
-  setitimer system calls per step (about a microsecond; BENCHMARKS.md).
+  timer (signal.setitimer, SIGALRM). When a call has run past the limit, the timer's handler raises
+  AgentTimeoutError inside run_step, even in the middle of time.sleep. Cost: one clock read per step
+  (the timer is armed once per episode and re-armed by its own handler; _AlarmGuard).
 * In any other thread (a Dask worker runs its tasks in a thread, where signals cannot be handled): the
   call runs in a helper thread of the episode and the step waits for its answer at most the limit. On a
   timeout the helper thread is abandoned (daemon; it holds only the stack, never SUMO) and the episode
@@ -24,6 +24,7 @@ from __future__ import annotations
 import queue
 import signal
 import threading
+import time
 from collections.abc import Callable
 from types import FrameType
 from typing import Any
@@ -36,6 +37,8 @@ MAX_AGENT_TIMEOUT_S = 3600.0
 TIMEOUT_STATUS = "timeout"
 #: After the limit, the alarm fires again this often until run_step gives up [s].
 RETRY_S = 0.1
+#: A timer may fire this much before the clock read at the step's start says the limit is reached [s].
+CLOCK_SLACK_S = 1e-3
 
 StepFunction = Callable[[Any, float], Any]
 
@@ -67,27 +70,43 @@ def _message(timeout_s: float, time_s: float) -> str:
 
 
 class _AlarmGuard:
-    """run_step under SIGALRM; main thread only. Use as a context manager around the episode's loop."""
+    """run_step under SIGALRM; main thread only. Use as a context manager around the episode's loop.
+
+    The timer is armed once, at the first step, not around every call (a setitimer system call costs
+    about 2 us on the development machine, against 0.2 us for reading the clock): when it fires, the
+    handler looks at the step in progress. Past the limit it raises; otherwise it re-arms the timer for
+    the rest of the current step's limit (or a whole limit between steps), so a step is cut off between
+    `timeout_s` and `timeout_s` plus a few milliseconds after it began. Between start() and stop() the
+    alarm fires about once per `timeout_s`, handled in Python between bytecodes; it is off while SUMO
+    loads and stages an episode."""
 
     def __init__(self, step: StepFunction, timeout_s: float) -> None:
         self._step = step
         self.timeout_s = timeout_s
         self.timed_out = False
         self._active = False
+        self._armed = False
         self._fired = False
+        self._started = 0.0
         self._time_s = 0.0
         self._previous: Any = None
 
     def _on_alarm(self, signum: int, frame: FrameType | None) -> None:
-        if self._active:
-            # Fire again every RETRY_S until run_step gives up: a stack that swallows the exception
-            # (a broad `except`) is interrupted again, and the step counts as timed out anyway.
-            again = self._fired
-            self._fired = True
-            signal.setitimer(signal.ITIMER_REAL, RETRY_S)
-            if again:
-                raise _StillRunning
-            raise AgentTimeoutError(_message(self.timeout_s, self._time_s))
+        if not self._active:
+            signal.setitimer(signal.ITIMER_REAL, self.timeout_s)  # between steps: the next one is later
+            return
+        elapsed_s = time.perf_counter() - self._started
+        if not self._fired and elapsed_s < self.timeout_s - CLOCK_SLACK_S:
+            signal.setitimer(signal.ITIMER_REAL, self.timeout_s - elapsed_s)
+            return
+        # Fire again every RETRY_S until run_step gives up: a stack that swallows the exception
+        # (a broad `except`) is interrupted again, and the step counts as timed out anyway.
+        again = self._fired
+        self._fired = True
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+        if again:
+            raise _StillRunning
+        raise AgentTimeoutError(_message(self.timeout_s, self._time_s))
 
     def start(self) -> _AlarmGuard:
         self._previous = signal.signal(signal.SIGALRM, self._on_alarm)
@@ -96,6 +115,7 @@ class _AlarmGuard:
     def stop(self) -> None:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, self._previous)
+        self._armed = False
 
     def __enter__(self) -> _AlarmGuard:
         return self.start()
@@ -105,15 +125,17 @@ class _AlarmGuard:
 
     def __call__(self, observation: Any, time_s: float) -> Any:
         self._time_s = time_s
+        self._started = time.perf_counter()
         self._active = True
-        signal.setitimer(signal.ITIMER_REAL, self.timeout_s)
+        if not self._armed:
+            self._armed = True
+            signal.setitimer(signal.ITIMER_REAL, self.timeout_s)
         try:
             command = self._step(observation, time_s)
         except _StillRunning:
             command = None
         finally:
             self._active = False
-            signal.setitimer(signal.ITIMER_REAL, 0.0)
             if self._fired:
                 self.timed_out = True
         if self.timed_out:  # the stack caught the AgentTimeoutError and returned late, or was stopped again

@@ -123,6 +123,36 @@ def test_a_step_slower_than_the_limit_in_total_but_not_per_step_is_not_cut_off()
     assert not step.timed_out
 
 
+def test_time_between_steps_does_not_count():
+    """The timer is armed once; firing between two steps (here: 1.5 limits apart) only re-arms it."""
+
+    def fast(observation, time_s):
+        return observation
+
+    with guard_step(fast, LIMIT_S) as step:
+        assert step(1, 0.0) == 1
+        time.sleep(1.5 * LIMIT_S)  # the episode's own work between two run_step calls
+        assert step(2, 0.05) == 2
+        time.sleep(0.8 * LIMIT_S)
+        assert step(3, 0.10) == 3
+    assert not step.timed_out
+
+
+def test_a_step_that_starts_late_gets_its_whole_limit():
+    """A slow step that begins just before the timer fires is cut off only a whole limit after it began."""
+
+    def slow_third(observation, time_s):
+        if observation == 3:
+            time.sleep(0.7 * LIMIT_S)
+        return observation
+
+    with guard_step(slow_third, LIMIT_S) as step:
+        step(1, 0.0)
+        time.sleep(0.6 * LIMIT_S)
+        assert step(3, 0.05) == 3  # runs from 0.6 to 1.3 limits after arming: 0.7 limits of its own
+    assert not step.timed_out
+
+
 @pytest.mark.parametrize("value", [0, -1, 3601, float("nan"), float("inf")])
 def test_limits_out_of_range_are_refused(value):
     with pytest.raises(ValueError, match="--agent-timeout must be > 0 and at most 3600"):
