@@ -47,7 +47,8 @@ from pedsafe_sumo.io.run_store import (
     holds_run,
     read_json,
 )
-from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
+from pedsafe_sumo.network.hosting import check_hosting, split_hosted
+from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.safety.stats import ERROR_STATUS
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
@@ -178,7 +179,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="continue the stopped run in --out with its recorded configuration; flags given again must "
         "repeat the recorded values",
     )
-    parser.add_argument("--site", help=f"study site [xueqing; known: {', '.join(SITES)}]")
+    parser.add_argument("--site", help=SITE_HELP)
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
@@ -315,13 +316,22 @@ def prepare(args: argparse.Namespace) -> Plan:
         agent_timeout_s = check_timeout_s(arguments["agent_timeout"])
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
-    site = get_site(arguments["site"])
+    site = resolve_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
     specs, params = configure(scenarios, params_file, arguments["set"])
     load_agent_class(arguments["algorithm"])
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
-    digests = site_file_digests(site.name)
+    if scenario == "all":  # every scenario the site can host; the others are named with the reason
+        scenarios, skipped = split_hosted(site, specs, params, conditions)
+        for name, why in skipped.items():
+            print(f"skipping scenario '{name}' on site {site.name}: {why}")
+        if not scenarios:
+            raise UsageError(f"site {site.name} hosts none of the scenarios (see the lines above)")
+        specs = {name: specs[name] for name in scenarios}
+    check_hosting(site, specs, params, conditions)  # its roadside poles see each scenario's staging area
+    reference = site_reference(arguments["site"], site)
+    digests = site_file_digests(reference)
     identity = {
         "site": site.name,
         "scenarios": {name: dataclasses.asdict(specs[name]) for name in scenarios},
@@ -337,7 +347,7 @@ def prepare(args: argparse.Namespace) -> Plan:
     scenario_overrides, _ = parse_set(arguments["set"])
     versions = worker_versions()
     config = WorkerConfig(
-        site.name, params, scenario_overrides, arguments["algorithm"], digests, versions, agent_timeout_s
+        reference, params, scenario_overrides, arguments["algorithm"], digests, versions, agent_timeout_s
     )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
@@ -376,6 +386,8 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
         "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
         "created_utc": datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S"),
         **identity,
+        # Where the site's files were (the digests above say what they held): replay finds them here.
+        "site_path": str(resolve_site(plan.arguments["site"], verify=False).directory.resolve()),
         "chunks_total": chunks_total,
         "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
         "arguments": plan.arguments,
