@@ -43,10 +43,12 @@ from pedsafe_sumo.io.run_store import (
     RUN_FILE,
     STATE_COMPLETE,
     STATE_RUNNING,
+    STEPLOGS_DIR,
     RunStoreError,
     holds_run,
     read_json,
 )
+from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS, KEEP_LOGS_CHOICES
 from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
@@ -73,6 +75,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "algorithm": DEFAULT_ALGORITHM,
     "chunk_size": None,
     "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
+    "keep_logs": KEEP_EVENTS,
 }
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
@@ -193,6 +196,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="time limit of each run_step call of the AD stack: an episode whose stack exceeds it ends "
         f"with status timeout, and the batch goes on [{DEFAULT_AGENT_TIMEOUT_S:g}]",
     )
+    parser.add_argument(
+        "--keep-logs",
+        dest="keep_logs",
+        choices=KEEP_LOGS_CHOICES,
+        help="which per-step logs to keep: 'events' = both conditions of every pair with a collision or "
+        "a conflict, in cases/; 'all' = those and every episode's log, one Parquet file per chunk in "
+        f"steplogs/ [{KEEP_EVENTS}]",
+    )
     return parser.parse_args(argv)
 
 
@@ -273,6 +284,12 @@ def prepare(args: argparse.Namespace) -> Plan:
         if args.out is None:
             raise UsageError("--resume needs --out DIR, the run directory to continue")
         recorded = _recorded_run(args.out)
+        kept = recorded["arguments"].get("keep_logs", KEEP_EVENTS)
+        if explicit.get("keep_logs", kept) != kept:
+            raise UsageError(
+                f"{args.out} was started with --keep-logs {kept}; a resumed run keeps the same logs "
+                "(leave the flag out or repeat its value)"
+            )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **recorded["arguments"], **explicit}
     else:
         if args.out is not None and holds_run(args.out):
@@ -347,7 +364,14 @@ def prepare(args: argparse.Namespace) -> Plan:
     scenario_overrides, _ = parse_set(arguments["set"])
     versions = worker_versions()
     config = WorkerConfig(
-        reference, params, scenario_overrides, arguments["algorithm"], digests, versions, agent_timeout_s
+        reference,
+        params,
+        scenario_overrides,
+        arguments["algorithm"],
+        digests,
+        versions,
+        keep_logs=arguments["keep_logs"],
+        agent_timeout_s=agent_timeout_s,
     )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
@@ -391,6 +415,7 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
         "chunks_total": chunks_total,
         "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
         "arguments": plan.arguments,
+        "keep_logs": plan.arguments["keep_logs"],
         "workers": backend.n_workers,
         "executor": backend.description,
         "versions": _versions(),
@@ -435,7 +460,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
-    run_dir = BatchRunDirectory(plan.out)
+    run_dir = BatchRunDirectory(plan.out, plan.arguments["keep_logs"])
     if plan.recorded is None:
         if plan.identity["chunk_size_pairs"] is None:
             size = auto_chunk_size(plan.identity["episodes_per_scenario"], backend.n_workers)
@@ -523,6 +548,8 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
         f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s) ({n_timeout} "
         f"timeout(s)), left out of the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
     )
+    if plan.arguments["keep_logs"] == KEEP_ALL:
+        print(f"every episode's step log: {len(chunks)} file(s) in {plan.out / STEPLOGS_DIR}")
     if backend.worker_deaths:
         print(
             f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "

@@ -15,8 +15,10 @@ EPISODE_COLUMNS = (
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
     "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
+    # the proximity measure (issue 12; pedsafe_sumo.safety.proximity)
+    "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
 )  # fmt: skip
-BOOL_COLUMNS = ("collision", "conflict", "sumo_collision")
+BOOL_COLUMNS = ("collision", "conflict", "sumo_collision", "close_pass")
 STRING_COLUMNS = ("scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error")
 INT_COLUMNS = ("episode", "seed")
 FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in (*BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS))

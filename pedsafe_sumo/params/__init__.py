@@ -30,10 +30,13 @@ class ParameterError(ValueError):
 VALIDATORS: dict[str, Callable[[dict[str, Any], str], None]] = {}
 
 
-def register_validator(section: str):
+Validator = Callable[[dict[str, Any], str], None]
+
+
+def register_validator(section: str) -> Callable[[Validator], Validator]:
     """Decorator: register the validator of one top-level section of the parameter file."""
 
-    def wrap(func: Callable[[dict[str, Any], str], None]):
+    def wrap(func: Validator) -> Validator:
         VALIDATORS[section] = func
         return func
 
@@ -116,6 +119,7 @@ def _import_validator_modules() -> None:
         "pedsafe_sumo.demand.params",
         "pedsafe_sumo.perception.params",
         "pedsafe_sumo.control.params",
+        "pedsafe_sumo.safety.params",
     ):
         try:
             importlib.import_module(module)

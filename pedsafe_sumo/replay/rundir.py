@@ -137,7 +137,7 @@ def load_logged_episode(
     except AlgorithmLoadError as exc:
         raise ReplayError(f"the run's algorithm cannot be loaded: {exc}") from None
     notes += _version_notes(run_info)
-    if outcome.get("status") == "error":
+    if outcome.get("status") in ("error", "timeout"):  # timeout: the AD stack exceeded --agent-timeout
         notes.append(f"the batch recorded an error for this episode: {outcome.get('error', '')}")
 
     case_log, case_meta = None, None
