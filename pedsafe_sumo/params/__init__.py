@@ -120,6 +120,7 @@ def _import_validator_modules() -> None:
         "pedsafe_sumo.perception.params",
         "pedsafe_sumo.control.params",
         "pedsafe_sumo.safety.params",
+        "pedsafe_sumo.conflicts.params",
     ):
         try:
             importlib.import_module(module)
