@@ -40,6 +40,9 @@ PEDESTRIAN_UPPER_BOUNDS: Bounds = {
     "hasten_max_speed_mps": (HUMAN_SPRINT_MPS, "a sprinter's top speed"),
     "step_back_speed_mps": (HUMAN_SPRINT_MPS, "a sprinter's top speed"),
     "corridor_half_width_m": (20.0, "wider than the study site's road"),
+    "yield_clearance_m": (20.0, "wider than the study site's road"),
+    "body_clearance_m": (5.0, "a pedestrian this far from every vehicle cannot move through a queue"),
+    "gap_startup_clearance_s": (60.0, "twenty times the HCM start-up time (3 s)"),
 }
 AGE_GROUP_UPPER_BOUNDS: Bounds = {
     "age_max_years": (120.0, "older than anyone recorded"),
@@ -118,7 +121,11 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
         raise ParameterError(f"parameter '{where}.hasten_factor' must be >= 1 (hasten means faster)")
     _positive(section, "hasten_max_speed_mps", where)
     _positive(section, "step_back_speed_mps", where)
-    _non_negative(section, "corridor_half_width_m", where)
+    _non_negative(section, "yield_clearance_m", where)
+    _non_negative(section, "body_clearance_m", where)
+    _non_negative(section, "gap_startup_clearance_s", where)
+    if not 0.0 < _positive(section, "eye_height_fraction", where) <= 1.0:
+        raise ParameterError(f"parameter '{where}.eye_height_fraction' must lie in (0, 1]")
     check_upper_bounds(section, PEDESTRIAN_UPPER_BOUNDS, where)
 
     groups = section.get("age_groups")
