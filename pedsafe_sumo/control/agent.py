@@ -234,7 +234,7 @@ def load_agent_class(spec: str) -> type[Agent]:
         raise AlgorithmLoadError(
             f"importing '{module_name}' for --algorithm failed: {type(exc).__name__}: {exc}"
         ) from None
-    cls = getattr(module, class_name, None)
+    cls: Any = getattr(module, class_name, None)
     if cls is None or not isinstance(cls, type):
         raise AlgorithmLoadError(f"module '{module_name}' has no class '{class_name}'")
     missing = [
@@ -244,9 +244,10 @@ def load_agent_class(spec: str) -> type[Agent]:
         raise AlgorithmLoadError(
             f"'{spec}' does not implement the agent interface: missing {', '.join(missing)}"
         )
-    if getattr(cls, "__abstractmethods__", None):
+    abstract = getattr(cls, "__abstractmethods__", None)
+    if abstract:
         raise AlgorithmLoadError(
-            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(cls.__abstractmethods__))}"
+            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(abstract))}"
         )
     check_sensor_names(_sensors_of(cls), spec)
     return cls
@@ -260,7 +261,7 @@ def check_sensor_names(names, who: str) -> None:
         raise AlgorithmLoadError(f"'{who}' asks for unknown sensors {unknown}; known: {known}")
 
 
-def _sensors_of(cls: type) -> list[str]:
+def _sensors_of(cls: Any) -> list[str]:
     try:
         return list(cls.sensors(cls.__new__(cls)))
     except Exception:  # sensors() that needs setup() first: checked when the episode starts
