@@ -15,9 +15,14 @@ EPISODE_COLUMNS = (
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
     "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
+    # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
+    "ego_signal", "ped_signal",
 )  # fmt: skip
 BOOL_COLUMNS = ("collision", "conflict", "sumo_collision")
-STRING_COLUMNS = ("scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error")
+STRING_COLUMNS = (
+    "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "ego_signal",
+    "ped_signal",
+)  # fmt: skip
 INT_COLUMNS = ("episode", "seed")
 FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in (*BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS))
 CONDITION_ORDER = {"sv": 0, "v2i": 1}

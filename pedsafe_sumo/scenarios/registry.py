@@ -1,20 +1,26 @@
-"""The three safety-critical scenarios of the paper, as frozen data in one registry.
+"""The safety-critical scenarios, as frozen data in one registry.
 
 `--scenario NAME` is a lookup in SCENARIOS; `--set key=value` replaces fields of the spec (an unknown
 key or a value out of range is an error). `draw_episode(spec, approach, seed, ...)` turns a spec and
 a seed into one concrete initial world (EpisodeSetup): the same seed gives the same world, whatever
 the condition (SV or V2I) it is then run under.
 
-Staging (see scenarios/geometry.py): the ego drives the kerb-far (left) lane of the watched approach;
-the pedestrian comes from the kerb-side sidewalk and crosses towards the median:
-- crossing: on the signalised crosswalk at the stop line, stepping out in front of a black vehicle
-  stopped at the stop line in the kerb lane (the head of a short queue), which hides them from the
-  ego (the "multiple threat" crosswalk crash);
-- jaywalking: mid-block, 30-45 m before the crosswalk, through the gap between vehicles queued or
-  parked in the kerb lane; the ego cruises at a stable (non-intersection) speed;
+Staging (see scenarios/geometry.py and docs/engine.md): the occluder stands in the kerb lane of the
+watched approach; the ego drives the lane next to it on the side the pedestrian crosses towards (the
+pedestrian comes from the kerb-side sidewalk and crosses towards the median). Every staging is placed in
+the junction's real signal program (scenarios/signals.py): the ego has green in every scenario.
+- crossing: the pedestrian crosses on the crosswalk at the stop line against the red (red-light running
+  by pedestrians, Zhu et al. 2021), stepping out in front of a black vehicle stopped at the stop line in
+  the kerb lane (the head of a short queue), which hides them from the ego (the "multiple threat"
+  crosswalk crash). The kerb lane carries the right turn: its head vehicle waits at the stop line on
+  green, as right-turners do, for the pedestrians on the crosswalk of the road it turns into (the
+  program gives that crosswalk its walk signal with the approach's green); the queue waits behind it;
+- jaywalking: mid-block, 30-45 m before the crosswalk (no signal: ped_signal none), through the gap
+  between vehicles queued or parked in the kerb lane; the ego cruises at a stable speed on green;
 - background_blending: standing just behind the rear bumper of a vehicle waiting at the stop line in
-  the kerb lane, closer to it than the LiDAR cluster tolerance and dressed in its colour, so that seen
-  from the ego the vehicle is right behind them, then crossing towards the median.
+  the kerb lane (a right-turner yielding, as in crossing), closer to it than the LiDAR can separate and
+  dressed in its colour, so that seen from the ego the vehicle is right behind them, then crossing
+  towards the median beside the crosswalk while it shows red.
 """
 
 from __future__ import annotations
@@ -26,6 +32,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from pedsafe_sumo.scenarios.geometry import Approach
+from pedsafe_sumo.scenarios.signals import (
+    NO_LINK,
+    SIGNAL_STATES,
+    JunctionSignals,
+    SignalStagingError,
+    draw_cycle_start_s,
+)
 
 #: Car body colours drawn for occluders and waiting vehicles (RGB 0-255): white, black, silver, grey,
 #: red, blue - the common colours of the Beijing fleet.
@@ -48,6 +61,10 @@ CLOTHING_COLOURS_RGB = (
 )
 OCCLUDER_BLACK_RGB = (20, 20, 20)
 EGO_BLUE_RGB = (30, 110, 255)
+
+
+#: Scenario fields that hold text; every other field is a number.
+STRING_FIELDS = ("placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal")
 
 
 class ScenarioError(ValueError):
@@ -129,6 +146,17 @@ class ScenarioSpec:
     #: watches it: the corner pole for crossing and jaywalking; for background blending also the
     #: far-side pole, because from the corner the waiting vehicle hides the pedestrian behind it.
     roadside_units: str = "rsu_camera_0"
+    #: The signal each road user has at the conflict (green, yellow, red or none), from the junction's
+    #: program (scenarios/signals.py): the episode starts at a point of the cycle where the ego's and the
+    #: pedestrian's signals show these from the start until `signal_hold_after_s` after the staged
+    #: conflict. The ego has green in every scenario: a straight-through ego never meets red by accident.
+    ego_signal: str = "green"
+    #: crossing: the pedestrian crosses against the red (red-light running by pedestrians, the violation
+    #: the paper cites, Zhu et al. 2021); none: no signal controls where they cross (mid-block).
+    ped_signal: str = "red"
+    #: How long after the staged conflict (the ego's front at the conflict point at its initial speed) the
+    #: signal states must still hold [s]: the +-0.6 s conflict window plus a reaction (assumption).
+    signal_hold_after_s: float = 2.0
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -163,6 +191,9 @@ class ScenarioSpec:
             (self.background_traffic in (0, 1), "background_traffic is 0 or 1"),
             (self.background_warmup_s >= 0, "background_warmup_s >= 0"),
             (all(self.roadside_unit_ids), "roadside_units is a comma-separated list of POI ids"),
+            (self.ego_signal in SIGNAL_STATES, f"ego_signal in {SIGNAL_STATES}"),
+            (self.ped_signal in SIGNAL_STATES, f"ped_signal in {SIGNAL_STATES}"),
+            (self.signal_hold_after_s >= 0, "signal_hold_after_s >= 0"),
         ]
         for ok, rule in checks:
             if not ok:
@@ -175,7 +206,7 @@ class ScenarioSpec:
         for key, value in overrides.items():
             if key not in names:
                 raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
-            if key in ("placement", "ego_speed_fit", "occluder_class", "roadside_units"):
+            if key in STRING_FIELDS:
                 changes[key] = str(value)
                 continue
             try:
@@ -193,10 +224,11 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     for spec in (
         ScenarioSpec(
             "crossing",
-            "a pedestrian on the signalised crosswalk steps out in front of a black vehicle stopped in the "
-            "kerb lane, which hides them from the ego",
+            "a pedestrian crossing against the red on the signalised crosswalk steps out in front of a "
+            "black right-turner waiting on green in the kerb lane, which hides them from the ego (green)",
             placement="crosswalk",
             ego_speed_fit="intersection",
+            ped_signal="red",
         ),
         ScenarioSpec(
             "jaywalking",
@@ -204,6 +236,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             "queued in the kerb lane, while the ego cruises at a stable speed",
             placement="midblock",
             ego_speed_fit="non_intersection",
+            ped_signal="none",
         ),
         ScenarioSpec(
             "background_blending",
@@ -211,6 +244,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             "closer to it than the LiDAR cluster tolerance",
             placement="behind_waiting_vehicle",
             ego_speed_fit="intersection",
+            ped_signal="red",
             roadside_units="rsu_camera_0,rsu_camera_1",
         ),
     )
@@ -277,6 +311,29 @@ class EpisodeSetup:
     conflict_offset_s: float
     time_limit_s: float
     background: tuple[BackgroundVehicle, ...] = ()
+    #: Seconds from the start until the ego's front reaches `conflict_xy` at its initial speed (the
+    #: staged conflict; the signal states are placed around it).
+    conflict_time_s: float = math.nan
+    #: The signalised crossing whose signal faces the pedestrian ("" when none does: mid-block).
+    ped_crossing_id: str = ""
+    #: Where the junction's signal program stands at the start (None: not staged, e.g. an old case).
+    signals: SignalStaging | None = None
+
+
+@dataclass(frozen=True)
+class SignalStaging:
+    """The junction's traffic light at the start of an episode, and the links of its road users."""
+
+    tls_id: str
+    program_id: str
+    #: Time of the program's cycle at the episode's t = 0 [s].
+    cycle_start_s: float
+    #: Link indices (SUMO's linkIndex) of the ego's connection and of the pedestrian's crossing
+    #: (signals.NO_LINK when no signal controls where they cross).
+    ego_link_index: int
+    ped_link_index: int
+    #: The right turn of the kerb lane, where the occluders wait (signals.NO_LINK when it has none).
+    occluder_link_index: int = NO_LINK
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
@@ -312,7 +369,10 @@ def draw_episode(
     (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
     """
     ego_size = VEHICLE_CLASSES["car"]
-    kerb_lane, ego_lane = 0, len(approach.lane_ids) - 1
+    # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
+    # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
+    kerb_lane = 0
+    ego_lane = adjacent_lane(kerb_lane, +1, len(approach.lane_ids))
     kerb_lane_id = approach.lane_ids[kerb_lane]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
     radius_m = 0.3
@@ -399,6 +459,7 @@ def draw_episode(
         start_delay_s += (ego_size.length_m - front_pos) / ego_speed_mps
         front_pos = ego_size.length_m
     ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size)
+    conflict_time_s = (ego_conflict_pos - front_pos) / ego_speed_mps
     pedestrian = PedestrianSetup(
         path_xy=tuple(tuple(float(c) for c in p) for p in path),
         start_delay_s=start_delay_s,
@@ -420,7 +481,23 @@ def draw_episode(
         conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
         time_limit_s=spec.time_limit_s,
+        conflict_time_s=float(conflict_time_s),
+        # Mid-block no signal faces the pedestrian; at the stop line (on the crosswalk or just beside
+        # it, behind the waiting vehicle) the crosswalk's signal does.
+        ped_crossing_id="" if spec.placement == "midblock" else approach.crosswalk_id,
     )
+
+
+def adjacent_lane(occluder_lane: int, towards: int, n_lanes: int) -> int:
+    """The lane next to `occluder_lane` in the direction the pedestrian crosses (+1: towards the
+    median, lanes counted from the kerb), where the ego drives."""
+    lane = occluder_lane + towards
+    if not 0 <= lane < n_lanes:
+        raise ScenarioError(
+            f"the approach has {n_lanes} vehicle lane(s): no lane next to lane {occluder_lane} on the side "
+            "the pedestrian crosses towards"
+        )
+    return lane
 
 
 def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[float, float]:
@@ -437,3 +514,37 @@ def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[floa
         if 0 <= t <= 1 and 0 <= u <= 1:
             return ax + t * d1x, ay + t * d1y
     raise ValueError("the pedestrian's path does not cross the ego's lane")
+
+
+def stage_signals(
+    spec: ScenarioSpec, setup: EpisodeSetup, junction: JunctionSignals | None, rng: np.random.Generator
+) -> EpisodeSetup:
+    """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
+    (one draw from `rng`) among those at which the ego's and the pedestrian's signals show what `spec`
+    requires from the start until `signal_hold_after_s` after the staged conflict."""
+    if junction is None:
+        if spec.ego_signal != "none" or spec.ped_signal != "none":
+            raise SignalStagingError(f"scenario '{spec.name}' needs a signalised junction; the site has none")
+        return setup
+    ego_link = junction.vehicle_link(setup.ego.lane_id, setup.ego_route[1])
+    ped_link = junction.crossing_link(setup.ped_crossing_id) if setup.ped_crossing_id else NO_LINK
+    if (ped_link == NO_LINK) != (spec.ped_signal == "none"):
+        where = f"crossing {setup.ped_crossing_id}" if setup.ped_crossing_id else "a mid-block crossing"
+        raise SignalStagingError(
+            f"scenario '{spec.name}': ped_signal {spec.ped_signal} does not fit {where} "
+            f"({'signalised' if ped_link != NO_LINK else 'no signal'})"
+        )
+    required = {ego_link: spec.ego_signal}
+    if ped_link != NO_LINK:
+        required[ped_link] = spec.ped_signal
+    until_s = setup.conflict_time_s + spec.signal_hold_after_s
+    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, rng)
+    staging = SignalStaging(
+        tls_id=junction.program.tls_id,
+        program_id=junction.program.program_id,
+        cycle_start_s=round(cycle_start_s, 6),
+        ego_link_index=ego_link,
+        ped_link_index=ped_link,
+        occluder_link_index=junction.turn_link(setup.parked[0].lane_id, "r") if setup.parked else NO_LINK,
+    )
+    return dataclasses.replace(setup, signals=staging)
