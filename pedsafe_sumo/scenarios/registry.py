@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pedsafe_sumo.scenarios.geometry import Approach
+from pedsafe_sumo.scenarios.geometry import Approach, Turn
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     SIGNAL_STATES,
@@ -64,7 +64,10 @@ EGO_BLUE_RGB = (30, 110, 255)
 
 
 #: Scenario fields that hold text; every other field is a number.
-STRING_FIELDS = ("placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal")
+STRING_FIELDS = (
+    "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
+    "ped_start_corner", "ped_signal_hold",
+)  # fmt: skip
 
 
 class ScenarioError(ValueError):
@@ -157,6 +160,16 @@ class ScenarioSpec:
     #: How long after the staged conflict (the ego's front at the conflict point at its initial speed) the
     #: signal states must still hold [s]: the +-0.6 s conflict window plus a reaction (assumption).
     signal_hold_after_s: float = 2.0
+    #: Turning scenarios (placement "turn"): "right" or "left", and the end of the crosswalk over the
+    #: road turned into that the pedestrian starts from ("near": nearer the approach's stop line, the
+    #: corner a right-turner turns around).
+    turn: str = ""
+    ped_start_corner: str = "near"
+    #: How long the pedestrian's signal must show `ped_signal`: "conflict" from stepping off until after
+    #: the conflict (crossing against the red all the way); "step_off" when they step off only (a
+    #: pedestrian who started on the walk signal may still be on the crosswalk in the clearance
+    #: interval that follows it, as the law allows).
+    ped_signal_hold: str = "conflict"
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -164,7 +177,10 @@ class ScenarioSpec:
 
     def __post_init__(self) -> None:
         checks = [
-            (self.placement in ("crosswalk", "midblock", "behind_waiting_vehicle"), "placement"),
+            (self.placement in ("crosswalk", "midblock", "behind_waiting_vehicle", "turn"), "placement"),
+            ((self.placement == "turn") == (self.turn in ("right", "left")), "turn is right or left (only)"),
+            (self.ped_start_corner in ("near", "far"), "ped_start_corner is near or far"),
+            (self.ped_signal_hold in ("conflict", "step_off"), "ped_signal_hold is conflict or step_off"),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
@@ -246,6 +262,36 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             ego_speed_fit="intersection",
             ped_signal="red",
             roadside_units="rsu_camera_0,rsu_camera_1",
+        ),
+        ScenarioSpec(
+            "right_turn",
+            "the ego turns right on green from the kerb lane; a pedestrian steps onto the crosswalk of the "
+            "road it turns into with the walk signal, from the corner the ego turns around",
+            placement="turn",
+            ego_speed_fit="intersection",
+            turn="right",
+            ped_start_corner="near",
+            ped_signal="green",
+            ped_signal_hold="step_off",
+            # China's Road Traffic Safety Law Implementation Regulations, art. 46: at most 30 km/h when
+            # turning.
+            ego_speed_max_mps=8.33,
+        ),
+        ScenarioSpec(
+            "left_turn",
+            "the ego turns left on a permissive green from the median lane; a pedestrian crosses the road "
+            "it turns into with the walk signal, from the far corner",
+            placement="turn",
+            ego_speed_fit="intersection",
+            turn="left",
+            ped_start_corner="far",
+            ped_signal="green",
+            ped_signal_hold="step_off",
+            ego_speed_max_mps=8.33,
+            # Staging bound, not a behaviour fit: the ego enters the junction on green and reaches the
+            # far crosswalk (about 40 m of turn on Xueqing) within the approach's green (16 s with its
+            # yellow-free part); slower left-turners cannot be staged there (issue 13, docs/engine.md).
+            ego_speed_min_mps=3.5,
         ),
     )
 }
@@ -361,13 +407,18 @@ def draw_episode(
     pedestrian_traits: dict,
     ego_speed_mps: float,
     rng: np.random.Generator,
+    turn: Turn | None = None,
 ) -> EpisodeSetup:
-    """Place one episode of `spec` on the approach.
+    """Place one episode of `spec` on the approach (for a turning scenario, on `turn`).
 
     `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
     demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
     (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
     """
+    if spec.placement == "turn":
+        if turn is None:
+            raise ScenarioError(f"scenario '{spec.name}' needs the geometry of its {spec.turn} turn")
+        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, rng)
     ego_size = VEHICLE_CLASSES["car"]
     # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
     # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
@@ -488,6 +539,104 @@ def draw_episode(
     )
 
 
+def _pedestrian(traits: dict, clothing, start_delay_s: float, path) -> PedestrianSetup:
+    """The pedestrian of an episode (body sizes by gender and age, as in draw_episode)."""
+    height_m = {"m": 1.72, "f": 1.60}.get(traits["gender"], 1.66)
+    if traits["age_years"] < 19:
+        height_m -= 0.05
+    return PedestrianSetup(
+        path_xy=tuple(tuple(float(c) for c in p) for p in path),
+        start_delay_s=start_delay_s,
+        age_years=float(traits["age_years"]),
+        gender=str(traits["gender"]),
+        risk=str(traits["risk"]),
+        walking_speed_mps=float(traits["walking_speed_mps"]),
+        clothing_rgb=tuple(int(c) for c in clothing),
+        radius_m=0.3,
+        height_m=height_m,
+    )
+
+
+#: SUMO inserts a vehicle before a minor (yielding) link only if it could stop before it: even with the
+#: ego's hard insertion decel (sim/episode.py) it refused fronts within 2 m of the stop line at 2-8.3 m/s
+#: (measured on Xueqing's right and left turns); 3 m leaves a margin.
+TURN_START_BEFORE_STOP_LINE_M = 3.0
+
+
+def _draw_turn_episode(
+    spec: ScenarioSpec,
+    approach: Approach,
+    turn: Turn,
+    seed: int,
+    traits: dict,
+    ego_speed_mps: float,
+    rng: np.random.Generator,
+) -> EpisodeSetup:
+    """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
+    left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
+    gives it), the ego turns on its green and must yield to them."""
+    import sumolib
+
+    ego_size = VEHICLE_CLASSES["car"]
+    ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
+    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
+    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    near, far = turn.crosswalk_path
+    start, end = (near, far) if spec.ped_start_corner == "near" else (far, near)
+    # From 1 m back on the sidewalk to 1 m beyond the crosswalk's other end.
+    length = math.dist(start, end)
+    ux, uy = (end[0] - start[0]) / length, (end[1] - start[1]) / length
+    path = ((start[0] - ux, start[1] - uy), (end[0] + ux, end[1] + uy))
+    conflict_xy = _crossing_with_polyline(turn.path_xy, path)
+    walk_to_conflict_s = math.dist(path[0], conflict_xy) / traits["walking_speed_mps"]
+    start_delay_s = spec.ped_start_delay_s
+    ego_conflict_pos = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(conflict_xy, turn.path_xy)
+    arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
+    front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
+    # The ego starts on the approach lane with its whole body on it, TURN_START_BEFORE_STOP_LINE_M
+    # before the stop line at the latest.
+    latest_m = turn.approach_length_m - TURN_START_BEFORE_STOP_LINE_M
+    if front_pos > latest_m:
+        # The pedestrian would reach the conflict before the ego could come from the stop line: they
+        # wait longer on the kerb instead.
+        start_delay_s += (front_pos - latest_m) / ego_speed_mps
+        front_pos = latest_m
+    if front_pos < ego_size.length_m:
+        start_delay_s += (ego_size.length_m - front_pos) / ego_speed_mps
+        front_pos = ego_size.length_m
+    ego = VehicleSetup(
+        "ego", approach.lane_ids[turn.lane_index], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size
+    )
+    return EpisodeSetup(
+        scenario=spec.name,
+        seed=seed,
+        ego=ego,
+        ego_route=turn.route,
+        pedestrian=_pedestrian(traits, clothing, start_delay_s, path),
+        parked=(),
+        conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
+        conflict_offset_s=conflict_offset_s,
+        time_limit_s=spec.time_limit_s,
+        conflict_time_s=float((ego_conflict_pos - front_pos) / ego_speed_mps),
+        ped_crossing_id=turn.crosswalk_id,
+    )
+
+
+def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
+    """First intersection of the pedestrian's straight path with a polyline (the ego's turn path)."""
+    (ax, ay), (bx, by) = path
+    for (px, py), (qx, qy) in zip(polyline[:-1], polyline[1:]):
+        d1x, d1y, d2x, d2y = bx - ax, by - ay, qx - px, qy - py
+        denom = d1x * d2y - d1y * d2x
+        if abs(denom) < 1e-12:
+            continue
+        t = ((px - ax) * d2y - (py - ay) * d2x) / denom
+        u = ((px - ax) * d1y - (py - ay) * d1x) / denom
+        if 0 <= t <= 1 and 0 <= u <= 1:
+            return ax + t * d1x, ay + t * d1y
+    raise ScenarioError("the pedestrian's path does not cross the ego's turn")
+
+
 def adjacent_lane(occluder_lane: int, towards: int, n_lanes: int) -> int:
     """The lane next to `occluder_lane` in the direction the pedestrian crosses (+1: towards the
     median, lanes counted from the kerb), where the ego drives."""
@@ -520,8 +669,9 @@ def stage_signals(
     spec: ScenarioSpec, setup: EpisodeSetup, junction: JunctionSignals | None, rng: np.random.Generator
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
-    (one draw from `rng`) among those at which the ego's and the pedestrian's signals show what `spec`
-    requires from the start until `signal_hold_after_s` after the staged conflict."""
+    (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
+    start, and the pedestrian's from the moment they step off, until `signal_hold_after_s` after the
+    staged conflict. SignalStagingError when the program has no such time (the message says which)."""
     if junction is None:
         if spec.ego_signal != "none" or spec.ped_signal != "none":
             raise SignalStagingError(f"scenario '{spec.name}' needs a signalised junction; the site has none")
@@ -534,10 +684,14 @@ def stage_signals(
             f"scenario '{spec.name}': ped_signal {spec.ped_signal} does not fit {where} "
             f"({'signalised' if ped_link != NO_LINK else 'no signal'})"
         )
-    required = {ego_link: spec.ego_signal}
-    if ped_link != NO_LINK:
-        required[ped_link] = spec.ped_signal
     until_s = setup.conflict_time_s + spec.signal_hold_after_s
+    # The ego from the start (it sees its signal all the way to the stop line), the pedestrian from
+    # stepping off the kerb, both until after the conflict.
+    required: dict[int, tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
+    if ped_link != NO_LINK:
+        step_off_s = min(setup.pedestrian.start_delay_s, until_s)
+        ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
+        required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
     cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, rng)
     staging = SignalStaging(
         tls_id=junction.program.tls_id,

@@ -93,21 +93,25 @@ class SignalProgram:
 
 
 def cycle_start_windows(
-    program: SignalProgram, required: dict[int, str], until_s: float
+    program: SignalProgram, required: dict[int, str | tuple[str, float, float]], until_s: float = 0.0
 ) -> list[tuple[float, float]]:
     """The cycle times c in [0, cycle) at which an episode can start so that every link of `required`
-    (link index -> colour) shows its colour during the whole of [c, c + until_s]. Sorted, disjoint."""
-    if until_s < 0:
-        raise ValueError("until_s must not be negative")
+    shows its colour during the whole of [c + from_s, c + to_s]. A value of `required` is
+    (colour, from_s, to_s), or a colour alone for (colour, 0, until_s). Sorted, disjoint."""
     windows = [(0.0, program.cycle_s)]
-    for link_index, colour in required.items():
+    for link_index, wanted in required.items():
+        colour, from_s, to_s = (wanted, 0.0, until_s) if isinstance(wanted, str) else wanted
+        if not 0 <= from_s <= to_s:
+            raise ValueError(f"the signal of link {link_index} is required over [{from_s}, {to_s}] s")
         if colour not in SIGNAL_STATES:
             raise ValueError(f"unknown signal state '{colour}' (known: {', '.join(SIGNAL_STATES)})")
         if link_index == NO_LINK:
             if colour != "none":
                 raise SignalStagingError(f"a road user no signal controls cannot have a {colour} signal")
             continue
-        starts = [(s, e - until_s) for s, e in program.runs(link_index, colour) if e - s >= until_s]
+        starts = [
+            (s - from_s, e - to_s) for s, e in program.runs(link_index, colour) if e - s >= to_s - from_s
+        ]
         # Start times of one cycle: shift each interval by whole cycles into [0, cycle).
         allowed = []
         for s, e in starts:
@@ -140,7 +144,10 @@ def _intersect(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> li
 
 
 def draw_cycle_start_s(
-    program: SignalProgram, required: dict[int, str], until_s: float, rng: np.random.Generator
+    program: SignalProgram,
+    required: dict[int, str | tuple[str, float, float]],
+    until_s: float,
+    rng: np.random.Generator,
 ) -> float:
     """A cycle time drawn uniformly over cycle_start_windows (one draw from `rng`); raises
     SignalStagingError when there is none."""
@@ -148,9 +155,13 @@ def draw_cycle_start_s(
     total = sum(hi - lo for lo, hi in windows)
     u = float(rng.uniform(0.0, 1.0))
     if not windows:
-        wanted = ", ".join(f"link {k} {v}" for k, v in required.items())
+        wanted = ", ".join(
+            f"link {k} {v}" if isinstance(v, str) else f"link {k} {v[0]} from {v[1]:.1f} to {v[2]:.1f} s"
+            for k, v in required.items()
+        )
         raise SignalStagingError(
-            f"signal program {program.tls_id}/{program.program_id} never shows {wanted} for {until_s:.1f} s"
+            f"signal program {program.tls_id}/{program.program_id} cannot show {wanted}"
+            + (f" (until {until_s:.1f} s)" if any(isinstance(v, str) for v in required.values()) else "")
         )
     if total <= 0:  # only single instants qualify
         return windows[0][0]

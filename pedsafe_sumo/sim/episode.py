@@ -47,7 +47,7 @@ from pedsafe_sumo.perception import (
 )
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
-from pedsafe_sumo.scenarios.geometry import load_approach
+from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
     VEHICLE_CLASSES,
@@ -67,6 +67,8 @@ CONDITIONS = ("sv", "v2i")
 DEFAULT_ALGORITHM = "pedsafe_sumo.control.reference:ReferenceStack"
 STEP_LENGTH_S = 0.05
 PED_ID = "ped"
+#: The ego's SUMO deceleration [m/s2]: only SUMO's insertion check reads it (see _add_vehicle).
+EGO_INSERTION_DECEL_MPS2 = 50.0
 EGO_ID = "ego"
 #: How far around the pedestrian SUMO searches for a lane to map them onto after each moveToXY [m].
 #: SUMO's default (100 m) makes the call scan every lane and walking area of the junction each step
@@ -279,7 +281,8 @@ class EpisodeRunner:
             "risk": person.risk,
             "walking_speed_mps": person.speed_mps,
         }
-        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng)
+        turn = load_turn(self.site, spec.turn) if spec.placement == "turn" else None
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng, turn)
         setup = stage_signals(spec, setup, self.signals, world_rng)
         if spec.background_traffic:
             setup = dataclasses.replace(setup, background=self._background(spec, traffic_seq))
@@ -378,6 +381,13 @@ class EpisodeRunner:
             # The ego's speed is the AD stack's, not SUMO's: allow initial speeds above the limit.
             api.vehicletype.setSpeedFactor(type_id, 2.0)
             api.vehicletype.setMaxSpeed(type_id, 50.0)
+            # SUMO inserts a vehicle before a minor link (a turn that must yield) only if it could stop
+            # before it at its decel; the AD stack, not SUMO, brakes the ego (speed mode 0), so the
+            # check must not refuse a turning ego close to the stop line. Followers keep judging it by
+            # a passenger car's braking (apparent decel).
+            api.vehicletype.setApparentDecel(type_id, api.vehicletype.getDecel(type_id))
+            api.vehicletype.setDecel(type_id, EGO_INSERTION_DECEL_MPS2)
+            api.vehicletype.setEmergencyDecel(type_id, EGO_INSERTION_DECEL_MPS2)
         api.vehicle.add(
             vehicle.vehicle_id,
             route_id,
