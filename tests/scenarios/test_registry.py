@@ -94,9 +94,10 @@ def test_ego_reaches_the_conflict_point_at_the_drawn_offset(name, approach):
     fx, fy, _ = approach.pose(index, setup.ego.front_pos_m)
     ego_s = math.dist((fx, fy), setup.conflict_xy) / setup.ego.speed_mps
     assert ego_s == pytest.approx(ped.start_delay_s + walk_s + setup.conflict_offset_s, abs=0.05)
-    # The path starts on the kerb side of the kerb lane and ends beyond the ego's lane.
+    # The path starts at the kerb lane's centre (blending: behind the waiting vehicle) or on its kerb
+    # side, at least a lane width from the ego lane's centre.
     kerb_x, kerb_y, _ = approach.pose(0, approach.lane_lengths_m[0] - 5)
-    assert math.dist(ped.path_xy[0], setup.conflict_xy) > approach.lane_width_m
+    assert math.dist(ped.path_xy[0], setup.conflict_xy) >= approach.lane_width_m - 0.01
 
 
 @pytest.mark.parametrize("name", ["right_turn", "left_turn"])
@@ -184,8 +185,13 @@ def test_blending_pedestrian_passes_within_the_lidar_cluster_tolerance_of_the_ve
             (ax, ay), (bx, by)
         )
         gap = dist_to_line - setup.pedestrian.radius_m
-        assert 0.1 - 1e-6 <= gap <= 0.4 + 1e-6
+        spec = get_scenario("background_blending")
+        assert spec.blend_gap_min_m - 1e-6 <= gap <= spec.blend_gap_max_m + 1e-6
         assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
+        # They start centred on the vehicle's rear (on the kerb lane's centreline), facing the median.
+        assert math.dist(setup.pedestrian.path_xy[0], (rear_x, rear_y)) == pytest.approx(
+            setup.pedestrian.radius_m + gap, abs=1e-6
+        )
 
 
 def test_blending_pedestrian_starts_in_front_of_the_vehicle_rear_as_seen_from_the_ego(approach):
