@@ -65,6 +65,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "set": [],
     "algorithm": DEFAULT_ALGORITHM,
     "chunk_size": None,
+    "protocol": None,
 }
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
 IDENTITY_KEYS = (
@@ -166,6 +167,13 @@ def parse_args(argv):
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--protocol",
+        type=Path,
+        metavar="FILE.toml",
+        help="run a protocol file (protocols/): it fixes every value; only --episodes and --workers may "
+        "override it (docs/protocols.md)",
+    )
     return parser.parse_args(argv)
 
 
@@ -186,6 +194,8 @@ def _explicit_arguments(args) -> dict[str, Any]:
     given = {name: getattr(args, name) for name in RUN_ARGUMENT_DEFAULTS if getattr(args, name) is not None}
     if "params" in given:
         given["params"] = str(Path(given["params"]).resolve())
+    if "protocol" in given:
+        given["protocol"] = str(Path(given["protocol"]))
     return given
 
 
@@ -243,12 +253,15 @@ def prepare(args) -> Plan:
                 "or choose another --out"
             )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **explicit}
+    protocol = None
+    if arguments["protocol"] is not None:
+        protocol, arguments = _with_protocol(args, arguments, explicit, recorded)
     scenario = arguments["scenario"]
     if scenario is None:
         raise UsageError(f"--scenario is required ({', '.join(SCENARIOS)} or all)")
-    if scenario != "all" and scenario not in SCENARIOS:
+    if protocol is None and scenario != "all" and scenario not in SCENARIOS:
         raise UsageError(f"unknown scenario '{scenario}' (known: {', '.join(SCENARIOS)}, all)")
-    scenarios = list(SCENARIOS) if scenario == "all" else [scenario]
+    scenarios = protocol.scenarios if protocol else list(SCENARIOS) if scenario == "all" else [scenario]
     if arguments["condition"] not in (*CONDITIONS, "both"):
         raise UsageError(f"unknown condition '{arguments['condition']}' (known: sv, v2i, both)")
     conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
@@ -260,7 +273,10 @@ def prepare(args) -> Plan:
         raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
     site = get_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
-    specs, params = configure(scenarios, params_file, arguments["set"])
+    if protocol is not None:
+        specs, params = protocol.specs(), protocol.params()
+    else:
+        specs, params = configure(scenarios, params_file, arguments["set"])
     load_agent_class(arguments["algorithm"])
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
@@ -278,6 +294,9 @@ def prepare(args) -> Plan:
         "chunk_size_pairs": arguments["chunk_size"],
     }
     scenario_overrides, _ = parse_set(arguments["set"])
+    if protocol is not None:
+        identity["protocol"] = protocol.record()
+        scenario_overrides = protocol.worker_overrides()
     versions = worker_versions()
     config = WorkerConfig(site.name, params, scenario_overrides, arguments["algorithm"], digests, versions)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
@@ -286,6 +305,33 @@ def prepare(args) -> Plan:
     if recorded is not None:
         _check_same_run(plan, recorded)
     return plan
+
+
+def _with_protocol(args, arguments: dict[str, Any], explicit: dict[str, Any], recorded) -> tuple[Any, dict]:
+    """The protocol's values in place of the flags: a protocol fixes everything but the number of
+    episodes and workers (and where the run goes). Another flag with --protocol is refused."""
+    from pedsafe_sumo.protocol import load_protocol
+
+    fixed = ("scenario", "condition", "seed", "site", "params", "set", "algorithm", "chunk_size", "cluster")
+    given = [name for name in fixed if getattr(args, name, None) not in (None, [])]
+    if args.protocol is not None and given:
+        flags = ", ".join(f"--{name.replace('_', '-')}" for name in given)
+        raise UsageError(
+            f"--protocol fixes every value: {flags} cannot be given with it (only --episodes, --workers)"
+        )
+    protocol = load_protocol(Path(arguments["protocol"]))
+    if recorded is not None and recorded.get("protocol", {}).get("sha256") != protocol.sha256:
+        raise UsageError(f"{arguments['protocol']} has changed since the run started (its SHA-256 differs)")
+    header = protocol.header
+    return protocol, {
+        **arguments,
+        "scenario": "all" if protocol.scenarios == list(SCENARIOS) else ",".join(protocol.scenarios),
+        "condition": header["conditions"],
+        "episodes": explicit.get("episodes", arguments["episodes"] if recorded else header["episodes"]),
+        "seed": header["seed"],
+        "site": header["site"],
+        "algorithm": header["algorithm"],
+    }
 
 
 def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:
