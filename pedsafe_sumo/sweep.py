@@ -9,7 +9,9 @@ worlds) in its own run directory OUT/<key>=<value>,... ; a combination whose run
 holds episodes.parquet is not run again and one stopped part-way is resumed (`--resume`), so a
 stopped sweep continues where it stopped. At the end
 OUT/sweep.csv and OUT/sweep.md hold Table I of every combination with its settings, and
-OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key.
+OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key;
+OUT/findings.csv and findings.png say which of the paper's qualitative findings hold in each
+combination (pedsafe_sumo/report/findings.py).
 Every --set / --vary key is validated for every combination before anything runs.
 """
 
@@ -176,9 +178,22 @@ def main(argv: list[str] | None = None) -> int:
     keys = list(combos[0])
     (args.out / "sweep.md").write_text(_markdown(table, keys) + "\n", encoding="utf-8")
     plot(table, keys, args.out / "sweep.png")
+    findings = write_findings(args.out, combos)
     print(_markdown(table, keys))
-    print(f"written: {args.out / 'sweep.csv'}, sweep.md, sweep.png")
+    print(findings.to_string(index=False))
+    print(f"written: {args.out / 'sweep.csv'}, sweep.md, sweep.png, findings.csv, findings.png")
     return 0
+
+
+def write_findings(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
+    """OUT/findings.csv and findings.png: the paper's qualitative findings in every combination
+    (pedsafe_sumo/report/findings.py)."""
+    from pedsafe_sumo.report.findings import findings_figure, findings_table
+
+    table = findings_table({label(combo): out / label(combo) for combo in combos})
+    table.to_csv(out / "findings.csv", index=False)
+    findings_figure(table, out / "findings.png", title=f"paper's findings across {', '.join(combos[0])}")
+    return table
 
 
 def _markdown(table: pd.DataFrame, keys: list[str]) -> str:
