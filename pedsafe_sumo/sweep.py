@@ -53,7 +53,9 @@ def label(combination: dict[str, str]) -> str:
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.sweep", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", required=True, help=f"{', '.join(SCENARIOS)} or all")
+    parser.add_argument(
+        "--scenario", required=True, help=f"{', '.join(SCENARIOS)}, a comma-separated list of them, or all"
+    )
     parser.add_argument("--condition", default="both", help="sv, v2i or both [both]")
     parser.add_argument(
         "--episodes", type=int, default=200, help="episodes per scenario and combination [200]"
@@ -71,9 +73,10 @@ def parse_args(argv):
 
 
 def validate(args) -> list[dict[str, str]]:
-    scenarios = list(SCENARIOS) if args.scenario == "all" else [args.scenario]
-    if args.scenario != "all" and args.scenario not in SCENARIOS:
-        raise UsageError(f"unknown scenario '{args.scenario}' (known: {', '.join(SCENARIOS)}, all)")
+    scenarios = list(SCENARIOS) if args.scenario == "all" else args.scenario.split(",")
+    unknown = [name for name in scenarios if name not in SCENARIOS]
+    if unknown:
+        raise UsageError(f"unknown scenario '{unknown[0]}' (known: {', '.join(SCENARIOS)}, all)")
     if args.episodes < 1:
         raise UsageError(f"--episodes must be at least 1, got {args.episodes}")
     site = get_site(args.site)

@@ -127,7 +127,10 @@ class _OneLineParser(argparse.ArgumentParser):
 
 def parse_args(argv):
     parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", help=f"{', '.join(SCENARIOS)} or all (required unless --resume)")
+    parser.add_argument(
+        "--scenario",
+        help=f"{', '.join(SCENARIOS)}, a comma-separated list, or all (required unless --resume)",
+    )
     parser.add_argument("--condition", help="sv, v2i or both (paired: same seed) [both]")
     parser.add_argument(
         "--episodes",
@@ -259,9 +262,13 @@ def prepare(args) -> Plan:
     scenario = arguments["scenario"]
     if scenario is None:
         raise UsageError(f"--scenario is required ({', '.join(SCENARIOS)} or all)")
-    if protocol is None and scenario != "all" and scenario not in SCENARIOS:
-        raise UsageError(f"unknown scenario '{scenario}' (known: {', '.join(SCENARIOS)}, all)")
-    scenarios = protocol.scenarios if protocol else list(SCENARIOS) if scenario == "all" else [scenario]
+    # One scenario, a comma-separated list (as a protocol's runs record it), or all.
+    scenarios = (
+        protocol.scenarios if protocol else list(SCENARIOS) if scenario == "all" else scenario.split(",")
+    )
+    unknown = [name for name in scenarios if name not in SCENARIOS]
+    if unknown:
+        raise UsageError(f"unknown scenario '{unknown[0]}' (known: {', '.join(SCENARIOS)}, all)")
     if arguments["condition"] not in (*CONDITIONS, "both"):
         raise UsageError(f"unknown condition '{arguments['condition']}' (known: sv, v2i, both)")
     conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
