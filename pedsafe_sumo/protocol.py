@@ -248,6 +248,26 @@ def field_reasons(source: str) -> dict[str, str]:
     return reasons
 
 
+def scenario_value_reasons(source: str) -> dict[tuple[str, str], str]:
+    """(scenario, field) -> the comment above that field's value in the scenario's SCENARIOS entry."""
+    reasons: dict[tuple[str, str], str] = {}
+    name, block = "", []
+    lines = source.split("\nSCENARIOS", 1)[-1].splitlines()
+    for previous, raw in zip(["", *lines], lines):
+        line = raw.strip()
+        if previous.strip() == "ScenarioSpec(":
+            name, block = line.strip('",'), []
+            continue
+        if line.startswith("#"):
+            block.append(line.lstrip("#").strip())
+            continue
+        value = re.match(r"^([a-z_0-9]+)=", line)
+        if value and name and block:
+            reasons[(name, value.group(1))] = " ".join(block)
+        block = []
+    return reasons
+
+
 def _toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -279,6 +299,7 @@ def protocol_text(header: dict[str, Any]) -> str:
     registry_source = Path(registry.__file__).read_text(encoding="utf-8")
     p_reasons = parameter_reasons(DEFAULTS_PATH.read_text(encoding="utf-8"))
     f_reasons = field_reasons(registry_source)
+    v_reasons = scenario_value_reasons(registry_source)
     out = [
         f"# Protocol {header['name']}, fixed {header['date']} before any of its runs. Never edit it after",
         "# a run: a change is a new dated file (docs/protocols.md). Above each value: its source, or for",
@@ -294,10 +315,11 @@ def protocol_text(header: dict[str, Any]) -> str:
         for key, value in spec_fields(spec).items():
             default = next(f.default for f in dataclasses.fields(ScenarioSpec) if f.name == key)
             reason = f_reasons.get(key, "")
+            own = v_reasons.get((name, key), "")
             if default is dataclasses.MISSING:
-                reason = f"{reason} This scenario's value (scenarios/registry.py)."
+                reason = f"{reason} This scenario's value (scenarios/registry.py). {own}"
             elif value != default:
-                reason = f"{reason} This scenario's value (scenarios/registry.py; default {default!r})."
+                reason = f"{reason} This scenario's value (scenarios/registry.py; default {default!r}). {own}"
             out += [*_comment(reason or "(no reason recorded)"), f"{key} = {_toml_value(value)}"]
 
     def tables(tree: dict[str, Any], prefix: str) -> None:

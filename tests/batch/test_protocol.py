@@ -28,15 +28,16 @@ def _leaves(tree, prefix=""):
     return out
 
 
-def test_paper_v1_names_every_value_with_a_reason():
-    data = tomllib.loads(PROTOCOL.read_text(encoding="utf-8"))
+@pytest.mark.parametrize("path", sorted((REPO_ROOT / "protocols").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_protocol_names_every_value_with_a_reason(path):
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
     # Every parameter of the parameter file and every field of each scenario it runs.
     assert set(_leaves(data["parameters"])) == set(_leaves(load_params()))
     for name in data["protocol"]["scenarios"]:
         fields = {f for f in get_scenario(name).__dataclass_fields__ if f not in ("name", "description")}
         assert set(data["scenarios"][name]) == fields
     # Each value line of the scenario and parameter tables has a comment (source or reason) above it.
-    lines = PROTOCOL.read_text(encoding="utf-8").splitlines()
+    lines = path.read_text(encoding="utf-8").splitlines()
     in_values = False
     for previous, line in zip(lines, lines[1:]):
         if line.startswith("["):
