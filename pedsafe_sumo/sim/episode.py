@@ -152,7 +152,7 @@ def _junction_signals(site: Site, junction_id: str):
         raise
 
 
-def start_signals(api, staging: SignalStaging | None) -> None:
+def start_signals(api, staging: SignalStaging | None, program=None) -> None:
     """Put the junction's traffic light at the staged point of its cycle, at the episode's t = 0.
 
     SUMO must run the program the staging was drawn from (read from the same network): a program with
@@ -169,6 +169,13 @@ def start_signals(api, staging: SignalStaging | None) -> None:
     if logic is None:
         raise RuntimeError(f"SUMO has no program {staging.program_id} for traffic light {tls}")
     durations_s = [float(phase.duration) for phase in logic.phases]
+    if program is not None and (
+        tuple(durations_s) != program.durations_s or tuple(p.state for p in logic.phases) != program.states
+    ):
+        raise RuntimeError(
+            f"SUMO runs another program {staging.program_id} for traffic light {tls} than the one the "
+            "episode was staged in (read from the site's network)"
+        )
     elapsed_s = staging.cycle_start_s % sum(durations_s)
     for index, duration_s in enumerate(durations_s):
         if elapsed_s < duration_s or index == len(durations_s) - 1:
@@ -471,7 +478,7 @@ class EpisodeRunner:
         api = self.session.api
         tc = api.constants
         self._populate(api, setup)
-        start_signals(api, setup.signals)
+        start_signals(api, setup.signals, self.signals.program if self.signals else None)
         api.simulation.step()  # inserts everything at t = 0
         timings["sumo_s"] += clock() - started
 

@@ -157,3 +157,40 @@ def test_signals_at_the_conflict_match_the_definition_over_a_seed_sweep(site, na
     finally:
         runner.close()
     assert not wrong, f"{name}: expected ego {spec.ego_signal}, pedestrian {spec.ped_signal}; got {wrong}"
+
+
+class _FakeTrafficLight:
+    """Just the trafficlight calls start_signals makes (a unit test of its arithmetic and its check)."""
+
+    def __init__(self, durations, states):
+        phases = [type("Phase", (), {"duration": d, "state": st})() for d, st in zip(durations, states)]
+        self.logic = type("Logic", (), {"programID": "0", "phases": phases})()
+        self.calls = []
+
+    def getProgram(self, tls):
+        return "0"
+
+    def getAllProgramLogics(self, tls):
+        return [self.logic]
+
+    def setPhase(self, tls, index):
+        self.calls.append(("phase", index))
+
+    def setPhaseDuration(self, tls, remaining):
+        self.calls.append(("remaining", remaining))
+
+
+def test_start_signals_sets_the_phase_and_what_is_left_of_it():
+    from types import SimpleNamespace
+
+    from pedsafe_sumo.scenarios.registry import SignalStaging
+    from pedsafe_sumo.sim.episode import start_signals
+
+    light = _FakeTrafficLight(PROGRAM.durations_s, PROGRAM.states)
+    staging = SignalStaging("tls", "0", cycle_start_s=11.5, ego_link_index=0, ped_link_index=1)
+    start_signals(SimpleNamespace(trafficlight=light), staging, PROGRAM)
+    # 11.5 s into (10, 3, 20): phase 1, 1.5 s left.
+    assert light.calls == [("phase", 1), ("remaining", pytest.approx(1.5))]
+    other = _FakeTrafficLight((10.0, 3.0, 25.0), PROGRAM.states)
+    with pytest.raises(RuntimeError, match="another program"):
+        start_signals(SimpleNamespace(trafficlight=other), staging, PROGRAM)
