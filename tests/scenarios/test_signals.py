@@ -167,16 +167,16 @@ class _FakeTrafficLight:
         self.logic = type("Logic", (), {"programID": "0", "phases": phases})()
         self.calls = []
 
-    def getProgram(self, tls):
+    def getProgram(self, tls):  # noqa: N802 - libsumo's name
         return "0"
 
-    def getAllProgramLogics(self, tls):
+    def getAllProgramLogics(self, tls):  # noqa: N802
         return [self.logic]
 
-    def setPhase(self, tls, index):
+    def setPhase(self, tls, index):  # noqa: N802
         self.calls.append(("phase", index))
 
-    def setPhaseDuration(self, tls, remaining):
+    def setPhaseDuration(self, tls, remaining):  # noqa: N802
         self.calls.append(("remaining", remaining))
 
 
