@@ -195,7 +195,7 @@ def write_findings(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
 
     table = findings_table({label(combo): out / label(combo) for combo in combos})
     table.to_csv(out / "findings.csv", index=False)
-    findings_figure(table, out / "findings.png", title=f"paper's findings across {', '.join(combos[0])}")
+    findings_figure(table, out / "findings.png", title="the paper's qualitative findings, per combination")
     return table
 
 

@@ -95,10 +95,20 @@ def findings_figure(table: pd.DataFrame, path: Path, title: str = "") -> Path:
     values = table[list(FINDINGS)].to_numpy(dtype=float).T
     coded = np.where(np.isnan(values), 0, np.where(values > 0.5, 2, 1))
     cmap = ListedColormap(["#d0d0d0", "#d9534f", "#5cb85c"])
-    fig, ax = plt.subplots(figsize=(1.0 + 0.9 * len(table), 2.8), constrained_layout=True)
+    labels = [str(run) for run in table["run"]]
+    keys = {label.split("=", 1)[0] for label in labels if "=" in label and "," not in label}
+    xlabel = ""
+    if len(keys) == 1 and all("=" in label and "," not in label for label in labels):
+        # One swept key: its values on the axis, its name below.
+        xlabel = keys.pop()
+        labels = [label.split("=", 1)[1] for label in labels]
+    fig, ax = plt.subplots(figsize=(max(5.0, 2.6 + 0.8 * len(table)), 3.0), constrained_layout=True)
     ax.imshow(coded, cmap=cmap, vmin=0, vmax=2, aspect="auto")
     ax.set_yticks(range(len(FINDINGS)), [f.replace("_", " ") for f in FINDINGS], fontsize=8)
-    ax.set_xticks(range(len(table)), table["run"], rotation=45, ha="right", fontsize=7)
+    ax.set_xticks(range(len(table)), labels, rotation=0 if xlabel else 45, ha="center" if xlabel else "right",
+                  fontsize=7)  # fmt: skip
+    if xlabel:
+        ax.set_xlabel(xlabel, fontsize=8)
     for (i, j), code in np.ndenumerate(coded):
         ax.text(j, i, {0: "n/a", 1: "fails", 2: "holds"}[int(code)], ha="center", va="center", fontsize=7)
     if title:
