@@ -151,9 +151,21 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
     return int((times >= time_s - 1e-9).nonzero()[0][0]), "the requested time"
 
 
+def runner_class(logged: LoggedEpisode) -> type[EpisodeRunner]:
+    """The engine the run used: a Euro NCAP run (pedsafe_sumo.ncap) holds the ego's movement green."""
+    if logged.run_info.get("kind") == "ncap":
+        from pedsafe_sumo.ncap.suite import NcapRunner
+
+        return NcapRunner
+    return EpisodeRunner
+
+
 def episode_setup(runner: EpisodeRunner, logged: LoggedEpisode, say) -> EpisodeSetup:
     """The episode's initial world drawn from its seed as the batch did; the recorded one when the case
-    recorded a different one (then the drawing code changed since the run)."""
+    recorded a different one (then the drawing code changed since the run). A Euro NCAP cell
+    (pedsafe_sumo.ncap) is staged, not drawn: its recorded world is the world."""
+    if logged.run_info.get("kind") == "ncap" and logged.case_meta is not None:
+        return logged.case_meta["setup"]
     drawn = runner.draw_setup(logged.spec, logged.seed)
     if logged.case_meta is None:
         return drawn
@@ -238,7 +250,9 @@ def _silent(*_args, **_kwargs) -> None:
 
 
 def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
-    runner = EpisodeRunner(logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s)
+    runner = runner_class(logged)(
+        logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
+    )
     try:
         setup = episode_setup(runner, logged, say)
         check = _trajectory_check(logged, say)
@@ -272,7 +286,7 @@ class ReplayPlan:
 def plan_replay(logged: LoggedEpisode, args: argparse.Namespace, size_px: tuple[int, int], say) -> ReplayPlan:
     """The world to replay, the episode's course, and the screenshot's step (ReplayError when the
     requested moment never happened)."""
-    headless = EpisodeRunner(
+    headless = runner_class(logged)(
         logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
     )
     try:
@@ -318,7 +332,7 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, plan: ReplayP
                 "--window-size",
                 f"{screenshot.width_px + WINDOW_CHROME_PX[0]},{screenshot.height_px + WINDOW_CHROME_PX[1]}",
             ]
-        runner = EpisodeRunner(
+        runner = runner_class(logged)(
             logged.site,
             logged.params,
             logged.agent_class,

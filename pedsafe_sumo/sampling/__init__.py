@@ -1,0 +1,1 @@
+"""Sampling designs for the batch's episodes: plain Monte Carlo and importance sampling."""

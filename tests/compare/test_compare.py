@@ -1,0 +1,139 @@
+"""Build against build: Tango's interval worked by hand, refusals of runs that do not share draws, and
+real batches of the same and of a deliberately worse stack."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo.compare import CompareError, compare_runs, main, tango_interval
+
+Z95 = 1.959963984540054
+
+
+def test_tango_with_no_discordant_pair_is_the_score_bound_worked_by_hand():
+    # With b = a = 0 the restricted MLE is q = 0 for d > 0 and T(d) = -sqrt(n d / (1 - d)); T = -z
+    # gives d = z^2 / (n + z^2).
+    n = 200
+    diff = tango_interval(0, 0, n, 0.95)
+    assert diff.estimate == 0.0
+    assert diff.high == pytest.approx(Z95**2 / (n + Z95**2), rel=1e-6)
+    assert diff.low == pytest.approx(-(Z95**2) / (n + Z95**2), rel=1e-6)
+
+
+def test_tango_interval_covers_in_about_95_percent_of_simulated_paired_samples():
+    rng = np.random.default_rng(12)
+    p_b_only, p_a_only, n = 0.03, 0.01, 300
+    truth = p_b_only - p_a_only
+    covered = []
+    for _ in range(400):
+        counts = rng.multinomial(n, [p_b_only, p_a_only, 1 - p_b_only - p_a_only])
+        diff = tango_interval(int(counts[0]), int(counts[1]), n, 0.95)
+        covered.append(diff.low <= truth <= diff.high)
+    # Binomial(400, 0.95) lies within [0.92, 0.975] with probability > 0.99.
+    assert 0.92 <= np.mean(covered) <= 0.975
+
+
+def _table(collisions, seeds=None, weights=None):
+    n = len(collisions)
+    table = pd.DataFrame(
+        {
+            "scenario": "crossing",
+            "condition": "sv",
+            "episode": np.arange(n),
+            "seed": np.arange(n) + 100 if seeds is None else seeds,
+            "collision": np.asarray(collisions, dtype=bool),
+            "conflict": False,
+            "injury_probability": np.asarray(collisions, dtype=float) * 0.2,
+            "status": "ok",
+        }
+    )
+    if weights is not None:
+        table["weight"] = weights
+    return table
+
+
+def test_a_clearly_worse_build_fails_and_its_worse_episodes_are_listed():
+    a = _table([0] * 400)
+    b = _table([1] * 40 + [0] * 360)
+    result, worse = compare_runs(a, b, {"collision": 0.01, "injury_probability": 0.01, "conflict": 0.02})
+    row = result.set_index("index").loc["collision"]
+    assert row["difference"] == pytest.approx(0.1)
+    assert row["verdict"] == "FAIL"
+    assert sorted(worse["episode"]) == list(range(40))
+    # Conflicts equal (none): B is not worse there.
+    assert result.set_index("index").loc["conflict", "verdict"] == "PASS"
+
+
+def test_runs_of_different_draws_are_refused():
+    a = _table([0] * 10)
+    with pytest.raises(CompareError, match="do not share their draws"):
+        compare_runs(a, _table([0] * 10, seeds=np.arange(10) + 7), {"collision": 0.01})
+    with pytest.raises(CompareError, match="different proposals"):
+        compare_runs(_table([0] * 10, weights=1.0), _table([0] * 10, weights=2.0), {"collision": 0.01})
+
+
+def test_weighted_runs_use_the_weighted_difference():
+    weights = np.array([0.5] * 10 + [1.5] * 10)
+    a = _table([0] * 20, weights=weights)
+    b = _table([1] + [0] * 19, weights=weights)
+    result, _ = compare_runs(a, b, {"collision": 0.5})
+    row = result.set_index("index").loc["collision"]
+    # (1/n) sum w (B - A) = 0.5 / 20.
+    assert row["difference"] == pytest.approx(0.025)
+    assert row["b"] == pytest.approx(0.025)
+
+
+def test_bad_margin_is_one_line_and_exit_2(capsys, tmp_path):
+    assert main([str(tmp_path), str(tmp_path), "--margin", "collision=-1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--margin collision" in err
+
+
+def _batch(out, *extra):
+    proc = subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.batch", "--scenario", "crossing", "--episodes", "40"]
+        + ["--seed", "5", "--workers", "1", "--out", str(out), *extra],
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        env=dict(os.environ),
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def _compare(a, b, *extra):
+    return subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.compare", str(a), str(b), *extra],
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        timeout=120,
+    )
+
+
+@pytest.mark.slow
+def test_same_stack_passes_and_a_slower_reacting_stack_fails(tmp_path):
+    same_a, same_b, slow = tmp_path / "a", tmp_path / "b", tmp_path / "slow"
+    _batch(same_a)
+    _batch(same_b)
+    # A stack that reacts 2.6 s later than the reference's 0.4 s: it brakes for the pedestrian too late.
+    _batch(slow, "--set", "algorithm.reaction_time_s=3.0")
+    # Margins above the bound z^2 / (n + z^2) = 0.088 that 40 pairs without any difference can give.
+    margins = ["--margin", "collision=0.1", "--margin", "conflict=0.1", "--margin", "injury_probability=0.1"]
+    same = _compare(same_a, same_b, *margins)
+    assert same.returncode == 0, same.stdout + same.stderr
+    assert same.stdout.strip().splitlines()[-1].startswith("PASS")
+    worse = _compare(same_a, slow, *margins)
+    assert worse.returncode == 1, worse.stdout + worse.stderr
+    assert worse.stdout.strip().splitlines()[-1].startswith("FAIL")
+    collision_rows = [line for line in worse.stdout.splitlines() if " collision " in f" {line} "]
+    assert any("FAIL" in line for line in collision_rows)
+    assert f"python -m pedsafe_sumo.replay {slow} --episode" in worse.stdout
