@@ -19,7 +19,8 @@ from pathlib import Path
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
-from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
+from pedsafe_sumo.network.hosting import check_hosting
+from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
@@ -129,9 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenario", required=True, help=f"one of: {', '.join(SCENARIOS)}")
     parser.add_argument("--condition", default="both", help="sv, v2i or both (default: both, same seed)")
     parser.add_argument("--seed", type=int, default=1, help="episode seed (default 1)")
-    parser.add_argument(
-        "--site", default="xueqing", help=f"study site (default xueqing; known: {', '.join(SITES)})"
-    )
+    parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
@@ -148,9 +147,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if any(c not in CONDITIONS for c in conditions):
             raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
-        site = get_site(args.site)
+        site = resolve_site(args.site)
         specs, params = configure([args.scenario], args.params, args.set)
         check_roadside_units(specs, site)
+        check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
         agent_class = load_agent_class(args.algorithm)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:

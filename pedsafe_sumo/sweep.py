@@ -25,7 +25,7 @@ from pathlib import Path
 import pandas as pd
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
-from pedsafe_sumo.network.sites import UnknownSiteError, get_site
+from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
@@ -68,7 +68,7 @@ def parse_args(argv):
     )
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="fixed for all")
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
-    parser.add_argument("--site", default="xueqing", help="study site [xueqing]")
+    parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     return parser.parse_args(argv)
 
 
@@ -79,7 +79,7 @@ def validate(args) -> list[dict[str, str]]:
         raise UsageError(f"unknown scenario '{unknown[0]}' (known: {', '.join(SCENARIOS)}, all)")
     if args.episodes < 1:
         raise UsageError(f"--episodes must be at least 1, got {args.episodes}")
-    site = get_site(args.site)
+    site = resolve_site(args.site)
     combos = combinations([parse_vary(text) for text in args.vary])
     for combo in combos:
         specs, _ = configure(scenarios, None, [*args.set, *(f"{k}={v}" for k, v in combo.items())])

@@ -17,19 +17,19 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pedsafe_sumo.network.sites import UnknownSiteError, get_site  # noqa: E402
+from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site  # noqa: E402
 from pedsafe_sumo.sumo_binaries import sumo_binary  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="screenshot_site", description=__doc__.splitlines()[0])
-    parser.add_argument("--site", default="xueqing")
+    parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
     parser.add_argument("--zoom", type=float, default=60.0, help="sumo-gui zoom in percent (250: junction)")
     parser.add_argument("--size", default="1400,1000", help="window size WIDTH,HEIGHT in pixels")
     args = parser.parse_args(argv)
     try:
-        site = get_site(args.site)
+        site = resolve_site(args.site)
     except UnknownSiteError as exc:
         parser.exit(2, f"screenshot_site: error: {exc}\n")
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))

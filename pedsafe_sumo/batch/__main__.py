@@ -42,11 +42,14 @@ from pedsafe_sumo.io.run_store import (
     RUN_FILE,
     STATE_COMPLETE,
     STATE_RUNNING,
+    STEPLOGS_DIR,
     RunStoreError,
     holds_run,
     read_json,
 )
-from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
+from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS, KEEP_LOGS_CHOICES
+from pedsafe_sumo.network.hosting import check_hosting, split_hosted
+from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
@@ -66,6 +69,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "algorithm": DEFAULT_ALGORITHM,
     "chunk_size": None,
     "protocol": None,
+    "keep_logs": KEEP_EVENTS,
 }
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
 IDENTITY_KEYS = (
@@ -164,12 +168,20 @@ def parse_args(argv):
         help="continue the stopped run in --out with its recorded configuration; flags given again must "
         "repeat the recorded values",
     )
-    parser.add_argument("--site", help=f"study site [xueqing; known: {', '.join(SITES)}]")
+    parser.add_argument("--site", help=SITE_HELP)
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--keep-logs",
+        dest="keep_logs",
+        choices=KEEP_LOGS_CHOICES,
+        help="which per-step logs to keep: 'events' = both conditions of every pair with a collision or "
+        "a conflict, in cases/; 'all' = those and every episode's log, one Parquet file per chunk in "
+        f"steplogs/ [{KEEP_EVENTS}]",
+    )
     parser.add_argument(
         "--protocol",
         type=Path,
@@ -247,6 +259,12 @@ def prepare(args) -> Plan:
         if args.out is None:
             raise UsageError("--resume needs --out DIR, the run directory to continue")
         recorded = _recorded_run(args.out)
+        kept = recorded["arguments"].get("keep_logs", KEEP_EVENTS)
+        if explicit.get("keep_logs", kept) != kept:
+            raise UsageError(
+                f"{args.out} was started with --keep-logs {kept}; a resumed run keeps the same logs "
+                "(leave the flag out or repeat its value)"
+            )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **recorded["arguments"], **explicit}
     else:
         if args.out is not None and holds_run(args.out):
@@ -278,7 +296,7 @@ def prepare(args) -> Plan:
         raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
     if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
         raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
-    site = get_site(arguments["site"])
+    site = resolve_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
     if protocol is not None:
         specs, params = protocol.specs(), protocol.params()
@@ -287,7 +305,16 @@ def prepare(args) -> Plan:
     load_agent_class(arguments["algorithm"])
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
-    digests = site_file_digests(site.name)
+    if scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
+        scenarios, skipped = split_hosted(site, specs, params, conditions)
+        for name, why in skipped.items():
+            print(f"skipping scenario '{name}' on site {site.name}: {why}")
+        if not scenarios:
+            raise UsageError(f"site {site.name} hosts none of the scenarios (see the lines above)")
+        specs = {name: specs[name] for name in scenarios}
+    check_hosting(site, specs, params, conditions)  # its roadside poles see each scenario's staging area
+    reference = site_reference(arguments["site"], site)
+    digests = site_file_digests(reference)
     identity = {
         "site": site.name,
         "scenarios": {name: dataclasses.asdict(specs[name]) for name in scenarios},
@@ -305,7 +332,15 @@ def prepare(args) -> Plan:
         identity["protocol"] = protocol.record()
         scenario_overrides = protocol.worker_overrides()
     versions = worker_versions()
-    config = WorkerConfig(site.name, params, scenario_overrides, arguments["algorithm"], digests, versions)
+    config = WorkerConfig(
+        reference,
+        params,
+        scenario_overrides,
+        arguments["algorithm"],
+        digests,
+        versions,
+        keep_logs=arguments["keep_logs"],
+    )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
     plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded)
@@ -370,9 +405,12 @@ def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
         "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
         "created_utc": datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S"),
         **identity,
+        # Where the site's files were (the digests above say what they held): replay finds them here.
+        "site_path": str(resolve_site(plan.arguments["site"], verify=False).directory.resolve()),
         "chunks_total": chunks_total,
         "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
         "arguments": plan.arguments,
+        "keep_logs": plan.arguments["keep_logs"],
         "workers": backend.n_workers,
         "executor": backend.description,
         "versions": _versions(),
@@ -416,7 +454,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run(plan: Plan, backend, argv: list[str]) -> int:
-    run_dir = BatchRunDirectory(plan.out)
+    run_dir = BatchRunDirectory(plan.out, plan.arguments["keep_logs"])
     if plan.recorded is None:
         if plan.identity["chunk_size_pairs"] is None:
             size = auto_chunk_size(plan.identity["episodes_per_scenario"], backend.n_workers)
@@ -502,6 +540,8 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s), left out of "
         f"the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
     )
+    if plan.arguments["keep_logs"] == KEEP_ALL:
+        print(f"every episode's step log: {len(chunks)} file(s) in {plan.out / STEPLOGS_DIR}")
     if backend.worker_deaths:
         print(
             f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "

@@ -35,6 +35,7 @@ from pathlib import Path
 
 from pedsafe_sumo.batch.chunks import Chunk, Task
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, error_row, init_pool_worker, run_chunk
+from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.settings import UsageError
 
 OnChunkDone = Callable[[Chunk, ChunkOutput], None]
@@ -70,6 +71,7 @@ def merge_outputs(outputs: list[ChunkOutput]) -> ChunkOutput:
         [case for o in outputs for case in o.cases],
         ",".join(sorted({o.worker for o in outputs if o.worker})),
         sum(o.compute_s for o in outputs),
+        step_logs.merge_bytes([o.step_logs for o in outputs]),
     )
 
 

@@ -17,6 +17,7 @@ import pandas as pd
 from pedsafe_sumo.batch.chunks import Chunk
 from pedsafe_sumo.batch.executors import BatchError
 from pedsafe_sumo.batch.runner import ERROR_STATUS, ChunkOutput
+from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
 from pedsafe_sumo.io.run_store import (
@@ -26,6 +27,7 @@ from pedsafe_sumo.io.run_store import (
     MANIFEST_FILE,
     PARTS_DIR,
     RUN_FILE,
+    STEPLOGS_DIR,
     ChunkRecord,
     Manifest,
     RunStoreError,
@@ -53,10 +55,12 @@ def utc_now() -> str:
 class BatchRunDirectory:
     """A run directory as the batch driver writes it."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, keep_logs: str = step_logs.KEEP_EVENTS) -> None:
         self.path = Path(path)
         self.manifest = Manifest(self.path / MANIFEST_FILE)
         self._lock_handle = None
+        #: --keep-logs: with "all", every chunk's step logs go to steplogs/ with its part file.
+        self.keep_logs = keep_logs
 
     @property
     def cases_dir(self) -> Path:
@@ -85,6 +89,11 @@ class BatchRunDirectory:
         self.manifest.save()
         (self.path / PARTS_DIR).mkdir(exist_ok=True)
         self.cases_dir.mkdir(exist_ok=True)
+        self._steplogs_dir()
+
+    def _steplogs_dir(self) -> None:
+        if self.keep_logs == step_logs.KEEP_ALL:
+            (self.path / STEPLOGS_DIR).mkdir(exist_ok=True)
 
     def reopen(self) -> list[str]:
         """A stopped run: lock it, keep the recorded chunks whose part files are intact, and delete what
@@ -108,6 +117,7 @@ class BatchRunDirectory:
             notes.append(f"removed {stray.relative_to(self.path)} (written but never recorded)")
         (self.path / PARTS_DIR).mkdir(exist_ok=True)
         self.cases_dir.mkdir(exist_ok=True)
+        self._steplogs_dir()
         return notes
 
     def save_run_info(self, run_info: dict[str, Any]) -> None:
@@ -123,8 +133,9 @@ class BatchRunDirectory:
 
     # ------------------------------------------------------------------ chunks
     def record(self, chunk: Chunk, output: ChunkOutput, session: int, session_elapsed_s: float) -> bool:
-        """Write a finished chunk: its case logs, its part file, then its manifest entry (in that order,
-        so a recorded chunk always has both). False, and nothing written, if it was recorded already."""
+        """Write a finished chunk: its case logs, its step logs (--keep-logs all), its part file, then its
+        manifest entry (in that order, so a recorded chunk always has them all). False, and nothing
+        written, if it was recorded already."""
         if chunk.key in self.manifest.chunks:
             return False
         table = to_table(output.rows)
@@ -134,6 +145,15 @@ class BatchRunDirectory:
             raise BatchError(f"chunk {chunk.key} came back with other episodes than it holds (a bug)")
         for result in output.cases:
             write_case(self.cases_dir, result)
+        steplog_file, steplog_sha256 = "", ""
+        if self.keep_logs == step_logs.KEEP_ALL:
+            # A chunk whose every pair killed its worker comes back without logs: an empty file says so.
+            logs = output.step_logs or step_logs.to_bytes(step_logs.chunk_step_log([]))
+            steplog_file = f"{STEPLOGS_DIR}/" + step_logs.steplog_file_name(
+                chunk.scenario, chunk.first_episode, chunk.last_episode
+            )
+            write_bytes_atomic(self.path / steplog_file, logs)
+            steplog_sha256 = sha256_bytes(logs)
         name = part_file_name(chunk.scenario, chunk.first_episode, chunk.last_episode)
         data = parquet_bytes(table)
         write_bytes_atomic(self.path / PARTS_DIR / name, data)
@@ -152,6 +172,8 @@ class BatchRunDirectory:
                 session_elapsed_s=round(session_elapsed_s, 3),
                 worker=output.worker,
                 compute_s=round(output.compute_s, 3),
+                steplog_file=steplog_file,
+                steplog_sha256=steplog_sha256,
             )
         )
         return True

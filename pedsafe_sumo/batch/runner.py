@@ -30,7 +30,9 @@ from typing import Any
 import numpy as np
 
 from pedsafe_sumo.batch.chunks import Task
+from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
+from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS
 
 ERROR_STATUS = "error"
 #: How often a pool worker checks that its driver is still alive [s].
@@ -55,6 +57,9 @@ class WorkerConfig:
     site_digests: dict[str, str] = field(default_factory=dict)
     #: The driver's pedsafe_sumo and SUMO versions, checked the same way.
     versions: dict[str, str] = field(default_factory=dict)
+    #: --keep-logs: "events" (case logs of pairs with a collision or conflict) or "all" (every step log
+    #: besides). Decides what is kept, not what is computed, so it stays out of the fingerprint.
+    keep_logs: str = KEEP_EVENTS
 
     @cached_property
     def fingerprint(self) -> str:
@@ -83,6 +88,9 @@ class ChunkOutput:
     #: "host:pid" of the worker process, and the seconds it spent on the chunk.
     worker: str = ""
     compute_s: float = 0.0
+    #: With --keep-logs all: every step log of the chunk's episodes that ran, as the bytes of one
+    #: Parquet file (pedsafe_sumo.io.step_logs); b"" otherwise.
+    step_logs: bytes = b""
 
 
 # One runner per worker process. The lock serialises chunks in a process: a Dask worker started with
@@ -129,11 +137,11 @@ def _note_started(chunk_key: str) -> None:
 
 
 def site_file_digests(site_name: str) -> dict[str, str]:
-    """SHA-256 of every site file an episode reads, by file name."""
-    from pedsafe_sumo.network.sites import get_site
+    """SHA-256 of every site file an episode reads, by file name (`site_name`: a site name or folder)."""
+    from pedsafe_sumo.network.sites import resolve_site
     from pedsafe_sumo.sim.episode import SITE_FILES_READ
 
-    site = get_site(site_name)
+    site = resolve_site(site_name, verify=False)
     digests = {}
     for suffix in SITE_FILES_READ:
         path = site.file(suffix)
@@ -208,6 +216,7 @@ def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
         collision=False,
         conflict=False,
         sumo_collision=False,
+        close_pass=False,
         detected_by="",
         ped_gender="",
         ped_risk="",
@@ -227,8 +236,9 @@ def scenario_spec(name: str, overrides: dict[str, Any]):
     return get_scenario(name).with_overrides(common).with_overrides(own)
 
 
-def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any]]:
-    """Both conditions of one paired episode: its rows, and both results when either had an event."""
+def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any], list[Any]]:
+    """Both conditions of one paired episode: its rows, both results when either had an event (the case
+    logs), and every result that ran (for --keep-logs all)."""
     runner = _runner_for(config)
     rows, results = [], []
     try:
@@ -236,7 +246,7 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
         setup = runner.draw_setup(spec, task.seed)
     except Exception as exc:  # the pair cannot even be set up: both rows are errors
         message = f"{type(exc).__name__}: {exc}"
-        return [error_row(task, c, message) for c in task.conditions], []
+        return [error_row(task, c, message) for c in task.conditions], [], []
     for condition in task.conditions:
         try:
             result = runner.run(spec, condition, task.seed, setup=setup)
@@ -249,7 +259,7 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
         rows.append({**result.outcome, "episode": task.episode})
         results.append(result)
     event = any(r.outcome["collision"] or r.outcome["conflict"] for r in results)
-    return rows, (results if event else [])
+    return rows, (results if event else []), results
 
 
 def run_chunk(config: WorkerConfig, chunk_key: str, tasks: tuple[Task, ...]) -> ChunkOutput:
@@ -259,8 +269,11 @@ def run_chunk(config: WorkerConfig, chunk_key: str, tasks: tuple[Task, ...]) -> 
         _note_started(chunk_key)
         rows: list[dict[str, Any]] = []
         cases: list[Any] = []
+        kept: list[tuple[int, Any]] = []
         for task in tasks:
-            pair_rows, pair_cases = _run_pair(config, task)
+            pair_rows, pair_cases, ran = _run_pair(config, task)
             rows += pair_rows
             cases += pair_cases
-        return ChunkOutput(rows, cases, worker_label(), time.perf_counter() - started)
+            kept += [(task.episode, result) for result in ran]
+        logs = step_logs.to_bytes(step_logs.chunk_step_log(kept)) if config.keep_logs == KEEP_ALL else b""
+        return ChunkOutput(rows, cases, worker_label(), time.perf_counter() - started, logs)

@@ -1,4 +1,4 @@
-"""CLI: python -m pedsafe_sumo.demand --site xueqing --duration 3600 --seed 1 --out routes/ [--params FILE]"""
+"""CLI: python -m pedsafe_sumo.demand --site NAME_OR_PATH --duration 3600 --seed 1 --out routes/"""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 from pedsafe_sumo import ROUTES_DIR
 from pedsafe_sumo.demand.generate import generate_demand
 from pedsafe_sumo.demand.site import SiteError
+from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.params import ParameterError
 
 
@@ -18,7 +19,7 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m pedsafe_sumo.demand",
         description="Write the site's background vehicle and pedestrian demand as SUMO route files.",
     )
-    parser.add_argument("--site", required=True, help="site name: networks/<site>/<site>.net.xml")
+    parser.add_argument("--site", required=True, help=SITE_HELP)
     parser.add_argument("--duration", type=float, default=3600.0, help="demand horizon in s (default 3600)")
     parser.add_argument("--seed", type=int, default=1, help="run seed (default 1)")
     parser.add_argument("--out", type=Path, default=ROUTES_DIR, help="output folder (default routes/)")
@@ -27,6 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     start = time.perf_counter()
     try:
+        if args.net is None:  # with --net, --site only names the output files
+            site = resolve_site(args.site)
+            args.site, args.net = site.name, site.file("net.xml")
         files = generate_demand(args.site, args.duration, args.seed, args.out, args.params, net_file=args.net)
     except (SiteError, ParameterError, ValueError, OSError) as exc:
         print(f"pedsafe_sumo.demand: error: {exc}", file=sys.stderr)

@@ -42,6 +42,7 @@ from pedsafe_sumo.demand.generate import generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
+from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
@@ -408,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0]
     )
-    parser.add_argument("--site", default="xueqing")
+    parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument("--duration", type=float, default=3600.0, help="simulated time in s (default 3600)")
     parser.add_argument("--warmup", type=float, default=300.0, help="s of records ignored at the start")
     parser.add_argument("--seed", type=int, default=1)
@@ -421,6 +422,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     started = time.perf_counter()
     try:
+        if args.net is None:  # with --net, --site only names the output files
+            site = resolve_site(args.site)
+            args.site, args.net = site.name, site.file("net.xml")
         runs = validate(args)
         site = load_site(args.site, NETWORKS_DIR, args.net)
         n_loops = {

@@ -15,10 +15,12 @@ EPISODE_COLUMNS = (
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
     "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
+    # the proximity measure (issue 12; pedsafe_sumo.safety.proximity)
+    "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
     # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
     "ego_signal", "ped_signal",
 )  # fmt: skip
-BOOL_COLUMNS = ("collision", "conflict", "sumo_collision")
+BOOL_COLUMNS = ("collision", "conflict", "sumo_collision", "close_pass")
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "ego_signal",
     "ped_signal",

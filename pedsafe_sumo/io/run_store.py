@@ -6,6 +6,7 @@
     DIR/parts/<scenario>-<first>-<last>.parquet   the rows of one chunk of episodes
     DIR/episodes.parquet  all parts, sorted; written last
     DIR/cases/            per-step logs (pedsafe_sumo.io.cases)
+    DIR/steplogs/<scenario>-<first>-<last>.parquet   with --keep-logs all: every step log of one chunk
 
 Every file is written to a temporary name beside its final one, flushed to disk, and renamed over it
 (`os.replace` is atomic on POSIX): a reader sees the old file or the new one, never half of one. Only
@@ -34,6 +35,8 @@ RUN_FILE = "run.json"
 MANIFEST_FILE = "manifest.json"
 PARTS_DIR = "parts"
 CASES_DIR = "cases"
+#: Per-step logs of every episode, one file per chunk (--keep-logs all; pedsafe_sumo.io.step_logs).
+STEPLOGS_DIR = "steplogs"
 EPISODES_FILE = "episodes.parquet"
 #: Held (flock) by the driver writing the directory; removed when the run completes.
 LOCK_FILE = ".lock"
@@ -120,6 +123,9 @@ class ChunkRecord:
     #: The worker process(es) that ran it ("host:pid") and the seconds they spent on it.
     worker: str = ""
     compute_s: float = 0.0
+    #: With --keep-logs all: the chunk's step-log file (relative path) and the SHA-256 of its bytes.
+    steplog_file: str = ""
+    steplog_sha256: str = ""
 
 
 class Manifest:
@@ -164,21 +170,26 @@ class Manifest:
 
 def check_part(run_dir: Path, record: ChunkRecord) -> str:
     """ "" when the chunk's part file is there with the recorded checksum, else why not (one phrase)."""
-    path = run_dir / record.file
-    if not path.is_file():
-        return f"{record.file} is missing"
-    if sha256_file(path) != record.sha256:
-        return f"{record.file} does not match its recorded checksum"
+    files = [(record.file, record.sha256)]
+    if record.steplog_file:
+        files.append((record.steplog_file, record.steplog_sha256))
+    for name, digest in files:
+        path = run_dir / name
+        if not path.is_file():
+            return f"{name} is missing"
+        if sha256_file(path) != digest:
+            return f"{name} does not match its recorded checksum"
     return ""
 
 
 def stray_files(run_dir: Path, manifest: Manifest) -> list[Path]:
     """Files a killed driver may have left: part files no manifest entry names, and temporary files."""
     listed = {run_dir / record.file for record in manifest.chunks.values()}
+    listed |= {run_dir / record.steplog_file for record in manifest.chunks.values() if record.steplog_file}
     strays = []
-    parts = run_dir / PARTS_DIR
-    if parts.is_dir():
-        strays += [p for p in sorted(parts.iterdir()) if p.is_file() and p not in listed]
+    for folder in (run_dir / PARTS_DIR, run_dir / STEPLOGS_DIR):
+        if folder.is_dir():
+            strays += [p for p in sorted(folder.iterdir()) if p.is_file() and p not in listed]
     for folder in (run_dir, run_dir / CASES_DIR):
         if folder.is_dir():
             strays += sorted(p for p in folder.iterdir() if p.is_file() and p.name.endswith(TMP_SUFFIX))

@@ -1,4 +1,4 @@
-"""python -m pedsafe_sumo.network [--site xueqing] [--no-build]: build the study site and summarise it."""
+"""python -m pedsafe_sumo.network [--site NAME_OR_PATH] [--no-build]: build a study site and summarise it."""
 
 from __future__ import annotations
 
@@ -7,22 +7,23 @@ import sys
 
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.network.build import BuildError, build_site
-from pedsafe_sumo.network.sites import SITES, UnknownSiteError, get_site
+from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.network", description=__doc__)
-    parser.add_argument("--site", default="xueqing", help=f"one of: {', '.join(SITES)}")
-    parser.add_argument("--no-build", action="store_true", help="summarise the committed network only")
+    parser.add_argument("--site", default="xueqing", help=SITE_HELP)
+    parser.add_argument("--no-build", action="store_true", help="summarise the site folder as it is")
     args = parser.parse_args(argv)
     try:
-        site = get_site(args.site)
+        # A rebuild re-derives everything, so a stale site is fine to start from; a summary is not.
+        site = resolve_site(args.site, verify=args.no_build)
     except UnknownSiteError as exc:
         parser.exit(2, f"error: {exc}\n")
     if not args.no_build:
-        # Rebuild from the committed clip when the shared source extract is not beside the checkout.
-        from_source = site.source_osm.exists()
+        # Rebuild from the committed clip when the source extract is not beside the checkout.
+        from_source = site.source_osm is not None and site.source_osm.exists()
         try:
             report = build_site(
                 site.source_osm if from_source else site.clip_osm,
@@ -30,22 +31,29 @@ def main(argv: list[str] | None = None) -> int:
                 site.center_lon,
                 site.radius_m,
                 site.name,
-                site.network_dir,
+                site.directory,
                 site.clip_osm,
                 clip=from_source,
-                patches_dir=site.network_dir / "patches",
+                patches_dir=site.directory / "patches",
                 rsu_corner=site.rsu_corner,
                 rsu_watch_arm=site.rsu_watch_arm,
+                description=site.description,
+                source_osm=site.source_osm,
             )
         except BuildError as exc:
             parser.exit(2, f"error: {exc}\n")
         origin = site.source_osm if from_source else site.clip_osm
         print(
-            f"built {site.network_dir} from {origin} in {report.seconds:.1f} s "
+            f"built {site.directory} from {origin} in {report.seconds:.1f} s "
             f"({len(report.written)} file(s) changed, {len(report.unchanged)} unchanged)"
         )
     for line in summarise(site).lines():
         print(line)
+    from pedsafe_sumo.network.hosting import hosting_lines
+
+    print("  scenarios:")
+    for line in hosting_lines(resolve_site(args.site)):
+        print(f"  {line}")
     print(f"  open it: sumo-gui -c {site.file('sumocfg')}   edit it: netedit -s {site.file('net.xml')}")
     print(f"  {OSM_ATTRIBUTION}")
     return 0

@@ -72,8 +72,12 @@ def summarise(site: Site) -> SiteSummary:
     junction = net.getNode(info["main_junction"])
     jx, jy = junction.getCoord()
     root = ET.parse(site.file("net.xml")).getroot()
-    logic = next(tl for tl in root.iter("tlLogic") if tl.get("id") == junction.getID())
-    phases = [float(p.get("duration")) for p in logic.iter("phase")]
+    # The junction's signal programme: the tlLogic its incoming connections name (netconvert may give a
+    # joined signal an id of its own, or several nodes one signal).
+    incoming = {e.getID() for e in junction.getIncoming()}
+    tl_ids = {c.get("tl") for c in root.iter("connection") if c.get("tl") and c.get("from") in incoming}
+    logics = [tl for tl in root.iter("tlLogic") if tl.get("id") in tl_ids]
+    phases = [float(p.get("duration")) for p in logics[0].iter("phase")] if logics else []
     crossings = {
         e.get("id"): e.get("crossingEdges").split()
         for e in root.iter("edge")

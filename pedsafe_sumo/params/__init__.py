@@ -89,6 +89,7 @@ def _import_validator_modules() -> None:
         "pedsafe_sumo.demand.params",
         "pedsafe_sumo.perception.params",
         "pedsafe_sumo.control.params",
+        "pedsafe_sumo.safety.params",
     ):
         try:
             importlib.import_module(module)

@@ -65,6 +65,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--condition", required=True, help="sv or v2i")
     parser.add_argument("--scenario", help="scenario of the episode (needed when the run has several)")
     parser.add_argument(
+        "--site", help="the run's site (name or folder) when it is not where run.json says [its site_path]"
+    )
+    parser.add_argument(
         "--delay",
         type=float,
         help=f"playback speed: milliseconds per simulation step [{DEFAULT_DELAY_MS:g}: real time with 0.05 s "
@@ -203,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         size_px = check_args(args)
-        logged = load_logged_episode(args.run_dir, args.episode, args.condition, args.scenario)
+        logged = load_logged_episode(args.run_dir, args.episode, args.condition, args.scenario, args.site)
     except (UsageError, ReplayError) as exc:
         return error(str(exc))
     if args.export_fcd is not None:

@@ -7,7 +7,8 @@ a scenario under a condition takes, from the run and never from today's defaults
   --set overrides applied), rebuilt field by field so a changed default in the registry cannot leak in;
 - the parameters: run.json["parameters"], the full merged parameter file of the run;
 - the AD stack: run.json["algorithm"], loaded like --algorithm;
-- the site: run.json["site"];
+- the site: the folder run.json["site_path"] names (else the site named run.json["site"]), or the one
+  given as --site; its files must be the run's (run.json["site_files_sha256"]);
 - the case, when there is one: cases/<scenario>_<condition>_<seed>.parquet (the per-step log the
   replay is checked against) and .json (the episode's initial world, its outcome and end reason).
 Every problem is a ReplayError whose message is one line naming it.
@@ -27,7 +28,7 @@ import pandas as pd
 
 from pedsafe_sumo.control.agent import Agent, AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import case_stem, read_case
-from pedsafe_sumo.network.sites import Site, UnknownSiteError, get_site
+from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params, validate
 from pedsafe_sumo.scenarios.registry import ScenarioError, ScenarioSpec
 from pedsafe_sumo.sim.episode import CONDITIONS, STEP_LENGTH_S
@@ -79,10 +80,11 @@ class LoggedEpisode:
 
 
 def load_logged_episode(
-    run_dir: Path, episode: int, condition: str, scenario: str | None = None
+    run_dir: Path, episode: int, condition: str, scenario: str | None = None, site: str | None = None
 ) -> LoggedEpisode:
     """Episode `episode` of `scenario` under `condition` in the run at `run_dir`; ReplayError if any of
-    them is missing or the run's settings cannot be rebuilt."""
+    them is missing or the run's settings cannot be rebuilt. `site` (a name or folder) replaces the
+    site the run recorded, e.g. a copy of its folder on another machine; its files must be the run's."""
     run_dir = Path(run_dir)
     if not run_dir.exists():
         raise ReplayError(f"run directory {run_dir} does not exist")
@@ -126,10 +128,7 @@ def load_logged_episode(
         raise ReplayError(
             f"{run_dir / RUN_FILE} lacks {', '.join(missing)}: cannot rebuild the run's settings"
         )
-    try:
-        site = get_site(str(run_info["site"]))
-    except UnknownSiteError as exc:
-        raise ReplayError(f"the run's site: {exc}") from None
+    site = run_site(run_info, site)
     spec = scenario_from_record(run_info["scenarios"], scenario, notes)
     params = params_from_record(run_info["parameters"], notes)
     algorithm = str(run_info["algorithm"])
@@ -262,6 +261,33 @@ def _read_episodes(path: Path) -> pd.DataFrame:
     if episodes.empty:
         raise ReplayError(f"{path} has no rows")
     return episodes
+
+
+def run_site(run_info: dict[str, Any], given: str | None = None) -> Site:
+    """The site of a run (see the module docstring); ReplayError, in one line, when it cannot be found
+    or its files differ from the ones the run read."""
+    from pedsafe_sumo.batch.runner import site_file_digests
+
+    recorded_path = run_info.get("site_path")
+    if given is not None:
+        reference = given
+    elif recorded_path and Path(recorded_path).is_dir():
+        reference = str(recorded_path)
+    else:
+        reference = str(run_info["site"])
+    try:
+        site = resolve_site(reference)
+        digests = site_file_digests(reference)
+    except UnknownSiteError as exc:
+        raise ReplayError(f"the run's site: {exc}") from None
+    recorded = run_info.get("site_files_sha256") or {}
+    differ = sorted(name for name, digest in recorded.items() if digests.get(name) != digest)
+    if differ:
+        raise ReplayError(
+            f"site {site.name} in {site.directory}: {', '.join(differ)} differ(s) from the file(s) the run "
+            "read (run.json site_files_sha256): give --site the folder the run used"
+        )
+    return site
 
 
 def _version_notes(run_info: dict[str, Any]) -> list[str]:

@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo.report import figures
+from pedsafe_sumo.report import indexes as idx
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, run_header
 from pedsafe_sumo.report.summaries import (
     CASE_SCENARIO,
@@ -31,6 +32,7 @@ from pedsafe_sumo.report.tables import (
     PAIRED_TITLE,
     TABLE_ONE_TITLE,
     condition_label,
+    markdown_table,
     paired_of_run,
     paired_rows,
     table_one_of_run,
@@ -114,6 +116,86 @@ def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
     return written
 
 
+CONTACTS_TITLE = (
+    "Stationary contacts: the pedestrian touched the ego while it stood (speed below 0.1 m/s);\n"
+    "neither a collision nor an injury in Table I"
+)
+AGREEMENT_TITLE = (
+    "Our collision against SUMO's own collision check (sumo_collision), on the episodes where SUMO can see\n"
+    "(not null); SUMO null = episodes where SUMO cannot see the pedestrian (mid-block: no crossing lane)"
+)
+PET_TITLE = (
+    "Post-encroachment time: episodes where it is defined (both passed the crossing point of their paths);\n"
+    "the others by why not, read from the kept logs (cases/, or steplogs/ with --keep-logs all)"
+)
+
+
+def _proximity_title(model) -> str:
+    return (
+        f"Proximity, over the episodes without a collision: close pass = clearance between the bodies below "
+        f"{model.close_pass_clearance_m:g} m\nat an ego speed above {model.close_pass_min_speed_mps:g} m/s; "
+        f"DRAC over {model.drac_threshold_mps2:g} m/s2 = harder than a comfortable stop "
+        "(params [safety], docs/safety_indexes.md)"
+    )
+
+
+def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
+    """Stationary contacts, our collision against SUMO's, where PET is defined, the proximity measure:
+    printed, and written to tables_dir (indexes.md and one CSV each). Columns a run lacks are a note."""
+    episodes = run.episodes
+    sections: list[tuple[str, str, object, object]] = []  # (title, csv name, table, rows function)
+    contacts = idx.stationary_contacts(episodes)
+    if contacts is None:
+        say(idx.missing_note(episodes, ("contact_stationary",), "the stationary-contact count"))
+    else:
+        sections.append((CONTACTS_TITLE, "contacts.csv", contacts, idx.contacts_rows))
+    agreement = idx.collision_agreement(episodes)
+    if agreement is None:
+        say(idx.missing_note(episodes, ("sumo_collision",), "the agreement with SUMO"))
+    else:
+        title = AGREEMENT_TITLE
+        if not idx.sumo_collision_is_nullable(episodes):
+            title += (
+                "\nnote: this run's sumo_collision is a plain boolean (from before issue 12): False also "
+                "where SUMO could not see, so those episodes are compared too"
+            )
+        sections.append((title, "agreement.csv", agreement, idx.agreement_rows))
+    if "pet_s" in episodes.columns:
+        pet = idx.pet_coverage(episodes, idx.KeptLogs(run))
+        sections.append((PET_TITLE, "pet.csv", pet, idx.pet_rows))
+    else:
+        say(idx.missing_note(episodes, ("pet_s",), "the PET summary"))
+    model = idx.proximity_model_of_run(run.run_info)
+    proximity = idx.proximity_summary(episodes, model.drac_threshold_mps2)
+    if proximity is None:
+        say(idx.missing_note(episodes, idx.PROXIMITY_COLUMNS, "the proximity summary"))
+    else:
+        sections.append((_proximity_title(model), "proximity.csv", proximity, idx.proximity_rows))
+
+    tables_dir.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    markdown = [f"**{run.incomplete}**\n"] if run.incomplete else []
+    for title, csv_name, table, rows_of in sections:
+        header, rows = rows_of(table)
+        say(title)
+        say(text_table(header, rows))
+        say("")
+        path = tables_dir / csv_name
+        table.to_csv(path, index=False)
+        written.append(path)
+        first, _, rest = title.partition("\n")
+        markdown.append(
+            f"**{first}**\n\n{rest}\n\n{markdown_table(header, rows)}\n"
+            if rest
+            else f"**{first}**\n\n{markdown_table(header, rows)}\n"
+        )
+    if sections:
+        path = tables_dir / "indexes.md"
+        path.write_text("\n".join(markdown), encoding="utf-8")
+        written.append(path)
+    return written
+
+
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
     try:
@@ -136,6 +218,7 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say("")
     out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
+    written += index_checks(run, out_dir / TABLES_DIR, say)
     written += write_figures(run, out_dir / FIGURES_DIR, say)
     say("wrote " + ", ".join(str(p.relative_to(run.path)) for p in written) + f" in {run.path}")
     if run.incomplete:

@@ -1,7 +1,7 @@
 """Table I and the paired SV-versus-V2I comparison of a run, as DataFrames, text, Markdown and CSV.
 
-The statistics are those of `pedsafe_sumo.safety.stats` (Wilson intervals, Student-t interval of the
-mean injury, exact McNemar); this module only arranges and formats them.
+The statistics are those of `pedsafe_sumo.safety.stats` (Wilson intervals, the two-part MOVER interval of
+the mean injury, exact McNemar); this module only arranges and formats them.
 """
 
 from __future__ import annotations
@@ -160,7 +160,8 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 
 TABLE_ONE_TITLE = (
     "Table I: collision rate, mean injury probability P_I, conflict rate (conflict without collision)\n"
-    "95% intervals: Wilson for the rates, Student t for the mean P_I; n = episodes counted, "
+    "95% intervals: Wilson for the rates, two-part (share injured x mean P_I of the injured, MOVER) for the "
+    "mean P_I; n = episodes counted, "
     "errors = episodes with status 'error' (left out)"
 )
 PAIRED_TITLE = (

@@ -1,7 +1,8 @@
 """Safety indexes computed after the run from the per-step log: pure functions, no SUMO, no plotting.
 
 `episode_indexes(log, ped_age_years, injury_model)` gives one episode's row of `episodes.parquet`;
-`stats.table_one` and `stats.paired_mcnemar` turn many rows into the paper's Table I. The log's
+`stats.table_one` and `stats.paired_mcnemar` turn many rows into the paper's Table I; `proximity` holds
+the close-pass measures (minimum clearance, DRAC), usable on any trajectories. The log's
 contract (columns, frames, units) is in `pedsafe_sumo.safety.log`; formulas and choices in
 docs/safety_indexes.md.
 """
@@ -26,7 +27,23 @@ from pedsafe_sumo.safety.injury import (
     register_injury_model,
 )
 from pedsafe_sumo.safety.log import LogError
-from pedsafe_sumo.safety.stats import mcnemar_exact, paired_counts, paired_mcnemar, table_one, wilson_interval
+from pedsafe_sumo.safety.proximity import (
+    ProximityModel,
+    ProximityResult,
+    clearance_steps_m,
+    drac_mps2,
+    drac_steps_mps2,
+    episode_proximity,
+    min_clearance_m,
+)
+from pedsafe_sumo.safety.stats import (
+    mcnemar_exact,
+    paired_counts,
+    paired_mcnemar,
+    table_one,
+    wilson_interval,
+    zero_inflated_mean_interval,
+)
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s, ttc_steps_s
 
 __all__ = [
@@ -39,15 +56,22 @@ __all__ = [
     "FirstDetection",
     "InjuryModel",
     "LogError",
+    "ProximityModel",
+    "ProximityResult",
     "conflict_steps",
     "conflict_without_collision",
+    "clearance_steps_m",
     "detect_collision",
+    "drac_mps2",
+    "drac_steps_mps2",
     "episode_conflict",
     "episode_indexes",
     "episode_injury",
+    "episode_proximity",
     "first_detection",
     "injury_probability",
     "mcnemar_exact",
+    "min_clearance_m",
     "min_ttc_s",
     "paired_counts",
     "paired_mcnemar",
@@ -57,4 +81,5 @@ __all__ = [
     "table_one",
     "ttc_steps_s",
     "wilson_interval",
+    "zero_inflated_mean_interval",
 ]

@@ -9,6 +9,7 @@ from pedsafe_sumo.safety.collision import detect_collision
 from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
 from pedsafe_sumo.safety.detection import first_detection
 from pedsafe_sumo.safety.injury import episode_injury
+from pedsafe_sumo.safety.proximity import ProximityModel, default_proximity_model, episode_proximity
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
 
 #: The columns of episodes.parquet that `episode_indexes` fills, in DESIGN's order.
@@ -26,6 +27,11 @@ INDEX_COLUMNS = (
     "first_detection_distance_m",
     "first_detection_time_s",
     "detected_by",
+    # the proximity measure (issue 12): close passes whatever the pedestrian's speed
+    "min_clearance_m",
+    "ego_speed_at_min_clearance_mps",
+    "drac_mps2",
+    "close_pass",
 )
 
 
@@ -34,6 +40,7 @@ def episode_indexes(
     ped_age_years: float,
     injury_model: str = "saade2020",
     conflict_model: ConflictModel = AMINI_2022,
+    proximity_model: ProximityModel | None = None,
 ) -> dict[str, Any]:
     """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
 
@@ -43,11 +50,14 @@ def episode_indexes(
     raw flag; Table I counts `conflict and not collision` (`conflict_without_collision`).
     Values that do not exist are NaN (impact speed without a collision, measures without a candidate
     step, detection distance when never perceived); `injury_probability` is 0 without a collision.
+    The proximity measures (`min_clearance_m`, `ego_speed_at_min_clearance_mps`, `drac_mps2`,
+    `close_pass`) take the conflict measures' window; `proximity_model` None: the defaults file's.
     """
     arrays = steplog.as_arrays(log)
     hit = detect_collision(arrays)
     conflict = episode_conflict(arrays, conflict_model, last_step=hit.step)
     detection = first_detection(arrays)
+    proximity = episode_proximity(arrays, proximity_model or default_proximity_model(), hit.step)
     return {
         "collision": hit.collided,
         "impact_speed_mps": hit.impact_speed_mps,
@@ -62,4 +72,8 @@ def episode_indexes(
         "first_detection_distance_m": detection.distance_m,
         "first_detection_time_s": detection.time_s,
         "detected_by": detection.detected_by,
+        "min_clearance_m": proximity.min_clearance_m,
+        "ego_speed_at_min_clearance_mps": proximity.ego_speed_at_min_clearance_mps,
+        "drac_mps2": proximity.drac_mps2,
+        "close_pass": proximity.close_pass,
     }

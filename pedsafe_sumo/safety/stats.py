@@ -1,4 +1,5 @@
-"""Statistics for Table I: Wilson intervals for rates, an exact McNemar test for the paired SV/V2I design."""
+"""Statistics for Table I: Wilson intervals for rates, a two-part (MOVER) interval for the mean injury,
+and the exact McNemar test for the paired SV/V2I design. The binomial pieces are scipy's (`binomtest`)."""
 
 from __future__ import annotations
 
@@ -17,8 +18,8 @@ ERROR_STATUS = "error"
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
     """Wilson score interval for a binomial proportion (Wilson 1927); (NaN, NaN) when n = 0.
 
-    centre = (p + z^2/(2n)) / (1 + z^2/n), half-width = z sqrt(p(1-p)/n + z^2/(4n^2)) / (1 + z^2/n),
-    with p = successes/n and z the two-sided normal quantile of `confidence`.
+    scipy's `binomtest(successes, n).proportion_ci(method="wilson")` (no continuity correction): centre
+    (p + z^2/(2n)) / (1 + z^2/n), half-width z sqrt(p(1-p)/n + z^2/(4n^2)) / (1 + z^2/n), p = successes/n.
     """
     if n < 0 or successes < 0 or successes > n:
         raise ValueError(f"need 0 <= successes <= n, got successes={successes}, n={n}")
@@ -26,24 +27,56 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[f
         raise ValueError(f"confidence must lie in (0, 1), got {confidence}")
     if n == 0:
         return math.nan, math.nan
-    z = stats.norm.ppf(0.5 + confidence / 2.0)
-    p = successes / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2.0 * n)) / denom
-    half = z * math.sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    ci = stats.binomtest(int(successes), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return float(ci.low), float(ci.high)
 
 
 def mcnemar_exact(b: int, c: int) -> float:
-    """Two-sided exact McNemar test: the binomial test of b successes in b + c discordant pairs at 1/2.
-
-    p = min(1, 2 * P(X <= min(b, c))), X ~ Binomial(b + c, 1/2); 1.0 when there is no discordant pair.
+    """Two-sided exact McNemar test: scipy's two-sided binomial test of b successes in b + c discordant
+    pairs at 1/2 (= min(1, 2 P(X <= min(b, c))), X ~ Binomial(b + c, 1/2)); 1.0 without a discordant pair.
     """
     if b < 0 or c < 0:
         raise ValueError(f"discordant counts must not be negative, got b={b}, c={c}")
     if b + c == 0:
         return 1.0
-    return float(min(1.0, 2.0 * stats.binom.cdf(min(b, c), b + c, 0.5)))
+    return float(stats.binomtest(int(b), int(b + c), 0.5, alternative="two-sided").pvalue)
+
+
+def zero_inflated_mean_interval(values, confidence: float = 0.95) -> tuple[float, float, float]:
+    """Mean of values in [0, 1] that are mostly 0 (per-episode P_I), with an interval that holds there.
+
+    A two-part model, mean = q m with q the share of positive values and m their mean, combined by MOVER
+    (method of variance estimates recovery, Zou & Donner 2008, Stat. Med. 27:1693; for zero-inflated
+    data Zou, Taleban & Huo 2009, Comput. Stat. Data Anal. 53:3755) on the log scale:
+        log q: Wilson interval (l_q, u_q) of the k positives among n;
+        log m: Student t interval (l_m, u_m) of the k positive values, clipped to [0, 1];
+        low  = exp(log q m - sqrt((log q - log l_q)^2 + (log m - log l_m)^2)),
+        high = exp(log q m + sqrt((log u_q - log q)^2 + (log u_m - log m)^2)).
+    With k <= 1 the spread of the positives is unknown: (low, high) = (0, u_q), using m <= 1. All-zero
+    data give (0, z^2 / (n + z^2)), about 3.84 / n: no event seen is not zero risk (cf. the rule of
+    three, 3 / n). Returns (mean, low, high); NaN for no values, ValueError for a value outside [0, 1].
+    Coverage by simulation: docs/safety_indexes.md and tests/safety/test_injury_interval.py.
+    """
+    x = np.asarray(values, dtype=float).reshape(-1)
+    if not np.all((x >= 0.0) & (x <= 1.0)):  # NaN fails too
+        raise ValueError("values must lie in [0, 1] (probabilities)")
+    n = x.size
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    positive = x[x > 0.0]
+    k = positive.size
+    low_q, high_q = wilson_interval(k, n, confidence)
+    mean = float(np.mean(x))
+    if k <= 1:
+        return mean, 0.0, high_q
+    q, m = k / n, float(np.mean(positive))
+    half = stats.t.ppf(0.5 + confidence / 2.0, k - 1) * float(np.std(positive, ddof=1)) / math.sqrt(k)
+    low_m, high_m = max(0.0, m - half), min(1.0, m + half)
+    with np.errstate(divide="ignore"):  # log 0 = -inf: a lower end at 0
+        log_q, log_m = math.log(q), math.log(m)
+        down = math.hypot(log_q - np.log(low_q), log_m - np.log(low_m))
+        up = math.hypot(math.log(high_q) - log_q, math.log(high_m) - log_m)
+    return mean, float(math.exp(log_q + log_m - down)), float(min(1.0, math.exp(log_q + log_m + up)))
 
 
 def paired_counts(sv, v2i) -> tuple[int, int, int, int]:
@@ -59,25 +92,13 @@ def paired_counts(sv, v2i) -> tuple[int, int, int, int]:
     )
 
 
-def _mean_interval(values: np.ndarray, confidence: float) -> tuple[float, float, float]:
-    """Mean with a Student-t interval (clipped to [0, 1], as the values are probabilities)."""
-    n = len(values)
-    if n == 0:
-        return math.nan, math.nan, math.nan
-    mean = float(np.mean(values))
-    if n == 1:
-        return mean, math.nan, math.nan
-    half = stats.t.ppf(0.5 + confidence / 2.0, n - 1) * float(np.std(values, ddof=1)) / math.sqrt(n)
-    return mean, max(0.0, mean - half), min(1.0, mean + half)
-
-
 def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     """The paper's Table I, one row per scenario and condition (in order of first appearance).
 
     Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error", left
-    out), collision_rate with collision_low/high (Wilson), injury_mean with injury_low/high (Student t
-    on the per-episode P_I), conflict_rate with conflict_low/high (Wilson), where a conflict counts only
-    in an episode without a collision.
+    out), collision_rate with collision_low/high (Wilson), injury_mean with injury_low/high
+    (`zero_inflated_mean_interval` of the per-episode P_I), conflict_rate with conflict_low/high
+    (Wilson), where a conflict counts only in an episode without a collision.
     """
     missing = [c for c in TABLE_INPUT_COLUMNS if c not in episodes.columns]
     if missing:
@@ -90,7 +111,7 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
         collisions = ok["collision"].to_numpy(dtype=bool)
         conflicts = conflict_without_collision(ok["conflict"].to_numpy(dtype=bool), collisions)
         n_col, n_con = int(collisions.sum()), int(conflicts.sum())
-        injury_mean, injury_low, injury_high = _mean_interval(
+        injury_mean, injury_low, injury_high = zero_inflated_mean_interval(
             ok["injury_probability"].to_numpy(dtype=float), confidence
         )
         rows.append(

@@ -289,6 +289,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             # the crosswalk within it: at 2.0-2.5 m/s 19 of 1,500 draws could not be staged (protocol
             # paper-v2; paper-v1 had 2.0).
             ego_speed_min_mps=2.5,
+            # The corner pole does not see where the pedestrian starts (the west crosswalk's north end);
+            # the far-side pole does (network/hosting.py; protocol paper-v3).
+            roadside_units="rsu_camera_0,rsu_camera_1",
         ),
         ScenarioSpec(
             "left_turn",

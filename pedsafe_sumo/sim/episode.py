@@ -47,6 +47,7 @@ from pedsafe_sumo.perception import (
 )
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
@@ -241,6 +242,7 @@ class EpisodeRunner:
         self.agent_class = agent_class
         self.step_length_s = step_length_s
         self.injury_model = injury_model
+        self.proximity_model = ProximityModel.from_params(params)
         data = load_site_data(site, params)
         self.approach = data.approach
         self.static = data.static
@@ -696,7 +698,9 @@ class EpisodeRunner:
             sumo_record = self._sumo_collision(api, api.simulation.getTime())
             sumo_collision = bool(sumo_record)
         log = pd.DataFrame(rows)
-        indexes = episode_indexes(log, ped.age_years, injury_model=self.injury_model)
+        indexes = episode_indexes(
+            log, ped.age_years, injury_model=self.injury_model, proximity_model=self.proximity_model
+        )
         ego_signal, ped_signal = signals_at_conflict(log, signal_states, setup)
         outcome = {
             "scenario": setup.scenario,

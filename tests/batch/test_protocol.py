@@ -17,7 +17,9 @@ from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.scenarios.registry import get_scenario
 
-PROTOCOL = REPO_ROOT / "protocols" / "paper-v1.toml"
+#: The newest protocol: the one that runs on this code (older ones predate parameters added since, and
+#: are refused, as a protocol must name every value).
+PROTOCOL = REPO_ROOT / "protocols" / "paper-v3.toml"
 
 
 def _leaves(tree, prefix=""):
@@ -28,14 +30,17 @@ def _leaves(tree, prefix=""):
     return out
 
 
-@pytest.mark.parametrize("path", sorted((REPO_ROOT / "protocols").glob("*.toml")), ids=lambda p: p.stem)
-def test_every_protocol_names_every_value_with_a_reason(path):
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+def test_the_newest_protocol_names_every_value():
+    data = tomllib.loads(PROTOCOL.read_text(encoding="utf-8"))
     # Every parameter of the parameter file and every field of each scenario it runs.
     assert set(_leaves(data["parameters"])) == set(_leaves(load_params()))
     for name in data["protocol"]["scenarios"]:
         fields = {f for f in get_scenario(name).__dataclass_fields__ if f not in ("name", "description")}
         assert set(data["scenarios"][name]) == fields
+
+
+@pytest.mark.parametrize("path", sorted((REPO_ROOT / "protocols").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_protocol_gives_each_value_a_reason(path):
     # Each value line of the scenario and parameter tables has a comment (source or reason) above it.
     lines = path.read_text(encoding="utf-8").splitlines()
     in_values = False

@@ -52,10 +52,13 @@ def test_table_one_rates_and_intervals():
     assert (sv["collision_low"], sv["collision_high"]) == pytest.approx(WILSON_3_OF_10, abs=1e-6)
     # conflict raw in {2, 3, 4}, episode 2 collided: Table I counts 2 of 10
     assert sv["conflict_rate"] == pytest.approx(0.2)
-    # mean P_I = (0.2 + 0.4 + 0.6) / 10 = 0.12; sample sd = sqrt((0.56 - 10 * 0.0144) / 9) = 0.2149935
-    # t(0.975, 9) = 2.262157 -> half = 2.262157 * 0.2149935 / sqrt(10) = 0.4863492 / 3.1622777 = 0.1537971
+    # mean P_I = (0.2 + 0.4 + 0.6) / 10 = 0.12 = q m with q = 3/10, m = 0.4 (two-part MOVER interval):
+    # Wilson(3, 10) for q; t interval of (0.2, 0.4, 0.6): sd 0.2, t(0.975, 2) = 4.302653,
+    # half = 4.302653 * 0.2 / sqrt(3) = 0.4968276 -> (0 (clipped), 0.8968276), so low = 0;
+    # up = hypot(ln(0.6032219 / 0.3), ln(0.8968276 / 0.4)) = hypot(0.6985026, 0.8073991) = 1.0676138,
+    # high = 0.12 exp(1.0676138) = 0.3490117
     assert sv["injury_mean"] == pytest.approx(0.12)
-    assert (sv["injury_low"], sv["injury_high"]) == pytest.approx((0.0, 0.12 + 0.1537971), abs=1e-6)
+    assert (sv["injury_low"], sv["injury_high"]) == pytest.approx((0.0, 0.3490117), abs=1e-6)
 
     v2i = _row(table, "crossing", "v2i")
     assert v2i["collision_rate"] == 0.0 and v2i["collision_low"] == 0.0
@@ -107,10 +110,11 @@ def test_formatted_cells_carry_rate_and_interval():
     assert md[1].startswith("| --- | --- | ---:") and md[2].startswith("| crossing | SV | 10 | 0 |")
 
 
-def test_single_episode_injury_interval_is_not_available():
+def test_single_episode_injury_interval_is_uninformative():
     episodes = pd.DataFrame([episode_row("crossing", "sv", 0, collision=True, injury_probability=0.3)])
     _, rows = table_one_rows(table_one_of_run(episodes))
-    assert rows[0][5] == "0.3000"  # no interval from one value
+    # one positive value of one: (0, Wilson upper of 1 of 1) = (0, 1), the honest answer from one episode
+    assert rows[0][5] == "0.3000 [0.0000, 1.0000]"
 
 
 def test_tables_written_as_csv_and_markdown(tmp_path):

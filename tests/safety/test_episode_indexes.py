@@ -15,7 +15,9 @@ DESIGN_COLUMNS = (
     "scenario condition episode seed ped_age ped_gender ped_risk ped_speed_mps ego_initial_speed_mps "
     "collision impact_speed_mps injury_probability conflict md_m tmd_s cs_mps conflict_probability "
     "min_ttc_s pet_s "
-    "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error"
+    "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error "
+    # the proximity measure's own columns (issue 12)
+    "min_clearance_m ego_speed_at_min_clearance_mps drac_mps2 close_pass"
 ).split()
 
 
@@ -76,9 +78,9 @@ def test_unknown_injury_model_is_an_error(near_miss_log):
 
 def test_values_have_parquet_friendly_types(near_miss_log):
     row = episode_indexes(near_miss_log, 30.0)
-    assert isinstance(row["collision"], bool) and isinstance(row["conflict"], bool)
+    assert all(isinstance(row[c], bool) for c in ("collision", "conflict", "close_pass"))
     assert isinstance(row["detected_by"], str)
-    others = set(INDEX_COLUMNS) - {"collision", "conflict", "detected_by"}
+    others = set(INDEX_COLUMNS) - {"collision", "conflict", "close_pass", "detected_by"}
     assert all(isinstance(row[c], float) and not isinstance(row[c], np.floating) for c in others)
 
 

@@ -43,6 +43,23 @@ def test_mcnemar_exact_10_against_2():
     assert mcnemar_exact(2, 10) == pytest.approx(0.0385742, abs=1e-7)
 
 
+def test_mcnemar_exact_against_the_binomial_sum():
+    # b = 30, c = 12: p = 2 * sum_{i <= 12} C(42, i) / 2^42, summed with integers
+    tail = sum(math.comb(42, i) for i in range(13)) / 2**42
+    assert mcnemar_exact(30, 12) == pytest.approx(2 * tail, rel=1e-9)
+    assert mcnemar_exact(12, 30) == pytest.approx(2 * tail, rel=1e-9)
+
+
+def test_wilson_agrees_with_the_closed_form_on_many_inputs():
+    for k, n in ((0, 1), (1, 1), (1, 4), (7, 9), (17, 150), (2, 2000), (1999, 2000)):
+        p, denom = k / n, 1 + Z * Z / n
+        centre = (p + Z * Z / (2 * n)) / denom
+        half = Z * math.sqrt(p * (1 - p) / n + Z * Z / (4 * n * n)) / denom
+        assert wilson_interval(k, n) == pytest.approx(
+            (max(0.0, centre - half), min(1.0, centre + half)), abs=1e-6
+        )
+
+
 def test_mcnemar_exact_degenerate_cases():
     assert mcnemar_exact(0, 0) == 1.0
     # b = c = 3: 2 * (1 + 6 + 15 + 20) / 64 = 1.3125, capped at 1
@@ -90,10 +107,10 @@ def test_table_one_by_hand():
     # conflict without collision: only episode 1 -> 1/4, same interval
     assert sv["conflict_rate"] == 0.25
     assert (sv["conflict_low"], sv["conflict_high"]) == pytest.approx((0.045588, 0.699358), abs=2e-6)
-    # injury: mean of (0.4, 0, 0, 0) = 0.1; sd = sqrt((0.3^2 + 3 * 0.1^2) / 3) = 0.2, se = 0.1,
-    # t(0.975, 3) = 3.182446 -> 0.1 +- 0.318245, clipped at 0: (0, 0.418245)
+    # injury: mean of (0.4, 0, 0, 0) = 0.1; one positive value, so the two-part interval is
+    # (0, Wilson upper of 1 of 4) = (0, 0.699358) (zero_inflated_mean_interval: m <= 1)
     assert sv["injury_mean"] == pytest.approx(0.1)
-    assert (sv["injury_low"], sv["injury_high"]) == pytest.approx((0.0, 0.418245), abs=1e-6)
+    assert (sv["injury_low"], sv["injury_high"]) == pytest.approx((0.0, 0.699358), abs=1e-6)
     v2i = table.iloc[1]
     assert (v2i["n"], v2i["n_error"], v2i["collision_rate"], v2i["conflict_rate"]) == (5, 0, 0.2, 0.0)
     assert v2i["conflict_low"] == 0.0

@@ -1,0 +1,143 @@
+"""Edits a traffic engineer makes to the Xueqing network: each is refused in one line until the derived
+files are re-derived from the edited network (build_network --refresh), and then either adapts or is
+refused in one line (issue 14, item 5; docs/sites.md has the table). The shifted network is in
+test_sites.py."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import sumolib
+
+from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
+from pedsafe_sumo.network.sites import SiteError, resolve_site
+from pedsafe_sumo.sumo_binaries import sumo_binary
+
+TOOL = REPO_ROOT / "tools" / "build_network.py"
+JUNCTION = "cluster_12817118532_12817118533_12817118534_12817118535_#15more"
+APPROACH = "177353854#0"  # the southbound Xueqing Road approach the scenarios use
+
+
+def edited_site(tmp_path: Path, **patches: str) -> Path:
+    """A copy of the Xueqing folder (with its own OSM clip) whose network netconvert has edited with the
+    given patch files (option name -> XML text)."""
+    folder = tmp_path / "xueqing_edit"
+    shutil.copytree(NETWORKS_DIR / "xueqing", folder)
+    shutil.copyfile(REPO_ROOT / "osm" / "xueqing.osm", folder / "xueqing.osm")
+    info = json.loads((folder / "xueqing.site.json").read_text())
+    (folder / "xueqing.site.json").write_text(json.dumps({**info, "clip_osm": "xueqing.osm"}))
+    net = folder / "xueqing.net.xml"
+    args = [sumo_binary("netconvert"), "-s", str(net), "-o", str(tmp_path / "edited.net.xml")]
+    for option, text in patches.items():
+        patch = tmp_path / f"patch.{option}.xml"
+        patch.write_text(text)
+        args += [f"--{option}", str(patch)]
+    subprocess.run(args, check=True, capture_output=True)
+    shutil.copyfile(tmp_path / "edited.net.xml", net)
+    return folder
+
+
+def refused_until_refresh(folder: Path) -> subprocess.CompletedProcess:
+    with pytest.raises(SiteError) as info:
+        resolve_site(str(folder))
+    assert "changed after its site file" in str(info.value) and "--refresh" in str(info.value)
+    return subprocess.run(
+        [sys.executable, str(TOOL), "--refresh", str(folder)], capture_output=True, text=True, cwd=REPO_ROOT
+    )
+
+
+def _vehicle_lanes(net_file: Path, edge: str) -> list:
+    return [
+        lane
+        for lane in sumolib.net.readNet(str(net_file)).getEdge(edge).getLanes()
+        if lane.allows("passenger")
+    ]
+
+
+@pytest.mark.slow
+def test_a_lane_added_to_the_approach(tmp_path):
+    from pedsafe_sumo.scenarios.geometry import load_approach
+
+    folder = edited_site(tmp_path, **{"edge-files": f'<edges><edge id="{APPROACH}" numLanes="4"/></edges>'})
+    proc = refused_until_refresh(folder)
+    assert proc.returncode == 0, proc.stderr
+    site = resolve_site(str(folder))
+    # numLanes 4 = the sidewalk and three vehicle lanes; the scenarios see all three.
+    assert len(_vehicle_lanes(site.file("net.xml"), APPROACH)) == 3
+    assert len(load_approach(site).lane_ids) == 3
+    assert "crossing:" in proc.stdout  # the hosting lines for the edited site
+
+
+@pytest.mark.slow
+def test_a_lower_speed_limit(tmp_path):
+    folder = edited_site(tmp_path, **{"edge-files": f'<edges><edge id="{APPROACH}" speed="8.33"/></edges>'})
+    proc = refused_until_refresh(folder)
+    assert proc.returncode == 0, proc.stderr
+    site = resolve_site(str(folder))
+    assert {round(lane.getSpeed(), 2) for lane in _vehicle_lanes(site.file("net.xml"), APPROACH)} == {8.33}
+
+
+@pytest.mark.slow
+def test_a_new_signal_programme(tmp_path):
+    from pedsafe_sumo.network.summary import summarise
+
+    before = summarise(resolve_site("xueqing"))
+    plan = (
+        f'<tlLogics><tlLogic id="{JUNCTION}" type="static" programID="0" offset="0">'
+        '<phase duration="40" state="' + "G" * 37 + '"/><phase duration="5" state="' + "y" * 37 + '"/>'
+        "</tlLogic></tlLogics>"
+    )
+    folder = edited_site(tmp_path, **{"tllogic-files": plan})
+    proc = refused_until_refresh(folder)
+    assert proc.returncode == 0, proc.stderr
+    after = summarise(resolve_site(str(folder)))
+    assert (before.cycle_s, after.cycle_s) == (90.0, 45.0) and after.phases == 2
+
+
+@pytest.mark.slow
+def test_the_signal_removed_is_refused_in_one_line(tmp_path):
+    xy = json.loads((NETWORKS_DIR / "xueqing" / "xueqing.site.json").read_text())["main_junction_xy"]
+    node = f'<nodes><node id="{JUNCTION}" x="{xy[0]:.2f}" y="{xy[1]:.2f}" type="priority"/></nodes>'
+    folder = edited_site(tmp_path, **{"node-files": node})
+    proc = refused_until_refresh(folder)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "the network has no signalised junction" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.slow
+def test_the_approach_split_in_two(tmp_path):
+    from pedsafe_sumo.scenarios.geometry import load_approach
+
+    folder = edited_site(
+        tmp_path, **{"edge-files": f'<edges><edge id="{APPROACH}"><split pos="60"/></edge></edges>'}
+    )
+    proc = refused_until_refresh(folder)
+    assert proc.returncode == 0, proc.stderr
+    # The part that reaches the stop line is the approach now; netconvert dropped the crosswalk over the
+    # edge it split (its crossing named the old edge): every scenario is refused, saying so.
+    net = sumolib.net.readNet(str(folder / "xueqing.net.xml"), withInternal=True)
+    downstream = next(e for e in net.getNode(JUNCTION).getIncoming() if e.getID().startswith(APPROACH))
+    assert downstream.getID() == f"{APPROACH}.60"
+    crossings = [e for e in net.getEdges(withInternal=True) if e.getFunction() == "crossing"]
+    assert not [c for c in crossings if downstream in c._crossingEdges]
+    message = f"NOT hosted: cannot be staged: site xueqing: no crosswalk over {APPROACH}.60"
+    assert proc.stdout.count(message) == 3
+    with pytest.raises(ValueError, match="no crosswalk over"):
+        load_approach(resolve_site(str(folder)))
+
+
+@pytest.mark.slow
+def test_the_junction_moved(tmp_path):
+    original = json.loads((NETWORKS_DIR / "xueqing" / "xueqing.site.json").read_text())["main_junction_xy"]
+    node = f'<nodes><node id="{JUNCTION}" x="{original[0] + 5.0:.2f}" y="{original[1]:.2f}"/></nodes>'
+    folder = edited_site(tmp_path, **{"node-files": node})
+    proc = refused_until_refresh(folder)
+    assert proc.returncode == 0, proc.stderr
+    moved = json.loads((folder / "xueqing.site.json").read_text())["main_junction_xy"]
+    assert moved == pytest.approx([original[0] + 5.0, original[1]], abs=0.01)
+    resolve_site(str(folder))
