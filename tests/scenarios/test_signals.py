@@ -194,3 +194,16 @@ def test_start_signals_sets_the_phase_and_what_is_left_of_it():
     other = _FakeTrafficLight((10.0, 3.0, 25.0), PROGRAM.states)
     with pytest.raises(RuntimeError, match="another program"):
         start_signals(SimpleNamespace(trafficlight=other), staging, PROGRAM)
+
+
+def test_a_junction_without_a_traffic_light_stages_no_signal():
+    """Another site's unsignalised junction: nothing to place, and the episode records none for both."""
+    from pedsafe_sumo.scenarios.geometry import load_turn  # noqa: F401 - the module the staging uses
+    from pedsafe_sumo.scenarios.registry import draw_episode, stage_signals
+
+    approach = load_approach(get_site("xueqing"))
+    traits = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
+    spec = get_scenario("crossing")
+    setup = draw_episode(spec, approach, 3, traits, 6.0, np.random.default_rng(3))
+    assert stage_signals(spec, setup, None, np.random.default_rng(3)) == setup
+    assert setup.signals is None
