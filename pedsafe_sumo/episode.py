@@ -79,15 +79,11 @@ def describe(result: EpisodeResult, algorithm: str) -> list[str]:
             f"  COLLISION at {impact_mps:.2f} m/s ({impact_mps * 3.6:.1f} km/h); "
             f"injury probability {outcome['injury_probability']:.3f}"
         )
-        seen = "also recorded" if outcome["sumo_collision"] else "not recorded"
-        lines.append(
-            f"  SUMO's own collision check: {seen}"
-            + (
-                ""
-                if outcome["sumo_collision"]
-                else " (SUMO checks persons only on shared lanes and crosswalks)"
-            )
+        sumo = outcome["sumo_collision"]
+        seen = {True: "also recorded", False: "not recorded"}.get(
+            sumo, "cannot tell (SUMO checks persons against vehicles only on crossings and walking areas)"
         )
+        lines.append(f"  SUMO's own collision check: {seen}")
     else:
         conflict = "yes" if outcome["conflict"] else "no"
         probability = outcome["conflict_probability"]
@@ -95,6 +91,10 @@ def describe(result: EpisodeResult, algorithm: str) -> list[str]:
         lines.append(
             f"  no collision; conflict: {conflict}{detail}; minimum TTC {outcome['min_ttc_s']:.2f} s"
         )
+        if outcome.get("contact_stationary"):
+            lines.append("  contact with the standing car (below 0.1 m/s): no collision, no injury")
+    pet_s = outcome["pet_s"]
+    lines.append(f"  post-encroachment time: {pet_s:.2f} s" if not math.isnan(pet_s) else "  PET: undefined")
     lines.append(
         f"  ended: {result.end_reason.replace('_', ' ')} at t={log['time_s'].iloc[-1]:.2f} s "
         f"after {len(log)} steps"

@@ -215,7 +215,8 @@ def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
         seed=task.seed,
         collision=False,
         conflict=False,
-        sumo_collision=False,
+        sumo_collision=None,  # SUMO witnessed nothing: unknown, not False
+        contact_stationary=False,
         close_pass=False,
         detected_by="",
         ped_gender="",

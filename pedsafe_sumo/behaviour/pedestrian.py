@@ -2,24 +2,43 @@
 
 A pedestrian walks a polyline path (a crosswalk, or a jaywalking line across the road) at their own
 walking speed. Each step the model computes where the ego's path (a straight line along its heading)
-crosses the pedestrian's path, and the ego's time to reach that conflict point. When that time falls
-below `awareness_ttc_s`, a pedestrian who is not `unaware` reacts, after their reaction time:
+crosses the pedestrian's path (the conflict point), and the time the ego's front needs to reach it.
+When that time falls below `awareness_ttc_s` and the pedestrian can see the ego (a line of sight from
+their eyes, which the episode loop casts through the sensors' geometry), a pedestrian who is not
+`unaware` reacts, after their reaction time:
 
 - `unaware` keeps their speed (they have not noticed the vehicle);
 - `hasten` speeds up (x `hasten_factor`, at most `max_speed_mps`) to pass before the vehicle;
-- `yield` stops short of the ego's corridor, or steps back out of it if already inside.
+- `yield` stops `yield_clearance_m` short of the ego's flank; if already closer, steps back to that
+  distance ("step backward to yield", paper section IV-A); if already past the ego's centreline, walks
+  on out of its path.
 
-Once the ego has passed the conflict point or stands still, everyone walks on at their own speed.
-The model is pure: the episode loop feeds it the ego's pose and moves the SUMO person to the
-returned position (traci person.moveToXY), so it works on and off the crosswalks alike.
+A yielder resumes only when the ego's rear has passed their path, or when the gap is safe by gap
+acceptance: the ego's time to reach their path is at least the time they need to walk clear of it
+plus a start-up and clearance time (HCM's critical headway t_c = L / S_p + t_s). A vehicle that stands
+still counts as an infinite gap only once it has been seen standing for a reaction time ("visibly
+stopped for them"); before that the pedestrian waits.
+
+Whatever their risk preference, nobody walks into a vehicle's body: a step that would bring the
+pedestrian closer than `body_clearance_m` to any vehicle footprint (moving or parked), and closer than
+they already are, is not taken (state "blocked"). A vehicle moving into a standing pedestrian is then
+the vehicle striking them.
+
+The model is pure: the episode loop feeds it the ego's pose, the vehicle footprints and a line-of-sight
+test, and moves the SUMO person to the returned position (traci person.moveToXY), so it works on and
+off the crosswalks alike.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 
 RISK_PREFERENCES = ("unaware", "hasten", "yield")
 
@@ -29,11 +48,16 @@ class BehaviourParams:
     risk: str
     walking_speed_mps: float
     reaction_time_s: float = 1.0  # pedestrian perception-reaction time [s]
-    awareness_ttc_s: float = 3.0  # reacts when the vehicle is this close in time to the conflict point [s]
+    awareness_ttc_s: float = 3.0  # reacts when the vehicle's front is this close in time to their path [s]
     hasten_factor: float = 1.5  # speed multiplier when hastening [-]
     max_speed_mps: float = 2.5  # fastest a hastening pedestrian moves (a brisk run) [m/s]
-    step_back_speed_mps: float = 0.8  # speed of stepping back out of the corridor [m/s]
-    corridor_half_width_m: float = 1.4  # ego half width plus a margin: the strip a yielder keeps out of [m]
+    step_back_speed_mps: float = 0.8  # speed of stepping back away from the vehicle's path [m/s]
+    yield_clearance_m: float = 1.0  # a yielder's body edge to the vehicle's flank [m]
+    body_clearance_m: float = 0.1  # nearest a pedestrian steps towards any vehicle body [m]
+    gap_startup_clearance_s: float = 3.0  # gap acceptance: start-up and clearance time t_s [s]
+    stopped_speed_mps: float = 0.1  # a vehicle slower than this stands still [m/s]
+    radius_m: float = 0.3  # the pedestrian's body circle [m]
+    avoids_bodies: bool = True  # False: a test-track dummy that keeps its path into a vehicle
 
     def __post_init__(self) -> None:
         if self.risk not in RISK_PREFERENCES:
@@ -48,12 +72,29 @@ class PedestrianPose:
     y_m: float
     heading_rad: float  # direction of motion, counter-clockwise from +x
     speed_mps: float  # signed along the path: negative when stepping back
-    state: str  # "walking", "reacting", "hastening", "yielding", "stepping_back", "finished"
+    #: "waiting", "walking", "reacting", "hastening", "yielding", "stepping_back", "clearing",
+    #: "blocked", "finished"
+    state: str
 
 
-def _conflict_point(path_xy: np.ndarray, ego_xy: tuple[float, float], ego_yaw_rad: float):
+@dataclass(frozen=True)
+class VehicleBodies:
+    """Footprints of the vehicles around the pedestrian: centres, headings, lengths, widths (arrays)."""
+
+    x_m: np.ndarray
+    y_m: np.ndarray
+    yaw_rad: np.ndarray
+    length_m: np.ndarray
+    width_m: np.ndarray
+    #: Half diagonals (circumscribed radii) of the footprints; computed when not given. The episode
+    #: loop passes them, rebuilt only when vehicles enter or leave, to keep the per-step cost down.
+    half_diagonal_m: np.ndarray | None = None
+
+
+def _conflict_point(path_xy, ego_xy: tuple[float, float], ego_yaw_rad: float):
     """Distance along the pedestrian path where the ego's heading line crosses it, and the ego's
-    signed distance to that point along its heading. None when the lines do not cross."""
+    signed distance to that point along its heading. None when the lines do not cross.
+    `path_xy`: a sequence of (x, y) points (plain floats are several times faster than numpy rows)."""
     ex, ey = ego_xy
     dx, dy = math.cos(ego_yaw_rad), math.sin(ego_yaw_rad)
     walked = 0.0
@@ -78,28 +119,67 @@ class PedestrianWalker:
         self.path_xy = np.asarray(path_xy, dtype=float)
         if self.path_xy.ndim != 2 or len(self.path_xy) < 2:
             raise ValueError("a pedestrian path needs at least two points")
+        self._path_points = [(float(x), float(y)) for x, y in self.path_xy]
+        # The conflict point of the last ego pose asked for: the loop asks twice per step (cleared, step).
+        self._conflict_cache: tuple = (None, None)
         self.params = params
         seg = np.diff(self.path_xy, axis=0)
         self._seg_len = np.hypot(seg[:, 0], seg[:, 1])
         self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
         self.length_m = float(self._cum[-1])
+        self._cum_list = [float(c) for c in self._cum]
         self.start_delay_s = start_delay_s
         self.s_m = 0.0  # distance walked along the path
         self.speed_mps = 0.0
         self._aware_since_s: float | None = None
+        self._yielding = False  # reacted by yielding, and not yet resumed
+        self._hastening = False  # reacted by hastening, until across or the ego has passed
+        self._seen_ego = False  # has had the ego in sight during this encounter
+        self._ego_stopped_since_s: float | None = None
         self.state = "waiting"
 
     def position(self, s_m: float) -> tuple[float, float, float]:
+        """(x, y, heading of the segment) at distance `s_m` along the path (clipped to it)."""
         s = min(max(s_m, 0.0), self.length_m)
-        i = int(np.searchsorted(self._cum, s, side="right") - 1)
-        i = min(i, len(self._seg_len) - 1)
-        (ax, ay), (bx, by) = self.path_xy[i], self.path_xy[i + 1]
-        u = (s - self._cum[i]) / self._seg_len[i] if self._seg_len[i] > 0 else 0.0
+        cum = self._cum_list  # plain floats: this runs several times a step
+        i = min(bisect.bisect_right(cum, s) - 1, len(cum) - 2)
+        (ax, ay), (bx, by) = self._path_points[i], self._path_points[i + 1]
+        seg_len = cum[i + 1] - cum[i]
+        u = (s - cum[i]) / seg_len if seg_len > 0 else 0.0
         return ax + u * (bx - ax), ay + u * (by - ay), math.atan2(by - ay, bx - ax)
 
     @property
     def finished(self) -> bool:
         return self.s_m >= self.length_m - 1e-9
+
+    def cleared(
+        self, ego_xy: tuple[float, float], ego_yaw_rad: float, ego_length_m: float, ego_width_m: float
+    ) -> tuple[bool, bool] | None:
+        """(ego cleared, pedestrian cleared) the conflict area, or None when their paths do not cross.
+
+        The ego has cleared it when its rear is past the pedestrian's path by their radius; the
+        pedestrian when their body is past the ego's far flank, or they reached the end of their path.
+        """
+        conflict = self._conflict(ego_xy, ego_yaw_rad)
+        if conflict is None:
+            return None
+        s_conflict, d_ego = conflict
+        r = self.params.radius_m
+        ego_clear = d_ego < -(ego_length_m / 2 + r)
+        ped_clear = self.finished or self.s_m > s_conflict + ego_width_m / 2 + r
+        return ego_clear, ped_clear
+
+    def _conflict(self, ego_xy: tuple[float, float], ego_yaw_rad: float):
+        key = (float(ego_xy[0]), float(ego_xy[1]), float(ego_yaw_rad))
+        if self._conflict_cache[0] != key:
+            self._conflict_cache = (key, _conflict_point(self._path_points, ego_xy, ego_yaw_rad))
+        return self._conflict_cache[1]
+
+    def _sees(self, sees_ego: Callable[[], bool] | None) -> bool:
+        """Whether the ego has been in sight; the line of sight is cast only until it first is."""
+        if not self._seen_ego:
+            self._seen_ego = True if sees_ego is None else bool(sees_ego())
+        return self._seen_ego
 
     def step(
         self,
@@ -109,7 +189,12 @@ class PedestrianWalker:
         ego_yaw_rad: float,
         ego_speed_mps: float,
         ego_length_m: float = 4.5,
+        ego_width_m: float = 1.8,
+        sees_ego: Callable[[], bool] | None = None,
+        bodies: VehicleBodies | None = None,
     ) -> PedestrianPose:
+        """Advance one step. `sees_ego()` answers whether the ego is in the pedestrian's sight now (None:
+        always); `bodies` are the vehicle footprints no step may walk into (None: none)."""
         p = self.params
         if time_s < self.start_delay_s:
             x, y, heading = self.position(self.s_m)
@@ -119,43 +204,110 @@ class PedestrianWalker:
             self.state = "finished"
             return PedestrianPose(x, y, heading, 0.0, "finished")
 
+        if ego_speed_mps < p.stopped_speed_mps:
+            if self._ego_stopped_since_s is None:
+                self._ego_stopped_since_s = time_s
+        else:
+            self._ego_stopped_since_s = None
+
         speed = p.walking_speed_mps
         state = "walking"
-        conflict = _conflict_point(self.path_xy, ego_xy, ego_yaw_rad)
-        threatened = False
+        target_s: float | None = None  # where a stepping-back or yielding pedestrian stops
+        conflict = self._conflict(ego_xy, ego_yaw_rad)
         if conflict is not None and p.risk != "unaware":
             s_conflict, d_ego = conflict
-            ego_passed = d_ego < -ego_length_m / 2
-            ego_stopped = ego_speed_mps < 0.1
-            not_yet_across = self.s_m < s_conflict + p.corridor_half_width_m
-            if not ego_passed and not ego_stopped and not_yet_across:
-                ttc_s = max(d_ego, 0.0) / ego_speed_mps
-                threatened = ttc_s <= p.awareness_ttc_s
-            if threatened:
-                if self._aware_since_s is None:
-                    self._aware_since_s = time_s
-                if time_s - self._aware_since_s < p.reaction_time_s - 1e-9:
-                    state = "reacting"
-                elif p.risk == "hasten":
-                    speed, state = min(p.walking_speed_mps * p.hasten_factor, p.max_speed_mps), "hastening"
-                else:  # yield: keep out of the ego's corridor
-                    edge = s_conflict - p.corridor_half_width_m
-                    if self.s_m > edge:
-                        speed, state = -p.step_back_speed_mps, "stepping_back"
+            half_w = ego_width_m / 2
+            near_edge = s_conflict - (half_w + p.yield_clearance_m + p.radius_m)
+            far_edge = s_conflict + half_w + p.radius_m
+            ego_passed = d_ego < -(ego_length_m / 2 + p.radius_m)
+            across = self.s_m > far_edge
+            front_gap_m = max(d_ego - ego_length_m / 2 - p.radius_m, 0.0)
+            moving = ego_speed_mps >= p.stopped_speed_mps
+            time_to_path_s = front_gap_m / ego_speed_mps if moving else math.inf
+            if ego_passed or across:
+                self._aware_since_s, self._yielding, self._hastening = None, False, False
+                self._seen_ego = False  # the next encounter needs its own look
+            else:
+                threatened = moving and time_to_path_s <= p.awareness_ttc_s and self._sees(sees_ego)
+                if self._yielding:
+                    if self._accepts_gap(time_s, time_to_path_s, far_edge - self.s_m):
+                        self._yielding, self._aware_since_s = False, None
+                elif threatened:
+                    if self._aware_since_s is None:
+                        self._aware_since_s = time_s
+                    if time_s - self._aware_since_s >= p.reaction_time_s - 1e-9:
+                        if p.risk == "yield":
+                            self._yielding = True
+                        else:
+                            speed = min(p.walking_speed_mps * p.hasten_factor, p.max_speed_mps)
+                            state, self._hastening = "hastening", True
+                    else:
+                        state = "reacting"
+                elif self._hastening and moving:
+                    # Once hastening, keep the pace until across or the ego has passed.
+                    speed = min(p.walking_speed_mps * p.hasten_factor, p.max_speed_mps)
+                    state = "hastening"
+                else:
+                    self._aware_since_s = None
+                if self._yielding:
+                    if self.s_m >= s_conflict:
+                        state = "clearing"  # past the centreline: out of the path forwards
+                    elif self.s_m > near_edge:
+                        speed, state, target_s = -p.step_back_speed_mps, "stepping_back", near_edge
                     else:
                         speed, state = 0.0, "yielding"
-            else:
-                self._aware_since_s = None
-        if state == "stepping_back":
-            edge = conflict[0] - p.corridor_half_width_m
-            self.s_m = max(edge, self.s_m + speed * dt_s, 0.0)
-        elif state == "yielding":
-            pass
+
+        if state == "yielding":
+            new_s = self.s_m
+        elif state == "stepping_back":
+            new_s = max(target_s, self.s_m + speed * dt_s, 0.0)
         else:
-            self.s_m = min(self.length_m, self.s_m + speed * dt_s)
+            new_s = min(self.length_m, self.s_m + speed * dt_s)
+        if new_s != self.s_m and p.avoids_bodies and bodies is not None and len(bodies.x_m):
+            if self._walks_into(bodies, self.s_m, new_s):
+                new_s, speed, state = self.s_m, 0.0, "blocked"
+        self.s_m = new_s
         self.speed_mps = speed
         self.state = state
         x, y, heading = self.position(self.s_m)
         if speed < 0:
             heading += math.pi
         return PedestrianPose(x, y, heading, speed, state)
+
+    def _accepts_gap(self, time_s: float, time_to_path_s: float, to_clear_m: float) -> bool:
+        """Gap acceptance (HCM critical headway): walk on only if the ego reaches the path later than the
+        time needed to walk `to_clear_m` clear of it plus the start-up and clearance time. A standing ego
+        (time_to_path_s inf) is an infinite gap once seen standing for a reaction time, else none."""
+        p = self.params
+        if math.isinf(time_to_path_s):
+            stopped_since = self._ego_stopped_since_s
+            if stopped_since is None or time_s - stopped_since < p.reaction_time_s - 1e-9:
+                return False
+        critical_s = max(to_clear_m, 0.0) / p.walking_speed_mps + p.gap_startup_clearance_s
+        return time_to_path_s >= critical_s
+
+    def _walks_into(self, bodies: VehicleBodies, s_from: float, s_to: float) -> bool:
+        """Whether moving s_from -> s_to brings the body within `body_clearance_m` of a vehicle footprint
+        and closer to it than before."""
+        x1, y1, _ = self.position(s_to)
+        r, margin = self.params.radius_m, self.params.body_clearance_m
+        # Cheap bound first (this runs every step): only footprints whose circumscribed circle comes
+        # within the margin of the body can be too close.
+        half_diagonal = bodies.half_diagonal_m
+        if half_diagonal is None:
+            half_diagonal = 0.5 * np.hypot(bodies.length_m, bodies.width_m)
+        dx, dy, reach = bodies.x_m - x1, bodies.y_m - y1, half_diagonal + (r + margin)
+        near = dx * dx + dy * dy <= reach * reach
+        if not near.any():
+            return False
+        x0, y0, _ = self.position(s_from)
+        box = (
+            bodies.x_m[near],
+            bodies.y_m[near],
+            bodies.yaw_rad[near],
+            bodies.length_m[near],
+            bodies.width_m[near],
+        )
+        before = rectangle_circle_distance_m(*box, x0, y0, r)
+        after = rectangle_circle_distance_m(*box, x1, y1, r)
+        return bool(np.any((after < margin) & (after < before)))

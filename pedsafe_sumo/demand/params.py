@@ -88,7 +88,11 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
         raise ParameterError(f"parameter '{where}.hasten_factor' must be >= 1 (hasten means faster)")
     _positive(section, "hasten_max_speed_mps", where)
     _positive(section, "step_back_speed_mps", where)
-    _non_negative(section, "corridor_half_width_m", where)
+    _non_negative(section, "yield_clearance_m", where)
+    _non_negative(section, "body_clearance_m", where)
+    _non_negative(section, "gap_startup_clearance_s", where)
+    if not 0.0 < _positive(section, "eye_height_fraction", where) <= 1.0:
+        raise ParameterError(f"parameter '{where}.eye_height_fraction' must lie in (0, 1]")
 
     groups = section.get("age_groups")
     if not isinstance(groups, dict) or not groups:

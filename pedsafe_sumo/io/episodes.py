@@ -17,28 +17,36 @@ EPISODE_COLUMNS = (
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
     # the proximity measure (issue 12; pedsafe_sumo.safety.proximity)
     "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
+    # collision semantics and end conditions (issue 12; safety.collision, sim.episode)
+    "contact_stationary", "end_reason",
     # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
     "ego_signal", "ped_signal",
 )  # fmt: skip
-BOOL_COLUMNS = ("collision", "conflict", "sumo_collision", "close_pass")
+BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
+#: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
+#: check vehicle-person contact (a pedestrian off crossings and walking areas at the closest approach).
+NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
-    "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "ego_signal",
-    "ped_signal",
+    "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
+    "ego_signal", "ped_signal",
 )  # fmt: skip
 INT_COLUMNS = ("episode", "seed")
-FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in (*BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS))
+_NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
+FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in _NOT_FLOAT)
 CONDITION_ORDER = {"sv": 0, "v2i": 1}
 
 
 def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in."""
     table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
-    for column in BOOL_COLUMNS:
-        table[column] = table[column].astype(bool)
+    for column in BOOL_COLUMNS:  # a row without the flag (an error row, an older row) has it False
+        table[column] = table[column].astype(object).where(table[column].notna(), False).astype(bool)
+    for column in NULLABLE_BOOL_COLUMNS:
+        table[column] = table[column].astype("boolean")
     for column in INT_COLUMNS:
         table[column] = table[column].astype("int64")
     for column in STRING_COLUMNS:
-        table[column] = table[column].fillna("").astype(str)
+        table[column] = table[column].astype(object).where(table[column].notna(), "").astype(str)
     for column in FLOAT_COLUMNS:
         table[column] = table[column].astype(float)
     return sort_rows(table)

@@ -140,7 +140,7 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
                         "seed": seed,
                         "collision": False,
                         "conflict": False,
-                        "sumo_collision": False,
+                        "sumo_collision": None,  # unknown: the run did not finish
                         "status": "error",
                         "error": row["error"],
                     }

@@ -331,6 +331,7 @@ def stage_cell(
         clothing_rgb=dummy.clothing_rgb,
         radius_m=radius_m,
         height_m=dummy.height_m,
+        avoids_vehicle_bodies=False,  # a dummy on its platform keeps its path into the car
     )
     ego = VehicleSetup("ego", approach.lane_ids[ego_lane], start_m, v_mps, EGO_BLUE_RGB, ego_size)
     setup = EpisodeSetup(

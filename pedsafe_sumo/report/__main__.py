@@ -8,6 +8,7 @@ docs/report.md). Bad input (no DIR, no episodes.parquet, missing columns) ends i
 and exit code 2; so does a batch that has not finished, unless --partial: then the report covers the
 chunks finished so far, says INCOMPLETE RUN in its first and last lines and in its Markdown tables,
 and writes under DIR/partial/ so that nothing is taken for the final report.
+All of it also goes into one self-contained page, DIR/report.html (pedsafe_sumo/report/html.py).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 
 from pedsafe_sumo.report import figures
 from pedsafe_sumo.report import indexes as idx
+from pedsafe_sumo.report.html import HTML_FILE, write_html_report
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, run_header
 from pedsafe_sumo.report.summaries import (
     CASE_SCENARIO,
@@ -220,6 +222,7 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
     written += index_checks(run, out_dir / TABLES_DIR, say)
     written += write_figures(run, out_dir / FIGURES_DIR, say)
+    written.append(write_html_report(run, table, paired, out_dir / FIGURES_DIR, out_dir / HTML_FILE))
     say("wrote " + ", ".join(str(p.relative_to(run.path)) for p in written) + f" in {run.path}")
     if run.incomplete:
         say(run.incomplete)

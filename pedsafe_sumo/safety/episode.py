@@ -32,6 +32,8 @@ INDEX_COLUMNS = (
     "ego_speed_at_min_clearance_mps",
     "drac_mps2",
     "close_pass",
+    # contact with a standing ego: neither a collision nor an injury (issue 12)
+    "contact_stationary",
 )
 
 
@@ -44,8 +46,10 @@ def episode_indexes(
 ) -> dict[str, Any]:
     """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
 
-    Conflict measures and TTC are taken over the steps up to and including the first contact (all steps
-    without a collision): what follows a collision says nothing about the encounter. PET is 0 for an
+    A collision is contact while the ego moves (at STATIONARY_SPEED_MPS or faster); contact with a
+    standing ego is `contact_stationary`, neither a collision nor an injury. Conflict measures and TTC
+    are taken over the steps up to and including the first collision step (all steps without a
+    collision): what follows a collision says nothing about the encounter. PET is 0 for an
     episode with a collision (the two met), else computed from the whole trajectories. `conflict` is the
     raw flag; Table I counts `conflict and not collision` (`conflict_without_collision`).
     Values that do not exist are NaN (impact speed without a collision, measures without a candidate
@@ -76,4 +80,5 @@ def episode_indexes(
         "ego_speed_at_min_clearance_mps": proximity.ego_speed_at_min_clearance_mps,
         "drac_mps2": proximity.drac_mps2,
         "close_pass": proximity.close_pass,
+        "contact_stationary": hit.contact_stationary,
     }

@@ -102,20 +102,39 @@ def first_polyline_crossing(
     """The first point where polyline A crosses polyline B (first along A, then along B), or None.
 
     Segments of zero length and parallel segments never cross. Endpoints count (a crossing exactly at a
-    vertex is found). A's segments are tested against all of B's in blocks of `block`, so memory stays
-    bounded for long logs.
+    vertex is found). A's segments are tested in blocks of `block` against those of B's segments whose
+    bounding boxes overlap the block's (zero-length ones left out), so memory stays bounded and long logs
+    with long standstills stay fast.
     """
     ax, ay, bx, by = (np.asarray(v, dtype=float) for v in (ax_m, ay_m, bx_m, by_m))
     if len(ax) < 2 or len(bx) < 2:
         return None
     # Segment i of A: a_i + s (a_{i+1} - a_i); segment j of B: b_j + u (b_{j+1} - b_j); s, u in [0, 1].
-    b0x, b0y, bdx, bdy = bx[None, :-1], by[None, :-1], np.diff(bx)[None, :], np.diff(by)[None, :]
-    b_len = np.hypot(bdx, bdy)
+    all_bdx, all_bdy = np.diff(bx), np.diff(by)
+    moving_b = np.flatnonzero(np.hypot(all_bdx, all_bdy) > 0)
+    if moving_b.size == 0:
+        return None
+    b_lo_x, b_hi_x = np.minimum(bx[:-1], bx[1:]), np.maximum(bx[:-1], bx[1:])
+    b_lo_y, b_hi_y = np.minimum(by[:-1], by[1:]), np.maximum(by[:-1], by[1:])
+    # Box test margin: far above the rounding of the parametric test below, far below any real gap.
+    margin = 1e-9 * (1.0 + max(np.abs(ax).max(), np.abs(ay).max(), np.abs(bx).max(), np.abs(by).max()))
     eps = 1e-12
     for start in range(0, len(ax) - 1, block):
         stop = min(start + block + 1, len(ax))
-        a0x, a0y = ax[start : stop - 1, None], ay[start : stop - 1, None]
-        adx, ady = np.diff(ax[start:stop])[:, None], np.diff(ay[start:stop])[:, None]
+        xs, ys = ax[start:stop], ay[start:stop]
+        near = moving_b[
+            (b_hi_x[moving_b] >= xs.min() - margin)
+            & (b_lo_x[moving_b] <= xs.max() + margin)
+            & (b_hi_y[moving_b] >= ys.min() - margin)
+            & (b_lo_y[moving_b] <= ys.max() + margin)
+        ]
+        if near.size == 0:
+            continue
+        b0x, b0y = bx[None, near], by[None, near]
+        bdx, bdy = all_bdx[None, near], all_bdy[None, near]
+        b_len = np.hypot(bdx, bdy)
+        a0x, a0y = xs[:-1, None], ys[:-1, None]
+        adx, ady = np.diff(xs)[:, None], np.diff(ys)[:, None]
         denom = adx * bdy - ady * bdx
         wx, wy = b0x - a0x, b0y - a0y
         scale = np.hypot(adx, ady) * b_len

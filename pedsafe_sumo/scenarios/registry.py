@@ -331,6 +331,9 @@ class PedestrianSetup:
     clothing_rgb: tuple[int, int, int]
     radius_m: float
     height_m: float
+    #: People do not walk into a vehicle's body (pedsafe_sumo.behaviour.pedestrian); a test-track dummy
+    #: on its platform (the Euro NCAP grid) does: it keeps its speed and path whatever is in its way.
+    avoids_vehicle_bodies: bool = True
 
 
 @dataclass(frozen=True)

@@ -2,14 +2,17 @@
 
 The loop, at every step of `step_length_s` (default 0.05 s):
   1. read the world from SUMO's subscriptions (vehicles' front positions, angles, speeds);
-  2. check the collision of the ego's footprint with the pedestrian's circle, and SUMO's own;
+  2. check the contact of the ego's footprint with the pedestrian's circle, and SUMO's own;
   3. build the world snapshot and run the sensors (perception layer);
   4. hand the AD stack what its condition grants (SV: onboard; V2I: onboard + roadside over the link);
   5. actuate the ego the TraCI way (speed mode 0, setSpeed to the stack's command);
-  6. move the pedestrian by the behaviour model (person.moveToXY, so jaywalking leaves the crosswalks);
+  6. move the pedestrian by the behaviour model (person.moveToXY, so jaywalking leaves the crosswalks),
+     which sees the vehicle bodies and casts its line of sight to the ego through the same geometry;
   7. log the step, and advance SUMO.
-The episode ends on a collision, when the ego has passed the pedestrian, when the pedestrian has
-finished crossing, when the ego has left the network, or at the scenario's time limit.
+The episode ends on a collision (contact while the ego moves at `STATIONARY_SPEED_MPS` or faster; a
+contact with a standing ego is logged and the episode goes on), once both road users have cleared the
+conflict area (the ego's rear past the pedestrian's path, the pedestrian past the ego's far flank), when
+the ego has left the network, or at the scenario's time limit.
 
 Randomness: the episode seed is split (numpy SeedSequence) into a world stream, drawn identically
 under SV and V2I, and a perception stream; SUMO gets the seed too.
@@ -22,13 +25,15 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker
+from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianPose, PedestrianWalker, VehicleBodies
+from pedsafe_sumo.behaviour.sight import ego_in_sight
 from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
@@ -45,6 +50,7 @@ from pedsafe_sumo.perception import (
     load_static_occluders,
     perceive,
 )
+from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
@@ -206,17 +212,32 @@ def signals_at_conflict(log: pd.DataFrame, states: Sequence[str], setup: Episode
     return colour_of_link(state, staging.ego_link_index), colour_of_link(state, staging.ped_link_index)
 
 
-def _move_pedestrian(api, pose) -> None:
-    """Put the pedestrian where the behaviour model says, free of SUMO's walking model (keepRoute=2)."""
+def _move_pedestrian(api, pose, radius_m: float) -> None:
+    """Put the pedestrian where the behaviour model says, free of SUMO's walking model (keepRoute=2).
+
+    SUMO takes a person's position as the FRONT of their shape, a length x width box that extends
+    `length` behind it along their angle (MSTransportable::getBoundingBox). Our pedestrian is a circle
+    around the model's position, so SUMO gets the point `radius_m` ahead of it: SUMO's 2r x 2r box is
+    then centred on our circle (with the position itself, the box trailed 0.6 m behind the circle and
+    SUMO saw contacts at 0.2-0.3 m of our clearance, e.g. with yielders stepping back).
+    """
     api.person.moveToXY(
         PED_ID,
         "",
-        pose.x_m,
-        pose.y_m,
+        pose.x_m + radius_m * math.cos(pose.heading_rad),
+        pose.y_m + radius_m * math.sin(pose.heading_rad),
         angle=yaw_rad_to_sumo_angle(pose.heading_rad),
         keepRoute=2,
         matchThreshold=PED_MATCH_RADIUS_M,
     )
+
+
+def _is_crossing_or_walkingarea(edge_id: str) -> bool:
+    """SUMO's netconvert names crossings ':<junction>_c<k>' and walking areas ':<junction>_w<k>'."""
+    if not edge_id.startswith(":"):
+        return False
+    tail = edge_id.rsplit("_", 1)[-1]
+    return len(tail) > 1 and tail[0] in "cw" and tail[1:].isdigit()
 
 
 class EpisodeRunner:
@@ -540,7 +561,7 @@ class EpisodeRunner:
         # Body sizes and colours of the vehicles in the last snapshot: they change only when a vehicle
         # enters or leaves, so they are rebuilt then, not every step.
         body_ids: tuple[str, ...] = ()
-        lengths = widths = heights = np.zeros(0)
+        lengths = widths = heights = half_diagonals = np.zeros(0)
         colours = np.zeros((0, 3))
         ego_index = -1
 
@@ -554,9 +575,15 @@ class EpisodeRunner:
         )
         sumo_collision = False
         sumo_record: dict[str, Any] = {}
+        # SUMO checks vehicle-person contact only on crossings and walking areas: the person's SUMO
+        # edge at the closest approach decides whether its verdict counts (sumo_collision null if not).
+        closest_clearance_m = math.inf
+        closest_edge = ""
         end_reason = "time_limit"
-        pose = walker.step(0.0, 0.0, (0.0, 0.0), 0.0, 0.0)  # position at the start of the path
-        _move_pedestrian(api, pose)
+        start_x, start_y, start_heading = walker.position(0.0)
+        pose = PedestrianPose(start_x, start_y, start_heading, 0.0, "waiting")
+        eye_height_m = self.params["pedestrians"]["eye_height_fraction"] * ped.height_m
+        _move_pedestrian(api, pose, ped.radius_m)
         try:
             while True:
                 t0 = clock()
@@ -573,6 +600,7 @@ class EpisodeRunner:
                     body_ids = ids
                     sizes = np.array([dims[vid][:3] for vid in ids], dtype=float).reshape(-1, 3)
                     lengths, widths, heights = sizes[:, 0].copy(), sizes[:, 1].copy(), sizes[:, 2].copy()
+                    half_diagonals = 0.5 * np.hypot(lengths, widths)
                     colours = np.array([dims[vid][3] for vid in ids], dtype=float).reshape(-1, 3)
                     ego_index = ids.index(EGO_ID)
                 front_xy = np.array([results[vid][tc.VAR_POSITION] for vid in ids])
@@ -636,6 +664,9 @@ class EpisodeRunner:
                         ego_x, ego_y, ego_yaw, ego_length, ego_width, pose.x_m, pose.y_m, ped.radius_m
                     )
                 )
+                if clearance_m < closest_clearance_m:
+                    closest_clearance_m = clearance_m
+                    closest_edge = api.person.getRoadID(PED_ID)
                 rows.append(
                     {
                         "time_s": time_s,
@@ -668,16 +699,17 @@ class EpisodeRunner:
                 if on_step is not None:
                     on_step(api, rows[-1])
 
-                # End conditions, on the state at time_s.
-                if clearance_m <= 0.0:
+                # End conditions, on the state at time_s. A contact with a standing ego is no
+                # collision (safety.collision): the step is logged and the episode goes on.
+                if clearance_m <= 0.0 and ego_speed >= STATIONARY_SPEED_MPS:
                     end_reason = "collision"
                     break
-                lon = (pose.x_m - ego_x) * math.cos(ego_yaw) + (pose.y_m - ego_y) * math.sin(ego_yaw)
-                if lon < -(ego_length / 2 + ped.radius_m) and time_s > ped.start_delay_s:
-                    end_reason = "ego_passed"
-                    break
-                if walker.finished:
-                    end_reason = "pedestrian_crossed"
+                cleared = walker.cleared((ego_x, ego_y), ego_yaw, ego_length, ego_width)
+                if cleared is None:  # the ego's heading no longer crosses the path: the old test
+                    lon = (pose.x_m - ego_x) * math.cos(ego_yaw) + (pose.y_m - ego_y) * math.sin(ego_yaw)
+                    cleared = (lon < -(ego_length / 2 + ped.radius_m), walker.finished)
+                if all(cleared) and time_s > ped.start_delay_s:
+                    end_reason = "both_cleared"
                     break
                 if time_s >= setup.time_limit_s:
                     end_reason = "time_limit"
@@ -685,19 +717,29 @@ class EpisodeRunner:
 
                 t4 = clock()
                 api.vehicle.setSpeed(EGO_ID, target_mps)
-                pose = walker.step(self.step_length_s, time_s, (ego_x, ego_y), ego_yaw, ego_speed, ego_length)
-                _move_pedestrian(api, pose)
+                bodies = VehicleBodies(centre_x, centre_y, yaw, lengths, widths, half_diagonals)
+                pose = walker.step(
+                    self.step_length_s,
+                    time_s,
+                    (ego_x, ego_y),
+                    ego_yaw,
+                    ego_speed,
+                    ego_length,
+                    ego_width,
+                    sees_ego=partial(ego_in_sight, snapshot, ego_index, (pose.x_m, pose.y_m, eye_height_m)),
+                    bodies=bodies,
+                )
+                _move_pedestrian(api, pose, ped.radius_m)
                 api.simulation.step()
                 timings["sumo_s"] += clock() - t4
         finally:
             agent.close()
 
-        # SUMO may register a collision in the step after ours (it checks after moving).
-        if end_reason == "collision" and not sumo_collision:
-            api.simulation.step()
-            sumo_record = self._sumo_collision(api, api.simulation.getTime())
-            sumo_collision = bool(sumo_record)
         log = pd.DataFrame(rows)
+        # SUMO's verdict counts where it looks: a pedestrian on a crossing or walking area at the
+        # closest approach. Elsewhere (mid-block: a person moved across the road stays logically on
+        # its sidewalk lane, where SUMO never checks against vehicles) it is unknown, not False.
+        sumo_witness = sumo_collision if _is_crossing_or_walkingarea(closest_edge) else None
         indexes = episode_indexes(
             log, ped.age_years, injury_model=self.injury_model, proximity_model=self.proximity_model
         )
@@ -712,7 +754,8 @@ class EpisodeRunner:
             "ped_speed_mps": ped.walking_speed_mps,
             "ego_initial_speed_mps": setup.ego.speed_mps,
             **indexes,
-            "sumo_collision": sumo_collision,
+            "sumo_collision": sumo_witness,
+            "end_reason": end_reason,
             "ego_signal": ego_signal,
             "ped_signal": ped_signal,
             "status": "ok",
@@ -722,11 +765,15 @@ class EpisodeRunner:
 
     @staticmethod
     def _sumo_collision(api, time_s: float) -> dict[str, Any]:
-        """SUMO's collision between the ego and the pedestrian in the last step, if it saw one."""
+        """SUMO's collision between the moving ego and the pedestrian in the last step, if it saw one.
+
+        Same definition as ours: a contact while the ego is slower than STATIONARY_SPEED_MPS is none.
+        """
         for collision in api.simulation.getCollisions():
             if {collision.collider, collision.victim} == {EGO_ID, PED_ID}:
                 speed = collision.colliderSpeed if collision.collider == EGO_ID else collision.victimSpeed
-                return {"time_s": time_s, "ego_speed_mps": float(speed), "type": collision.type}
+                if speed >= STATIONARY_SPEED_MPS:
+                    return {"time_s": time_s, "ego_speed_mps": float(speed), "type": collision.type}
         return {}
 
     def _behaviour(self, ped) -> BehaviourParams:
@@ -739,5 +786,10 @@ class EpisodeRunner:
             hasten_factor=p["hasten_factor"],
             max_speed_mps=p["hasten_max_speed_mps"],
             step_back_speed_mps=p["step_back_speed_mps"],
-            corridor_half_width_m=p["corridor_half_width_m"],
+            yield_clearance_m=p["yield_clearance_m"],
+            body_clearance_m=p["body_clearance_m"],
+            gap_startup_clearance_s=p["gap_startup_clearance_s"],
+            stopped_speed_mps=STATIONARY_SPEED_MPS,
+            radius_m=ped.radius_m,
+            avoids_bodies=ped.avoids_vehicle_bodies,
         )

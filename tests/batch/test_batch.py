@@ -27,7 +27,8 @@ MUST_EXIST = [
     "collision",
     "injury_probability",
     "conflict",
-    "sumo_collision",
+    "contact_stationary",
+    "end_reason",
     "status",
 ]
 
@@ -40,8 +41,11 @@ def test_small_paired_batch_writes_every_column_with_the_right_types(small_run):
     assert len(table) == 8 and sorted(table["condition"].unique()) == ["sv", "v2i"]
     assert table[MUST_EXIST].notna().all().all()
     assert (table["status"] == "ok").all() and (table["error"] == "").all()
-    for column in ("collision", "conflict", "sumo_collision"):
+    for column in ("collision", "conflict", "contact_stationary"):
         assert table[column].dtype == bool
+    # Null where SUMO does not check person-vehicle contact (a pedestrian off crossings/walking areas).
+    assert table["sumo_collision"].dtype == "boolean"
+    assert table.loc[table.scenario == "crossing", "sumo_collision"].notna().all()
     for column in ("episode", "seed"):
         assert table[column].dtype == np.int64
     # Paired: episode i has the same seed and the same pedestrian and ego under both conditions.

@@ -1,27 +1,38 @@
 """Pedestrian behaviour by risk preference, with hand-worked numbers.
 
-Scene: the ego at the origin heading +x at 10 m/s; the pedestrian crosses at x = 30 m from
-y = -6 to y = +6 at 1.5 m/s. The conflict point is 6 m along the path, 30 m ahead of the ego:
-time to conflict 30 / 10 = 3.0 s, at the default awareness threshold of 3.0 s.
+Scene: the ego (4.5 m x 1.8 m) at the origin heading +x at 10 m/s; the pedestrian (radius 0.3 m)
+crosses at x = 30 m from y = -6 to y = +6 at 1.5 m/s. The conflict point is 6 m along the path. The
+ego's front needs (30 - 2.25 - 0.3) / 10 = 2.745 s to reach the pedestrian's body line: under the
+default awareness threshold of 3.0 s. A yielder stands with their body 1.0 m from the ego's flank:
+centre at 6 - (0.9 + 1.0 + 0.3) = 3.8 m along the path; they are across once past 6 + 0.9 + 0.3 = 7.2 m.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker
+from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianWalker, VehicleBodies
 
 PATH = [(30.0, -6.0), (30.0, 6.0)]
 DT = 0.05
 
 
-def run(risk, seconds, ego_xy=(0.0, 0.0), ego_speed=10.0, reaction_time_s=1.0, start_s=0.0):
+def run(risk, seconds, ego_xy=(0.0, 0.0), ego_speed=10.0, reaction_time_s=1.0, start_s=0.0, **kwargs):
     walker = PedestrianWalker(PATH, BehaviourParams(risk, 1.5, reaction_time_s=reaction_time_s))
     walker.s_m = start_s
     pose = None
     for k in range(round(seconds / DT)):
-        pose = walker.step(DT, k * DT, ego_xy, 0.0, ego_speed)
+        pose = walker.step(DT, k * DT, ego_xy, 0.0, ego_speed, **kwargs)
     return walker, pose
+
+
+def advance(walker, k_from, k_to, ego_xy, ego_speed, **kwargs):
+    """Steps k_from .. k_to - 1 (time k * DT) with the ego held at ego_xy and ego_speed."""
+    pose = None
+    for k in range(k_from, k_to):
+        pose = walker.step(DT, k * DT, ego_xy, 0.0, ego_speed, **kwargs)
+    return pose
 
 
 def test_unaware_keeps_walking_speed():
@@ -37,28 +48,113 @@ def test_hasten_speeds_up_after_the_reaction_time():
     assert pose.state == "hastening" and pose.speed_mps == pytest.approx(2.25)
 
 
-def test_yield_stops_short_of_the_corridor():
+def test_a_threat_that_passes_within_the_reaction_time_leaves_a_hastener_at_their_pace():
+    walker = PedestrianWalker(PATH, BehaviourParams("hasten", 1.5))
+    # 0.5 s threatened (2.745 s to the body line): reacting, walking 0.75 m.
+    advance(walker, 0, 10, (0.0, 0.0), 10.0)
+    # Then the ego slows to 5 m/s: 27.45 / 5 = 5.5 s > 3 s, no threat; 1 s more at 1.5 m/s, not 2.25.
+    pose = advance(walker, 10, 30, (0.0, 0.0), 5.0)
+    assert walker.s_m == pytest.approx(0.75 + 1.5) and pose.state == "walking"
+    # Once hastening (after a full reaction time under threat), they keep the pace when the ego slows.
+    walker, _ = run("hasten", 1.5)  # 1 s reacting (1.5 m) + 0.5 s at 2.25 m/s = 2.625 m
+    pose = advance(walker, 30, 40, (0.0, 0.0), 5.0)  # 0.5 s more at 2.25 m/s
+    assert walker.s_m == pytest.approx(2.625 + 1.125) and pose.state == "hastening"
+
+
+def test_yield_stops_short_of_the_ego_flank():
     walker, pose = run("yield", 3.0)
-    # 1 s reacting (1.5 m walked), then stands: the corridor starts at 6 - 1.4 = 4.6 m.
+    # 1 s reacting (1.5 m walked), then stands where they are: 1.5 m is short of the 3.8 m stand line.
     assert walker.s_m == pytest.approx(1.5)
     assert pose.state == "yielding" and pose.speed_mps == 0.0
 
 
-def test_yield_inside_the_corridor_steps_back_to_its_edge():
+def test_yield_inside_the_safe_distance_steps_back_to_it():
     walker, pose = run("yield", 0.5, reaction_time_s=0.0, start_s=5.5)
     # No reaction time: steps back at 0.8 m/s, 0.4 m in 0.5 s: 5.5 - 0.4 = 5.1 m, still stepping back.
     assert walker.s_m == pytest.approx(5.1)
     assert pose.state == "stepping_back" and pose.speed_mps == pytest.approx(-0.8)
-    walker2, pose2 = run("yield", 2.0, reaction_time_s=0.0, start_s=5.5)
-    # After 2 s it reached the edge (4.6 m) at 1.125 s and stands there, yielding.
-    assert walker2.s_m == pytest.approx(4.6) and pose2.state == "yielding"
+    walker2, pose2 = run("yield", 3.0, reaction_time_s=0.0, start_s=5.5)
+    # 5.5 - 3.8 = 1.7 m at 0.8 m/s: at the stand line after 2.125 s, and standing there at 3 s.
+    assert walker2.s_m == pytest.approx(3.8) and pose2.state == "yielding"
+    # Standing, the body edge is 6 - 3.8 - 0.3 = 1.9 m from the centreline: 1.0 m from the 0.9 m flank.
+
+
+def test_yield_past_the_centreline_clears_forwards():
+    walker, pose = run("yield", 0.2, reaction_time_s=0.0, start_s=6.5)
+    # Past the centreline (6 m): out of the path forwards at walking speed, 4 steps of 0.075 m.
+    assert walker.s_m == pytest.approx(6.8) and pose.state == "clearing"
+
+
+def test_yielder_resumes_only_once_the_standing_ego_was_seen_standing_for_a_reaction_time():
+    walker, pose = run("yield", 3.0)  # steps 0..59: standing at 1.5 m
+    assert pose.state == "yielding"
+    # The ego stands from step 60 (t = 3.0 s). Still waiting at t = 3.95 s (stood 0.95 s < 1 s) ...
+    pose = advance(walker, 60, 80, (0.0, 0.0), 0.0)
+    assert walker.s_m == pytest.approx(1.5) and pose.state == "yielding"
+    # ... at t = 4.0 s it has stood 1 s: walks on, 10 steps (t = 4.0 .. 4.45) of 0.075 m.
+    pose = advance(walker, 80, 90, (0.0, 0.0), 0.0)
+    assert walker.s_m == pytest.approx(1.5 + 10 * 0.075) and pose.state == "walking"
+
+
+def test_yielder_resumes_on_an_accepted_gap_to_a_moving_ego():
+    # Standing at 1.5 m, to be across they walk 7.2 - 1.5 = 5.7 m at 1.5 m/s = 3.8 s; plus the 3 s start-up
+    # and clearance time, the critical gap is 6.8 s. An ego at 1 m/s whose centre is d m before the path
+    # reaches the body line in d - 2.55 s.
+    walker, _ = run("yield", 3.0)
+    pose = advance(walker, 60, 70, (21.0, 0.0), 1.0)  # d = 9: 6.45 s < 6.8 s, keeps standing
+    assert walker.s_m == pytest.approx(1.5) and pose.state == "yielding"
+    walker, _ = run("yield", 3.0)
+    pose = advance(walker, 60, 61, (20.0, 0.0), 1.0)  # d = 10: 7.45 s >= 6.8 s, walks on
+    assert walker.s_m == pytest.approx(1.575) and pose.state == "walking"
+
+
+def test_nobody_reacts_to_an_ego_they_cannot_see():
+    looks = []
+
+    def blind():
+        looks.append(1)
+        return False
+
+    walker, pose = run("yield", 2.0, sees_ego=blind)
+    # Never in sight: walks on at 1.5 m/s like the unaware, and looks every step (the ego threatens).
+    assert walker.s_m == pytest.approx(3.0) and pose.state == "walking"
+    assert len(looks) == 40
+    # In sight: one look is enough; the line of sight is not cast again during the encounter.
+    looks.clear()
+
+    def sees():
+        looks.append(1)
+        return True
+
+    walker, pose = run("yield", 2.0, sees_ego=sees)
+    assert walker.s_m == pytest.approx(1.5) and pose.state == "yielding" and len(looks) == 1
+
+
+def test_nobody_walks_into_a_standing_vehicle_body():
+    # The audit's 0 km/h contact: an ego standing across the path. Its centre (30, 1.02), heading +x,
+    # 4.5 m x 1.8 m: near flank at y = 0.12. With 0.1 m of body clearance the pedestrian's centre stops
+    # at y <= 0.12 - 0.1 - 0.3 = -0.28, s <= 5.72 m: the last 0.075 m step that fits ends at 76 * 0.075
+    # = 5.70 m. Whatever their risk preference.
+    ego = VehicleBodies(np.array([30.0]), np.array([1.02]), np.array([0.0]), np.array([4.5]), np.array([1.8]))
+    for risk in ("unaware", "hasten", "yield"):
+        walker, pose = run(risk, 10.0, ego_xy=(30.0, 1.02), ego_speed=0.0, bodies=ego)
+        assert walker.s_m == pytest.approx(5.70), risk
+        assert pose.state == "blocked" and pose.speed_mps == 0.0
+    # Walking along a body without closing in on it is allowed: a 20 m bus parallel to the path, its
+    # side 0.05 m from the pedestrian's body all along (the blending pedestrian behind a waiting car).
+    beside = VehicleBodies(
+        np.array([30.0 + 0.3 + 0.05 + 0.9]), np.array([0.0]), np.array([np.pi / 2]), np.array([20.0]),
+        np.array([1.8]),
+    )  # fmt: skip
+    walker, pose = run("unaware", 2.0, ego_xy=(0.0, 0.0), ego_speed=10.0, bodies=beside)
+    assert walker.s_m == pytest.approx(3.0) and pose.state == "walking"
 
 
 def test_no_reaction_when_the_vehicle_is_far_passed_or_stopped():
-    # 40 m away: 4 s to the conflict point > 3 s, nobody reacts.
+    # 40 m away: (40 - 2.55) / 10 = 3.745 s to the body line > 3 s, nobody reacts.
     walker, _ = run("yield", 1.0, ego_xy=(-10.0, 0.0))
     assert walker.s_m == pytest.approx(1.5)
-    # The ego's centre is 5 m past the path (more than half its 4.5 m length): walk on.
+    # The ego's centre is 5 m past the path (more than half its 4.5 m length plus the 0.3 m radius).
     walker, _ = run("yield", 1.0, ego_xy=(35.0, 0.0))
     assert walker.s_m == pytest.approx(1.5)
     # The ego stands still: walk on.
@@ -77,3 +173,13 @@ def test_bad_parameters_are_rejected():
         BehaviourParams("reckless", 1.4)
     with pytest.raises(ValueError, match="walking speed must be positive"):
         BehaviourParams("unaware", -1.0)
+
+
+def test_a_test_track_dummy_keeps_its_path_into_a_vehicle():
+    # The Euro NCAP dummy (avoids_bodies False) walks on into the standing ego of the body test:
+    # 10 s at 1.5 m/s would be 15 m, the path ends at 12 m.
+    ego = VehicleBodies(np.array([30.0]), np.array([1.02]), np.array([0.0]), np.array([4.5]), np.array([1.8]))
+    walker = PedestrianWalker(PATH, BehaviourParams("unaware", 1.5, avoids_bodies=False))
+    for k in range(200):
+        pose = walker.step(DT, k * DT, (30.0, 1.02), 0.0, 0.0, bodies=ego)
+    assert walker.finished and pose.state == "finished"

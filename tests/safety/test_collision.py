@@ -44,3 +44,39 @@ def test_near_miss_has_no_collision_even_at_millisecond_resolution(near_miss_log
     )
     hit = detect_collision(dense)
     assert not hit.collided and math.isnan(hit.time_s) and math.isnan(hit.impact_speed_mps)
+
+
+def test_contact_with_a_standing_ego_is_no_collision():
+    # The audit's artefact: the ego stands (0.05 m/s, then 0) and the pedestrian walks into its flank.
+    # Ego centre (0, 0), 4 m x 2 m: flank at y = 1. Pedestrian centre y = 1.6, 1.4, 1.2: clearances
+    # 0.3, 0.1, -0.1 -> contact at the third step, where the ego's speed 0.0 is below 0.1 m/s.
+    log = make_log([0.0, 0.1, 0.2], ego_speed_mps=[0.05, 0.0, 0.0], ped_x_m=0.0, ped_y_m=[1.6, 1.4, 1.2])
+    hit = detect_collision(log)
+    assert not hit.collided and hit.contact_stationary and hit.step is None
+    assert math.isnan(hit.impact_speed_mps)
+
+
+def test_a_standing_contact_then_the_ego_drives_on_is_a_collision_at_the_moving_step():
+    # Contact from the second step on; the ego stands there (0.0 m/s) and then moves at 0.1 m/s (not
+    # below the threshold) and 2 m/s: the collision is the step at 0.1 m/s, the contact before it stays
+    # recorded as stationary.
+    log = make_log(
+        [0.0, 0.1, 0.2, 0.3], ego_speed_mps=[0.0, 0.0, 0.1, 2.0], ped_x_m=0.0, ped_y_m=[1.6, 1.2, 1.2, 1.2]
+    )
+    hit = detect_collision(log)
+    assert (hit.collided, hit.step, hit.impact_speed_mps, hit.contact_stationary) == (True, 2, 0.1, True)
+
+
+def test_no_collision_below_the_stationary_speed_whatever_the_log():
+    # Any log: a collision always has an impact speed of at least 0.1 m/s.
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        n = 20
+        log = make_log(
+            np.arange(n) * 0.1,
+            ego_speed_mps=rng.choice([0.0, 0.05, 0.099, 0.1, 3.0], n),
+            ped_x_m=rng.uniform(-3, 3, n),
+            ped_y_m=rng.uniform(-2, 2, n),
+        )
+        hit = detect_collision(log)
+        assert not hit.collided or hit.impact_speed_mps >= 0.1

@@ -17,7 +17,8 @@ DESIGN_COLUMNS = (
     "min_ttc_s pet_s "
     "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error "
     # the proximity measure's own columns (issue 12)
-    "min_clearance_m ego_speed_at_min_clearance_mps drac_mps2 close_pass"
+    "min_clearance_m ego_speed_at_min_clearance_mps drac_mps2 close_pass "
+    "contact_stationary"
 ).split()
 
 
@@ -78,9 +79,10 @@ def test_unknown_injury_model_is_an_error(near_miss_log):
 
 def test_values_have_parquet_friendly_types(near_miss_log):
     row = episode_indexes(near_miss_log, 30.0)
-    assert all(isinstance(row[c], bool) for c in ("collision", "conflict", "close_pass"))
+    flags = ("collision", "conflict", "close_pass", "contact_stationary")
+    assert all(isinstance(row[c], bool) for c in flags)
     assert isinstance(row["detected_by"], str)
-    others = set(INDEX_COLUMNS) - {"collision", "conflict", "close_pass", "detected_by"}
+    others = set(INDEX_COLUMNS) - {*flags, "detected_by"}
     assert all(isinstance(row[c], float) and not isinstance(row[c], np.floating) for c in others)
 
 
@@ -113,8 +115,10 @@ def test_indexes_agree_with_each_other_on_random_encounters():
         row = episode_indexes(log, ped_age_years=rng.uniform(13, 90))
         # the reported step decides the flag
         assert row["conflict"] == (row["conflict_probability"] >= 0.425)
-        # TTC reaches 0 exactly when the footprint and circle touch
-        assert (row["min_ttc_s"] == 0.0) == row["collision"]
+        # TTC reaches 0 exactly when the footprint and circle touch; a touch of a standing ego (below
+        # 0.1 m/s) is a stationary contact, not a collision
+        assert (row["min_ttc_s"] == 0.0) == (row["collision"] or row["contact_stationary"])
+        assert not (row["collision"] and row["impact_speed_mps"] < 0.1)
         if row["collision"]:
             assert row["pet_s"] == 0.0 and 0.0 < row["injury_probability"] < 1.0
             counts["collision"] += 1

@@ -39,7 +39,8 @@ def test_each_scenario_runs_under_both_conditions_from_the_same_world(runner, na
     for condition, result in results.items():
         log = result.log
         assert set(REQUIRED_COLUMNS) <= set(log.columns)
-        assert result.end_reason in {"collision", "ego_passed", "pedestrian_crossed", "time_limit"}
+        assert result.end_reason in {"collision", "both_cleared", "ego_left_network", "time_limit"}
+        assert result.outcome["end_reason"] == result.end_reason
         # Steps of 0.05 s from the insertion step on; the ego starts at its drawn speed.
         assert log["time_s"].diff().dropna().round(6).eq(STEP_S).all()
         assert log["ego_speed_mps"].iloc[0] == pytest.approx(result.setup.ego.speed_mps, abs=1e-6)
@@ -86,17 +87,25 @@ def test_forced_collision_on_the_crosswalk_is_seen_by_us_and_by_sumo_at_the_same
     assert result.end_reason == "collision" and result.outcome["collision"]
     # The ego never braked: the impact speed is its initial speed.
     assert result.outcome["impact_speed_mps"] == pytest.approx(setup.ego.speed_mps, abs=1e-6)
-    assert result.outcome["sumo_collision"]
+    assert result.outcome["sumo_collision"] is True
     sumo = result.sumo_collision
     assert sumo["type"] == "crossing"
     assert sumo["ego_speed_mps"] == pytest.approx(result.outcome["impact_speed_mps"], abs=0.01)
-    assert abs(sumo["time_s"] - result.log["time_s"].iloc[-1]) <= STEP_S + 1e-9
+    # SUMO's 0.6 m box is centred on our 0.3 m circle and holds it: SUMO sees the contact in the same
+    # step as we do, or earlier, and then only where a box corner reaches past the circle, by at most
+    # (sqrt(2) - 1) * 0.3 = 0.124 m: our clearance at SUMO's step is within that.
+    log = result.log
+    ours_s = log["time_s"].iloc[-1]
+    assert ours_s - STEP_S - 1e-9 <= sumo["time_s"] <= ours_s + 1e-9
+    at_sumo = log.loc[(log["time_s"] - sumo["time_s"]).abs() < 1e-6, "clearance_m"].iloc[0]
+    assert at_sumo <= (math.sqrt(2) - 1) * 0.3 + 1e-6
 
 
 @pytest.mark.slow
-def test_mid_block_collision_is_ours_alone_as_documented():
+def test_mid_block_collision_is_ours_alone_and_sumo_says_it_cannot_tell():
     """SUMO checks person-vehicle contact only where they share a lane, crosswalk or walking area; a
-    person moved across the road with moveToXY stays on the sidewalk lane, so SUMO misses it."""
+    person moved across the road with moveToXY stays on the sidewalk lane, so SUMO misses it: its
+    column is null (unknown), not False."""
     runner = EpisodeRunner(SITE, load_params(), load_agent_class("tests.sim.plugin_agents:NeverBrakes"))
     try:
         spec = get_scenario("jaywalking").with_overrides(
@@ -107,7 +116,8 @@ def test_mid_block_collision_is_ours_alone_as_documented():
         result = runner.run(spec, "sv", 0, setup=setup)
     finally:
         runner.close()
-    assert result.outcome["collision"] and not result.outcome["sumo_collision"]
+    assert result.outcome["collision"] and result.outcome["sumo_collision"] is None
+    assert not result.sumo_collision
 
 
 @pytest.mark.slow
@@ -133,7 +143,8 @@ def test_reference_stack_brakes_for_a_perceived_pedestrian(runner):
     log = result.log
     assert log["braking"].any()
     braking_from = log.index[log["braking"]][0]
-    assert log["ego_speed_mps"].iloc[-1] < log["ego_speed_mps"].iloc[braking_from]
+    # It slowed down (the episode runs on until both cleared the conflict area, so it may speed up again).
+    assert log.loc[braking_from:, "ego_speed_mps"].min() < log["ego_speed_mps"].iloc[braking_from]
     # It braked only after seeing the pedestrian, and no sooner than the 0.4 s reaction time.
     first_seen = log.loc[log["perceived"], "time_s"].iloc[0]
     assert log.loc[braking_from, "time_s"] >= first_seen + 0.4 - 1e-9
@@ -177,7 +188,11 @@ def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_both_pole
     spec = get_scenario("background_blending").with_overrides({"time_limit_s": "3.0"})
 
     def frames_seen(units: str, seed: int) -> int:
-        log = runner.run(spec.with_overrides({"roadside_units": units}), "v2i", seed).log
+        # An unaware pedestrian walks the same way whatever the ego does (a yielder would react to an
+        # ego that brakes sooner with another pole), so every pole set films the same motion.
+        setup = runner.draw_setup(spec, seed)
+        setup = dataclasses.replace(setup, pedestrian=dataclasses.replace(setup.pedestrian, risk="unaware"))
+        log = runner.run(spec.with_overrides({"roadside_units": units}), "v2i", seed, setup=setup).log
         return int(log["roadside_raw"].iloc[20:60].sum())
 
     corner = [frames_seen("rsu_camera_0", seed) for seed in range(12)]

@@ -1,0 +1,164 @@
+"""Pedestrian-vehicle interactions, conflicts and surrogate safety measures from any SUMO FCD output.
+
+    python -m pedsafe_sumo.conflicts run.fcd.xml --out conflicts.csv
+    python -m pedsafe_sumo.conflicts run.fcd.xml.gz --out conflicts.parquet --net site.net.xml \\
+        --types routes.rou.xml --ssm conflicts.ssm.xml
+
+Every pair of a vehicle and a walking person that come within the interaction radius gives one row
+per interaction (docs/conflicts.md): TTC, PET, DRAC, Amini MD/TMD/CS and its conflict flag, the
+minimum clearance, speeds, place and times. The file is read one timestep at a time. Bad input ends
+in one line on stderr and exit status 2; an earlier output of the same name is left as it was.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from pedsafe_sumo.conflicts.fcd import FcdError, read_fcd
+from pedsafe_sumo.conflicts.interactions import InteractionTracker
+from pedsafe_sumo.conflicts.output import TABLE_SUFFIXES, SsmWriter, TableWriter
+from pedsafe_sumo.conflicts.sizes import SizeBook, TypesError
+from pedsafe_sumo.params import ParameterError, load_params
+from pedsafe_sumo.settings import UsageError
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m pedsafe_sumo.conflicts", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("fcd", type=Path, metavar="FCD.xml", help="SUMO FCD output (.xml or .xml.gz)")
+    parser.add_argument(
+        "--out", type=Path, required=True, metavar="FILE", help="output table: .csv or .parquet"
+    )
+    parser.add_argument(
+        "--net", type=Path, metavar="NET.xml", help="the network: adds lane_id and crossing_id"
+    )
+    parser.add_argument(
+        "--site",
+        metavar="NAME_OR_PATH",
+        help="a pedsafe_sumo site (name or folder) whose network is the --net",
+    )
+    parser.add_argument(
+        "--types",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="SUMO route/additional file whose vTypes give the road users' sizes (repeatable)",
+    )
+    parser.add_argument("--ssm", type=Path, metavar="FILE.xml", help="also write an SSM-device-like XML")
+    parser.add_argument("--radius", type=float, metavar="M", help="interaction radius, m [parameter file]")
+    parser.add_argument(
+        "--params", type=Path, metavar="FILE.toml", help="parameter file laid over the defaults"
+    )
+    parser.add_argument("--quiet", action="store_true", help="no summary on stdout")
+    return parser.parse_args(argv)
+
+
+def site_net(net: Path | None, site: str | None) -> Path | None:
+    """The network file: --net, or the one of --site (UsageError when both are given or the site is bad)."""
+    if site is None:
+        return net
+    if net is not None:
+        raise UsageError("give --net or --site, not both")
+    from pedsafe_sumo.network.sites import SiteError, resolve_site
+
+    try:
+        return resolve_site(site, verify=False).file("net.xml")
+    except SiteError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def run(args: argparse.Namespace) -> dict[str, float]:
+    if args.out.suffix.lower() not in TABLE_SUFFIXES:
+        raise UsageError(f"--out must end in .csv or .parquet, got {args.out}")
+    if args.ssm is not None and args.ssm.suffix.lower() != ".xml":
+        raise UsageError(f"--ssm writes XML: give a file name ending in .xml, got {args.ssm}")
+    if not args.fcd.is_file():
+        raise UsageError(f"FCD file not found: {args.fcd}")
+    args.net = site_net(args.net, args.site)
+    section = load_params(args.params)["conflicts"]
+    for key, value in section.items():
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+            or value <= 0
+        ):
+            raise UsageError(f"parameter conflicts.{key} must be a positive number, got {value!r}")
+    radius_m = section["interaction_radius_m"] if args.radius is None else args.radius
+    if not math.isfinite(radius_m) or radius_m <= 0:
+        raise UsageError(f"--radius must be a positive number of metres, got {radius_m:g}")
+    sizes = SizeBook.from_params(section, args.types)
+    place = None
+    if args.net is not None:
+        from pedsafe_sumo.conflicts.places import NetError, PlaceFinder  # sumolib only when asked
+
+        try:
+            place = PlaceFinder(args.net)
+        except NetError as exc:
+            raise UsageError(str(exc)) from None
+    table = TableWriter(args.out)
+    ssm = (
+        SsmWriter(
+            args.ssm,
+            section["ssm_ttc_threshold_s"],
+            section["ssm_drac_threshold_mps2"],
+            section["ssm_pet_threshold_s"],
+        )
+        if args.ssm is not None
+        else None
+    )
+
+    def emit(row):
+        table.write(row)
+        if ssm is not None:
+            ssm.write(row)
+
+    tracker = InteractionTracker(radius_m, sizes, emit, place)
+    started = time.perf_counter()
+    try:
+        for step in read_fcd(args.fcd):
+            tracker.step(step)
+        tracker.finish()
+    except BaseException:
+        table.abort()
+        if ssm is not None:
+            ssm.abort()
+        raise
+    table.close()
+    if ssm is not None:
+        ssm.close()
+    return {
+        "steps": tracker.steps,
+        "fcd_rows": tracker.vehicle_rows + tracker.person_rows,
+        "interactions": tracker.interactions,
+        "ssm_kept": ssm.kept if ssm is not None else 0,
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        summary = run(args)
+    except (UsageError, FcdError, TypesError, ParameterError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not args.quiet:
+        rate = summary["fcd_rows"] / summary["seconds"] if summary["seconds"] > 0 else math.inf
+        print(
+            f"{args.fcd}: {summary['steps']} timesteps, {summary['fcd_rows']} FCD rows, "
+            f"{summary['interactions']} interactions -> {args.out}"
+            + (f", {summary['ssm_kept']} in {args.ssm}" if args.ssm is not None else "")
+            + f" ({summary['seconds']:.1f} s, {rate:,.0f} FCD rows/s)"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

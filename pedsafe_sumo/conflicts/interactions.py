@@ -1,0 +1,253 @@
+"""Pedestrian-vehicle interactions in a stream of FCD timesteps, and their row of measures.
+
+An interaction of vehicle V and person P is a run of consecutive timesteps at which both are in the file
+and V's footprint centre lies within the interaction radius of P. It ends at the first timestep that
+breaks the run (one of them gone, or apart); if they meet again later, that is a new interaction. Only
+open interactions are held in memory, so memory depends on how many pairs are near each other at once,
+never on the length of the simulation.
+
+The measures of a finished interaction come from `pedsafe_sumo.safety.interaction` (the same functions
+as a batch episode's indexes), on a log built in the contract of `pedsafe_sumo.safety.log`: the vehicle's
+centre half a length behind SUMO's front-bumper position, its velocity its speed along its heading, the
+person's velocity its speed along its angle.
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from pedsafe_sumo.conflicts.fcd import FcdStep
+from pedsafe_sumo.conflicts.sizes import SizeBook
+from pedsafe_sumo.safety import log as steplog
+from pedsafe_sumo.safety.geometry import first_polyline_crossing
+from pedsafe_sumo.safety.interaction import interaction_measures
+from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
+
+#: Columns of the per-step buffer of an open interaction, in the log contract's names.
+_STEP_COLUMNS = (
+    steplog.TIME,
+    steplog.EGO_X,
+    steplog.EGO_Y,
+    steplog.EGO_YAW,
+    steplog.EGO_SPEED,
+    steplog.EGO_LENGTH,
+    steplog.EGO_WIDTH,
+    steplog.PED_X,
+    steplog.PED_Y,
+    steplog.PED_VX,
+    steplog.PED_VY,
+    steplog.PED_RADIUS,
+)
+
+#: Numbers held per step of an open interaction: the log columns and the two FCD speeds.
+_ROW_WIDTH = len(_STEP_COLUMNS) + 2
+
+#: The output columns, in order (docs/conflicts.md defines each).
+ROW_COLUMNS = (
+    "vehicle_id",
+    "person_id",
+    "vehicle_type",
+    "person_type",
+    "begin_s",
+    "end_s",
+    "time_s",
+    "x_m",
+    "y_m",
+    "vehicle_lane",
+    "person_edge",
+    "lane_id",
+    "crossing_id",
+    "vehicle_speed_mps",
+    "person_speed_mps",
+    "min_clearance_m",
+    "collision",
+    "contact_time_s",
+    "ttc_s",
+    "ttc_time_s",
+    "ttc_x_m",
+    "ttc_y_m",
+    "pet_s",
+    "pet_x_m",
+    "pet_y_m",
+    "drac_mps2",
+    "md_m",
+    "tmd_s",
+    "cs_mps",
+    "conflict_probability",
+    "conflict",
+    "conflict_time_s",
+)
+STRING_COLUMNS = (
+    "vehicle_id",
+    "person_id",
+    "vehicle_type",
+    "person_type",
+    "vehicle_lane",
+    "person_edge",
+    "lane_id",
+    "crossing_id",
+)
+BOOL_COLUMNS = ("collision", "conflict")
+
+
+@dataclass
+class _Open:
+    """An open interaction: its per-step values so far."""
+
+    vehicle_type: str
+    person_type: str
+    #: per step, flat: the log columns (_STEP_COLUMNS), then the vehicle's and the person's FCD speed
+    values: array = field(default_factory=lambda: array("d"))
+    #: per step: the vehicle's lane and the person's edge from the FCD
+    places: list[tuple[str, str]] = field(default_factory=list)
+
+
+#: Finds the lane and the crossing at a point: (x_m, y_m) -> (lane_id, crossing_id); "" where none.
+PlaceLookup = Callable[[float, float], tuple[str, str]]
+
+
+class InteractionTracker:
+    """Feed it FCD timesteps in order; it calls `emit(row)` for every interaction as it ends.
+
+    `finish()` ends the interactions still open at the end of the file.
+    """
+
+    def __init__(
+        self,
+        radius_m: float,
+        sizes: SizeBook,
+        emit: Callable[[dict[str, Any]], None],
+        place: PlaceLookup | None = None,
+    ) -> None:
+        self.radius_m = radius_m
+        self.sizes = sizes
+        self.emit = emit
+        self.place = place
+        self.open: dict[tuple[str, str], _Open] = {}
+        self.steps = 0
+        self.vehicle_rows = 0
+        self.person_rows = 0
+        self.interactions = 0
+
+    def step(self, step: FcdStep) -> None:
+        self.steps += 1
+        vehicles, persons = step.vehicles, step.persons
+        self.vehicle_rows += len(vehicles)
+        self.person_rows += len(persons)
+        near: set[tuple[str, str]] = set()
+        if len(vehicles) and len(persons):
+            length, width = self.sizes.vehicle_sizes(vehicles.types, vehicles.length_m, vehicles.width_m)
+            yaw = sumo_angle_to_yaw_rad(vehicles.angle_deg)
+            cx, cy = sumo_front_to_centre(vehicles.x_m, vehicles.y_m, yaw, length)
+            radius = self.sizes.person_radii(persons.types, persons.length_m, persons.width_m)
+            p_yaw = sumo_angle_to_yaw_rad(persons.angle_deg)
+            pvx, pvy = persons.speed_mps * np.cos(p_yaw), persons.speed_mps * np.sin(p_yaw)
+            tree = cKDTree(np.column_stack((persons.x_m, persons.y_m)))
+            hits = tree.query_ball_point(np.column_stack((cx, cy)), self.radius_m)
+            vi = np.repeat(np.arange(len(vehicles)), [len(h) for h in hits])
+            pj = np.fromiter((j for h in hits for j in h), dtype=int, count=len(vi))
+            rows = np.column_stack(
+                (
+                    np.full(len(vi), step.time_s),
+                    cx[vi],
+                    cy[vi],
+                    yaw[vi],
+                    np.maximum(vehicles.speed_mps[vi], 0.0),
+                    length[vi],
+                    width[vi],
+                    persons.x_m[pj],
+                    persons.y_m[pj],
+                    pvx[pj],
+                    pvy[pj],
+                    radius[pj],
+                    vehicles.speed_mps[vi],
+                    persons.speed_mps[pj],
+                )
+            ).tolist()
+            for i, j, row in zip(vi.tolist(), pj.tolist(), rows):
+                key = (vehicles.ids[i], persons.ids[j])
+                near.add(key)
+                record = self.open.get(key)
+                if record is None:
+                    record = self.open[key] = _Open(vehicles.types[i], persons.types[j])
+                record.values.extend(row)
+                record.places.append((vehicles.places[i], persons.places[j]))
+        for key in [k for k in self.open if k not in near]:
+            self._close(key)
+
+    def finish(self) -> None:
+        for key in list(self.open):
+            self._close(key)
+
+    def _close(self, key: tuple[str, str]) -> None:
+        record = self.open.pop(key)
+        self.interactions += 1
+        self.emit(interaction_row(key[0], key[1], record, self.place))
+
+
+def interaction_row(
+    vehicle_id: str, person_id: str, record: _Open, place: PlaceLookup | None
+) -> dict[str, Any]:
+    """The output row of one finished interaction (ROW_COLUMNS)."""
+    table = np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH)
+    log = {name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)}
+    m = interaction_measures(log)
+    t = log[steplog.TIME]
+    k = m.min_clearance_step
+    x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
+    lane_id, crossing_id = place(x_m, y_m) if place is not None else ("", "")
+    crossing = (
+        None
+        if m.collision
+        else first_polyline_crossing(
+            log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
+        )
+    )
+    if m.collision:
+        crossing = (float(log[steplog.PED_X][m.contact_step]), float(log[steplog.PED_Y][m.contact_step]))
+    has_pet = math.isfinite(m.pet_s)
+
+    def at(step: int | None) -> float:
+        return float(t[step]) if step is not None else math.nan
+
+    return {
+        "vehicle_id": vehicle_id,
+        "person_id": person_id,
+        "vehicle_type": record.vehicle_type,
+        "person_type": record.person_type,
+        "begin_s": float(t[0]),
+        "end_s": float(t[-1]),
+        "time_s": float(t[k]),
+        "x_m": x_m,
+        "y_m": y_m,
+        "vehicle_lane": record.places[k][0],
+        "person_edge": record.places[k][1],
+        "lane_id": lane_id,
+        "crossing_id": crossing_id,
+        "vehicle_speed_mps": float(table[k, len(_STEP_COLUMNS)]),
+        "person_speed_mps": float(table[k, len(_STEP_COLUMNS) + 1]),
+        "min_clearance_m": m.min_clearance_m,
+        "collision": m.collision,
+        "contact_time_s": at(m.contact_step),
+        "ttc_s": m.ttc_s,
+        "ttc_time_s": at(m.ttc_step),
+        "ttc_x_m": float(log[steplog.PED_X][m.ttc_step]) if m.ttc_step is not None else math.nan,
+        "ttc_y_m": float(log[steplog.PED_Y][m.ttc_step]) if m.ttc_step is not None else math.nan,
+        "pet_s": m.pet_s,
+        "pet_x_m": crossing[0] if has_pet and crossing else math.nan,
+        "pet_y_m": crossing[1] if has_pet and crossing else math.nan,
+        "drac_mps2": m.drac_mps2,
+        "md_m": m.md_m,
+        "tmd_s": m.tmd_s,
+        "cs_mps": m.cs_mps,
+        "conflict_probability": m.conflict_probability,
+        "conflict": m.conflict,
+        "conflict_time_s": at(m.conflict_step),
+    }

@@ -1,0 +1,178 @@
+"""Writers of the interaction rows: CSV or Parquet, and an XML in the layout of SUMO's SSM device.
+
+Rows are written as they come (Parquet in row groups), so the output never has to fit in memory. Each
+writer writes to `<file>.tmp` and renames it over the final name only when complete: a run that fails
+half-way leaves an earlier result of the same name untouched.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pedsafe_sumo.conflicts.interactions import BOOL_COLUMNS, ROW_COLUMNS, STRING_COLUMNS
+
+#: Rows per Parquet row group.
+ROW_GROUP_ROWS = 4096
+TABLE_SUFFIXES = (".csv", ".parquet")
+
+
+def _schema() -> pa.Schema:
+    def kind(name: str) -> pa.DataType:
+        if name in STRING_COLUMNS:
+            return pa.string()
+        if name in BOOL_COLUMNS:
+            return pa.bool_()
+        return pa.float64()
+
+    return pa.schema([(name, kind(name)) for name in ROW_COLUMNS])
+
+
+class _Staged:
+    """A file written under a temporary name and renamed into place by `close()`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.tmp = self.path.with_name(self.path.name + ".tmp")
+
+    def abort(self) -> None:
+        self._close_handle()
+        self.tmp.unlink(missing_ok=True)
+
+    def close(self) -> None:
+        self._finish()
+        self._close_handle()
+        self.tmp.replace(self.path)
+
+    def _finish(self) -> None:  # pragma: no cover - overridden
+        pass
+
+    def _close_handle(self) -> None:  # pragma: no cover - overridden
+        pass
+
+
+class TableWriter(_Staged):
+    """Interaction rows to a .csv or .parquet file."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path)
+        self.kind = self.path.suffix.lower()
+        self.rows = 0
+        self._buffer: list[dict[str, Any]] = []
+        self._parquet: pq.ParquetWriter | None = None
+        self._csv_handle = None
+        if self.kind == ".csv":
+            self._csv_handle = open(self.tmp, "w", newline="", encoding="utf-8")
+            self._csv = csv.DictWriter(self._csv_handle, fieldnames=ROW_COLUMNS)
+            self._csv.writeheader()
+        else:
+            self._parquet = pq.ParquetWriter(self.tmp, _schema())
+
+    def write(self, row: dict[str, Any]) -> None:
+        self.rows += 1
+        if self._csv_handle is not None:
+            self._csv.writerow(
+                {k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
+            )
+            return
+        self._buffer.append(row)
+        if len(self._buffer) >= ROW_GROUP_ROWS:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._buffer and self._parquet is not None:
+            self._parquet.write_table(pa.Table.from_pylist(self._buffer, schema=_schema()))
+            self._buffer = []
+
+    def _finish(self) -> None:
+        if self._parquet is not None:
+            self._flush()
+
+    def _close_handle(self) -> None:
+        if self._csv_handle is not None:
+            self._csv_handle.close()
+            self._csv_handle = None
+        if self._parquet is not None:
+            self._parquet.close()
+            self._parquet = None
+
+
+def _value(value: float, digits: int = 2) -> str:
+    return "NA" if not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _position(x_m: float, y_m: float) -> str:
+    return "NA" if not (math.isfinite(x_m) and math.isfinite(y_m)) else f"{x_m:.2f},{y_m:.2f}"
+
+
+class SsmWriter(_Staged):
+    """Interactions in the layout of SUMO's SSM device output (`--device.ssm.file`).
+
+    One `<conflict begin end ego foe>` per kept interaction, the vehicle as ego and the person as foe,
+    with SUMO's `minTTC`, `maxDRAC` and `PET` elements (time, position "x,y", value; "NA" where the
+    measure does not exist) and two more for the pedestrian measures: `minClearance` and `amini`
+    (MD, TMD, CS, probability and the conflict flag). An interaction is kept when it meets one of the
+    thresholds or has a conflict or a contact.
+    """
+
+    def __init__(
+        self, path: Path, ttc_threshold_s: float, drac_threshold_mps2: float, pet_threshold_s: float
+    ):
+        super().__init__(path)
+        self.thresholds = (ttc_threshold_s, drac_threshold_mps2, pet_threshold_s)
+        self.kept = 0
+        self._handle = open(self.tmp, "w", encoding="utf-8")
+        self._handle.write('<?xml version="1.0" encoding="UTF-8"?>\n')
+        self._handle.write(
+            "<!-- pedsafe_sumo.conflicts: pedestrian-vehicle interactions (docs/conflicts.md) -->\n"
+        )
+        self._handle.write("<SSMLog>\n")
+
+    def keeps(self, row: dict[str, Any]) -> bool:
+        ttc, drac, pet = self.thresholds
+        return bool(
+            row["collision"]
+            or row["conflict"]
+            or row["ttc_s"] < ttc
+            or row["drac_mps2"] > drac
+            or row["pet_s"] < pet
+        )
+
+    def write(self, row: dict[str, Any]) -> None:
+        if not self.keeps(row):
+            return
+        self.kept += 1
+        flag = {True: "true", False: "false"}
+        r = {k: (_value(v, 3) if isinstance(v, float) else v) for k, v in row.items()}
+        lines = [
+            f"    <conflict begin={quoteattr(_value(row['begin_s']))} end={quoteattr(_value(row['end_s']))} "
+            f"ego={quoteattr(row['vehicle_id'])} foe={quoteattr(row['person_id'])} "
+            f"egoType={quoteattr(row['vehicle_type'])} foeType={quoteattr(row['person_type'])}>",
+            f'        <minTTC time="{_value(row["ttc_time_s"])}" '
+            f'position="{_position(row["ttc_x_m"], row["ttc_y_m"])}" value="{_value(row["ttc_s"])}"/>',
+            f'        <maxDRAC value="{_value(row["drac_mps2"])}"/>',
+            f'        <PET position="{_position(row["pet_x_m"], row["pet_y_m"])}" '
+            f'value="{_value(row["pet_s"])}"/>',
+            f'        <minClearance time="{_value(row["time_s"])}" '
+            f'position="{_position(row["x_m"], row["y_m"])}" '
+            f'value="{r["min_clearance_m"]}" collision="{flag[bool(row["collision"])]}"/>',
+            f'        <amini time="{_value(row["conflict_time_s"])}" md="{r["md_m"]}" tmd="{r["tmd_s"]}" '
+            f'cs="{r["cs_mps"]}" probability="{_value(row["conflict_probability"], 4)}" '
+            f'conflict="{flag[bool(row["conflict"])]}"/>',
+            "    </conflict>",
+        ]
+        self._handle.write("\n".join(lines) + "\n")
+
+    def _finish(self) -> None:
+        self._handle.write("</SSMLog>\n")
+
+    def _close_handle(self) -> None:
+        if not self._handle.closed:
+            self._handle.close()
