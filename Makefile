@@ -9,7 +9,7 @@ ifndef RUN_DIR
 RUN_DIR := results/crossing-$(shell date -u +%Y%m%d-%H%M%S)
 endif
 
-.PHONY: run test lint network clean-venv
+.PHONY: run test lint typecheck network clean-venv
 
 # The dev extra includes the cluster extra (Dask): the tests run a batch on a Dask LocalCluster.
 $(STAMP): pyproject.toml requirements.lock Makefile
@@ -30,6 +30,10 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+# Type check (configuration in pyproject.toml: strict on the public interfaces, lenient elsewhere).
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

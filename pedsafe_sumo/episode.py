@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.hosting import check_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
@@ -141,6 +142,13 @@ def main(argv: list[str] | None = None) -> int:
         "--case-dir", type=Path, help="write each episode as a case (Parquet log + JSON world)"
     )
     parser.add_argument("--gui", action="store_true", help="run in sumo-gui instead of headless libsumo")
+    parser.add_argument(
+        "--agent-timeout",
+        type=float,
+        default=DEFAULT_AGENT_TIMEOUT_S,
+        metavar="SECONDS",
+        help=f"time limit of each run_step call of the AD stack (default {DEFAULT_AGENT_TIMEOUT_S:g})",
+    )
     args = parser.parse_args(argv)
 
     conditions = list(CONDITIONS) if args.condition == "both" else [args.condition]
@@ -153,11 +161,17 @@ def main(argv: list[str] | None = None) -> int:
         check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
         agent_class = load_agent_class(args.algorithm)
+        if args.seed < 0:
+            raise UsageError(f"--seed must not be negative, got {args.seed}")
+        agent_timeout_s = check_timeout_s(args.agent_timeout)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except ValueError as exc:  # --agent-timeout out of range
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
 
-    runner = EpisodeRunner(site, params, agent_class, gui=args.gui)
+    runner = EpisodeRunner(site, params, agent_class, gui=args.gui, agent_timeout_s=agent_timeout_s)
     try:
         for condition in conditions:
             result = runner.run(spec, condition, args.seed)
@@ -172,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  per-step log: {path}")
             if args.case_dir:
                 print(f"  case: {write_case(args.case_dir, result)}")
-    except SimulatorError as exc:
+    except (SimulatorError, AgentTimeoutError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     finally:

@@ -29,15 +29,16 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, auto_chunk_size, plan_chunks
-from pedsafe_sumo.batch.executors import BatchError, make_backend
+from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, Chunk, auto_chunk_size, plan_chunks
+from pedsafe_sumo.batch.executors import BatchError, DaskBackend, ProcessPoolBackend, make_backend
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
-from pedsafe_sumo.batch.runner import ERROR_STATUS, WorkerConfig, site_file_digests, worker_versions
+from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
     RUN_FILE,
     STATE_COMPLETE,
@@ -51,10 +52,15 @@ from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS, KEEP_LOGS_CHOICES
 from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
+from pedsafe_sumo.safety.stats import ERROR_STATUS
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
+if TYPE_CHECKING:
+    import pandas as pd
+
+Backend = DaskBackend | ProcessPoolBackend
 DEFAULT_EPISODES = 100
 #: The arguments that decide a run's results (and its chunk layout), with their defaults. run.json
 #: records them; --resume takes them from there, and a flag given again must repeat its value.
@@ -69,8 +75,20 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "algorithm": DEFAULT_ALGORITHM,
     "chunk_size": None,
     "protocol": None,
+    "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
     "keep_logs": KEEP_EVENTS,
 }
+#: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
+#: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
+#: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
+MAX_EPISODES = 1_000_000
+#: Run seeds are stored in run.json and compared as 64-bit integers.
+MAX_SEED = 2**63 - 1
+#: Local worker processes (one SUMO each, about 150 MB): 256 need about 40 GB, beyond one machine;
+#: more workers belong on a cluster (--cluster).
+MAX_WORKERS = 256
+#: A chunk's rows and case logs are held by its worker and rerun whole after a kill.
+MAX_CHUNK_PAIRS = 10_000
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
 IDENTITY_KEYS = (
     "site",
@@ -125,11 +143,11 @@ def _versions() -> dict[str, str]:
 class _OneLineParser(argparse.ArgumentParser):
     """argparse whose errors are one line on stderr (exit 2), like every other bad input."""
 
-    def error(self, message: str):
+    def error(self, message: str) -> NoReturn:
         self.exit(2, f"error: {message} (see --help)\n")
 
 
-def parse_args(argv):
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--scenario",
@@ -175,6 +193,14 @@ def parse_args(argv):
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
     parser.add_argument(
+        "--agent-timeout",
+        type=float,
+        dest="agent_timeout",
+        metavar="SECONDS",
+        help="time limit of each run_step call of the AD stack: an episode whose stack exceeds it ends "
+        f"with status timeout, and the batch goes on [{DEFAULT_AGENT_TIMEOUT_S:g}]",
+    )
+    parser.add_argument(
         "--keep-logs",
         dest="keep_logs",
         choices=KEEP_LOGS_CHOICES,
@@ -205,7 +231,7 @@ class Plan:
     recorded: dict[str, Any] | None  # run.json of the run being resumed
 
 
-def _explicit_arguments(args) -> dict[str, Any]:
+def _explicit_arguments(args: argparse.Namespace) -> dict[str, Any]:
     given = {name: getattr(args, name) for name in RUN_ARGUMENT_DEFAULTS if getattr(args, name) is not None}
     if "params" in given:
         given["params"] = str(Path(given["params"]).resolve())
@@ -233,6 +259,16 @@ def _lookup(data: Any, dotted: str) -> Any:
     return data
 
 
+def _is_foreign(out: Path) -> bool:
+    """Whether `out` is an existing directory with something in it and no run of ours (holds_run)."""
+    if not out.is_dir():
+        return False
+    try:
+        return next(out.iterdir(), None) is not None
+    except OSError:  # unreadable: certainly not ours to write into
+        return True
+
+
 def _recorded_run(out: Path) -> dict[str, Any]:
     try:
         recorded = read_json(out / RUN_FILE)
@@ -245,12 +281,14 @@ def _recorded_run(out: Path) -> dict[str, Any]:
     return recorded
 
 
-def prepare(args) -> Plan:
+def prepare(args: argparse.Namespace) -> Plan:
     """Check everything about the command and its input files; writes nothing."""
     if args.workers is not None and args.cluster:
         raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers is not None and args.workers > MAX_WORKERS:
+        raise UsageError(f"--workers must be at most {MAX_WORKERS}, got {args.workers} (more: use --cluster)")
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} is a file, not a run directory")
     explicit = _explicit_arguments(args)
@@ -273,6 +311,11 @@ def prepare(args) -> Plan:
                 f"output directory {args.out} already holds a run ({state}); continue it with --resume "
                 "or choose another --out"
             )
+        if args.out is not None and _is_foreign(args.out):
+            raise UsageError(
+                f"--out {args.out} is a directory that is not empty and holds no run: choose a new or "
+                "empty directory (nothing in it is touched)"
+            )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **explicit}
     protocol = None
     if arguments["protocol"] is not None:
@@ -292,10 +335,24 @@ def prepare(args) -> Plan:
     conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
     if arguments["episodes"] < 1:
         raise UsageError(f"--episodes must be at least 1, got {arguments['episodes']}")
+    if arguments["episodes"] > MAX_EPISODES:
+        raise UsageError(
+            f"--episodes must be at most {MAX_EPISODES:,} per scenario, got {arguments['episodes']}"
+        )
     if arguments["seed"] < 0:
         raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
+    if arguments["seed"] > MAX_SEED:
+        raise UsageError(f"--seed must be at most 2**63 - 1, got {arguments['seed']}")
     if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
         raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
+    if arguments["chunk_size"] is not None and arguments["chunk_size"] > MAX_CHUNK_PAIRS:
+        raise UsageError(
+            f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
+        )
+    try:
+        agent_timeout_s = check_timeout_s(arguments["agent_timeout"])
+    except (TypeError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
     site = resolve_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
     if protocol is not None:
@@ -340,6 +397,7 @@ def prepare(args) -> Plan:
         digests,
         versions,
         keep_logs=arguments["keep_logs"],
+        agent_timeout_s=agent_timeout_s,
     )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
@@ -354,7 +412,10 @@ def _with_protocol(args, arguments: dict[str, Any], explicit: dict[str, Any], re
     episodes and workers (and where the run goes). Another flag with --protocol is refused."""
     from pedsafe_sumo.protocol import load_protocol
 
-    fixed = ("scenario", "condition", "seed", "site", "params", "set", "algorithm", "chunk_size", "cluster")
+    fixed = (
+        "scenario", "condition", "seed", "site", "params", "set", "algorithm", "chunk_size", "cluster",
+        "agent_timeout",
+    )  # fmt: skip
     given = [name for name in fixed if getattr(args, name, None) not in (None, [])]
     if args.protocol is not None and given:
         flags = ", ".join(f"--{name.replace('_', '-')}" for name in given)
@@ -395,7 +456,7 @@ def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:
             raise UsageError(f"{plan.out} was started with {name} {was}, this is {now}: resume it with {was}")
 
 
-def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
+def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any]:
     identity = plan.identity
     chunks_total = len(plan.scenarios) * math.ceil(
         identity["episodes_per_scenario"] / identity["chunk_size_pairs"]
@@ -419,6 +480,7 @@ def new_run_info(plan: Plan, backend, argv: list[str]) -> dict[str, Any]:
         "wall_time_s": None,
         "episodes_per_s": None,
         "n_error": None,
+        "n_timeout": None,
         "cases_written": None,
     }
 
@@ -453,7 +515,7 @@ def main(argv: list[str] | None = None) -> int:
         backend.close()
 
 
-def run(plan: Plan, backend, argv: list[str]) -> int:
+def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
     run_dir = BatchRunDirectory(plan.out, plan.arguments["keep_logs"])
     if plan.recorded is None:
         if plan.identity["chunk_size_pairs"] is None:
@@ -511,7 +573,7 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         total=total, initial=done_rows, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr
     ) as bar:
 
-        def on_chunk_done(chunk, output) -> None:
+        def on_chunk_done(chunk: Chunk, output: ChunkOutput) -> None:
             if run_dir.record(chunk, output, session_index, time.perf_counter() - started):
                 bar.update(chunk.n_rows)
 
@@ -521,7 +583,8 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
     table = run_dir.finalize(chunks)
     session.update(wall_time_s=round(session_wall_s, 3), worker_deaths=backend.worker_deaths)
     wall_s = sum(run_dir.session_wall_times_s(run_info["sessions"]))
-    n_error = int((table["status"] == ERROR_STATUS).sum())
+    n_timeout = int((table["status"] == TIMEOUT_STATUS).sum())
+    n_error = int((table["status"] == ERROR_STATUS).sum()) + n_timeout
     cases_written = len(list(run_dir.cases_dir.glob("*.parquet")))
     run_info.update(
         state=STATE_COMPLETE,
@@ -529,6 +592,7 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
         wall_time_s=round(wall_s, 3),
         episodes_per_s=round(total / wall_s, 3) if wall_s > 0 else None,
         n_error=n_error,
+        n_timeout=n_timeout,
         cases_written=cases_written,
     )
     run_dir.save_run_info(run_info)
@@ -537,8 +601,8 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
     ran_rows = total - done_rows
     rate = f" ({ran_rows / session_wall_s:.1f} episodes/s)" if ran_rows and session_wall_s > 0 else ""
     print(
-        f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s), left out of "
-        f"the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
+        f"{ran_rows} episodes run in {session_wall_s:.1f} s{rate}; {n_error} error(s) ({n_timeout} "
+        f"timeout(s)), left out of the rates; {cases_written} case log(s) in {run_dir.cases_dir}"
     )
     if plan.arguments["keep_logs"] == KEEP_ALL:
         print(f"every episode's step log: {len(chunks)} file(s) in {plan.out / STEPLOGS_DIR}")
@@ -552,7 +616,7 @@ def run(plan: Plan, backend, argv: list[str]) -> int:
     return 0
 
 
-def print_table(table) -> None:
+def print_table(table: pd.DataFrame) -> None:
     from pedsafe_sumo.safety.stats import table_one
 
     summary = table_one(table)

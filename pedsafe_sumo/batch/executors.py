@@ -32,6 +32,7 @@ from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
+from typing import Any
 
 from pedsafe_sumo.batch.chunks import Chunk, Task
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, error_row, init_pool_worker, run_chunk
@@ -45,6 +46,8 @@ PAIR_ATTEMPTS_ALONE = 2
 #: Pool breaks in a row in which no chunk had even started before the batch gives up.
 MAX_STARTUP_DEATHS = 3
 LOCAL_CLUSTER_PREFIX = "local:"
+#: Most Dask workers local:N starts (one SUMO process each, as --workers; the same bound).
+MAX_LOCAL_CLUSTER_WORKERS = 256
 CLUSTER_EXTRA_HINT = "Dask is not installed: install the cluster extra, pip install 'pedsafe_sumo[cluster]'"
 
 
@@ -60,7 +63,7 @@ WORKER_DIED_MESSAGE = (
 )
 
 
-def worker_died_rows(task: Task) -> list[dict]:
+def worker_died_rows(task: Task) -> list[dict[str, Any]]:
     """Error rows of a pair whose worker process died every time it ran."""
     return [error_row(task, condition, WORKER_DIED_MESSAGE) for condition in task.conditions]
 
@@ -144,7 +147,7 @@ class ProcessPoolBackend:
                 initargs=(str(progress_dir),),
             )
             try:
-                futures: dict[Future, Chunk] = {
+                futures: dict[Future[ChunkOutput], Chunk] = {
                     pool.submit(run_chunk, config, chunk.key, chunk.tasks): chunk for chunk in chunks
                 }
                 for future in as_completed(futures):
@@ -219,6 +222,11 @@ def parse_cluster_address(text: str) -> tuple[str, int]:
         count = text[len(LOCAL_CLUSTER_PREFIX) :]
         if not count.isdigit() or int(count) < 1:
             raise UsageError(f"--cluster local:N needs a number of workers N >= 1, got '{text}'")
+        if int(count) > MAX_LOCAL_CLUSTER_WORKERS:
+            raise UsageError(
+                f"--cluster local:N starts at most {MAX_LOCAL_CLUSTER_WORKERS} local workers, got '{text}' "
+                "(more: start a Dask cluster and give its scheduler's address)"
+            )
         return "local", int(count)
     scheme, sep, rest = text.partition("://")
     if not sep or not rest or scheme not in ("tcp", "tls", "ws", "wss", "inproc", "ucx"):
@@ -236,8 +244,8 @@ class DaskBackend:
         self.target, self.local_workers = parse_cluster_address(address)
         self.worker_deaths = 0
         self.notes: list[str] = []
-        self._client = None
-        self._cluster = None
+        self._client: Any = None  # distributed.Client (imported only when used)
+        self._cluster: Any = None
 
     @property
     def description(self) -> str:
@@ -307,11 +315,11 @@ class DaskBackend:
         # Keys unique to this session: a resumed batch on a long-lived cluster never meets its past tasks.
         token = uuid.uuid4().hex[:12]
         #: future -> (chunk, index of the pair within the chunk, or None for the whole chunk)
-        owners: dict = {}
+        owners: dict[Any, tuple[Chunk, int | None]] = {}
         #: chunk key -> outputs of its pairs so far, when the chunk had to be split
         split: dict[str, list[ChunkOutput | None]] = {}
 
-        def submit(chunk: Chunk, pair: int | None):
+        def submit(chunk: Chunk, pair: int | None) -> Any:
             tasks = chunk.tasks if pair is None else (chunk.tasks[pair],)
             key = f"pedsafe-{token}-{chunk.key}" + ("" if pair is None else f"-pair{pair}")
             future = client.submit(run_chunk, config, chunk.key, tasks, key=key, pure=False)
@@ -346,8 +354,8 @@ class DaskBackend:
             parts[pair] = output
             if all(p is not None for p in parts):
                 del split[chunk.key]
-                on_done(chunk, merge_outputs(parts))
+                on_done(chunk, merge_outputs([p for p in parts if p is not None]))
 
 
-def make_backend(cluster: str | None, workers: int):
+def make_backend(cluster: str | None, workers: int) -> DaskBackend | ProcessPoolBackend:
     return DaskBackend(cluster) if cluster else ProcessPoolBackend(workers)

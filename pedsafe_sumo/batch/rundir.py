@@ -16,7 +16,7 @@ import pandas as pd
 
 from pedsafe_sumo.batch.chunks import Chunk
 from pedsafe_sumo.batch.executors import BatchError
-from pedsafe_sumo.batch.runner import ERROR_STATUS, ChunkOutput
+from pedsafe_sumo.batch.runner import ChunkOutput
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
@@ -40,12 +40,13 @@ from pedsafe_sumo.io.run_store import (
     write_bytes_atomic,
     write_json_atomic,
 )
+from pedsafe_sumo.safety.stats import FAILED_STATUSES
 from pedsafe_sumo.settings import UsageError
 
 try:
     import fcntl
 except ImportError:  # pragma: no cover - not POSIX: no lock, one driver per directory is then on the user
-    fcntl = None
+    fcntl = None  # type: ignore[assignment]
 
 
 def utc_now() -> str:
@@ -58,7 +59,7 @@ class BatchRunDirectory:
     def __init__(self, path: Path, keep_logs: str = step_logs.KEEP_EVENTS) -> None:
         self.path = Path(path)
         self.manifest = Manifest(self.path / MANIFEST_FILE)
-        self._lock_handle = None
+        self._lock_handle: Any = None
         #: --keep-logs: with "all", every chunk's step logs go to steplogs/ with its part file.
         self.keep_logs = keep_logs
 
@@ -166,7 +167,7 @@ class BatchRunDirectory:
                 file=f"{PARTS_DIR}/{name}",
                 rows=len(table),
                 sha256=sha256_bytes(data),
-                n_error=int((table["status"] == ERROR_STATUS).sum()),
+                n_error=int(table["status"].isin(FAILED_STATUSES).sum()),
                 session=session,
                 completed_utc=utc_now(),
                 session_elapsed_s=round(session_elapsed_s, 3),

@@ -8,7 +8,8 @@ depend on the worker, on the episodes it ran before, or on the order: tests/batc
 workers, a resumed run against an uninterrupted one, and Dask against the process pool.
 
 A failing episode (SUMO refusing it, an exception in the AD stack under test) becomes a row with status
-"error" and its message; the runner is rebuilt (SUMO may be in any state) and the chunk goes on. Rows
+"error" and its message, an AD stack that exceeds the per-step time limit (--agent-timeout) a row with
+status "timeout"; the runner is rebuilt (SUMO may be in any state) and the chunk goes on. Rows
 are returned to the driver, which alone writes the run directory: workers on other machines need no
 shared file system.
 """
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from pedsafe_sumo.batch.chunks import Task
+from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, AgentTimeoutError
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS
@@ -57,6 +59,8 @@ class WorkerConfig:
     site_digests: dict[str, str] = field(default_factory=dict)
     #: The driver's pedsafe_sumo and SUMO versions, checked the same way.
     versions: dict[str, str] = field(default_factory=dict)
+    #: Per-step time limit of the AD stack's run_step [s] (--agent-timeout).
+    agent_timeout_s: float = DEFAULT_AGENT_TIMEOUT_S
     #: --keep-logs: "events" (case logs of pairs with a collision or conflict) or "all" (every step log
     #: besides). Decides what is kept, not what is computed, so it stays out of the fingerprint.
     keep_logs: str = KEEP_EVENTS
@@ -71,6 +75,7 @@ class WorkerConfig:
                 self.algorithm,
                 self.site_digests,
                 self.versions,
+                self.agent_timeout_s,
             ],
             sort_keys=True,
             default=str,
@@ -96,7 +101,7 @@ class ChunkOutput:
 # One runner per worker process. The lock serialises chunks in a process: a Dask worker started with
 # more than one thread would otherwise drive the process's single SUMO from two threads at once.
 _SUMO_LOCK = threading.Lock()
-_RUNNER = None
+_RUNNER: Any = None  # an EpisodeRunner (imported lazily: the driver never builds one)
 _RUNNER_FINGERPRINT = ""
 _RUNNER_CONFIG: WorkerConfig | None = None
 #: Set by the process pool's initializer: where this worker notes the chunk it has started.
@@ -179,7 +184,7 @@ def check_environment(config: WorkerConfig) -> None:
             )
 
 
-def _runner_for(config: WorkerConfig):
+def _runner_for(config: WorkerConfig) -> Any:
     global _RUNNER, _RUNNER_FINGERPRINT, _RUNNER_CONFIG
     fingerprint = config.fingerprint
     if _RUNNER is not None and _RUNNER_FINGERPRINT == fingerprint:
@@ -191,7 +196,12 @@ def _runner_for(config: WorkerConfig):
     if _RUNNER is not None:
         _close_runner()
     check_environment(config)
-    _RUNNER = EpisodeRunner(get_site(config.site), config.params, load_agent_class(config.algorithm))
+    _RUNNER = EpisodeRunner(
+        get_site(config.site),
+        config.params,
+        load_agent_class(config.algorithm),
+        agent_timeout_s=config.agent_timeout_s,
+    )
     _RUNNER_FINGERPRINT, _RUNNER_CONFIG = fingerprint, config
     return _RUNNER
 
@@ -205,8 +215,9 @@ def _close_runner() -> None:
         traceback.print_exc(limit=0)
 
 
-def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
-    """The row of an episode that did not run to its end: status "error", the message, the pair's keys."""
+def error_row(task: Task, condition: str, message: str, status: str = ERROR_STATUS) -> dict[str, Any]:
+    """The row of an episode that did not run to its end: its status ("error" or "timeout"), the
+    message, the pair's keys."""
     row: dict[str, Any] = {c: np.nan for c in EPISODE_COLUMNS}
     row.update(
         scenario=task.scenario,
@@ -221,7 +232,7 @@ def error_row(task: Task, condition: str, message: str) -> dict[str, Any]:
         detected_by="",
         ped_gender="",
         ped_risk="",
-        status=ERROR_STATUS,
+        status=status,
         error=message,
     )
     return row
@@ -252,7 +263,8 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
         try:
             result = runner.run(spec, condition, task.seed, setup=setup)
         except Exception as exc:
-            rows.append(error_row(task, condition, f"{type(exc).__name__}: {exc}"))
+            status = TIMEOUT_STATUS if isinstance(exc, AgentTimeoutError) else ERROR_STATUS
+            rows.append(error_row(task, condition, f"{type(exc).__name__}: {exc}", status))
             # After a failed episode SUMO may be in any state: a fresh instance for the next one.
             _close_runner()
             runner = _runner_for(config)

@@ -260,7 +260,7 @@ class PedestrianWalker:
         if state == "yielding":
             new_s = self.s_m
         elif state == "stepping_back":
-            new_s = max(target_s, self.s_m + speed * dt_s, 0.0)
+            new_s = max(target_s or 0.0, self.s_m + speed * dt_s, 0.0)  # target_s is set when stepping back
         else:
             new_s = min(self.length_m, self.s_m + speed * dt_s)
         if new_s != self.s_m and p.avoids_bodies and bodies is not None and len(bodies.x_m):

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -40,7 +41,8 @@ def read_table(path: Path) -> pd.DataFrame:
 
 def draw_network(ax, net) -> tuple[float, float, float, float]:
     """Lanes as grey lines of their width (roads darker than walkways); returns the net's bounding box."""
-    roads, walks = [], []
+    roads: list[Any] = []
+    walks: list[Any] = []
     for edge in net.getEdges(withInternal=True):
         walking = edge.getFunction() in ("crossing", "walkingarea") or all(
             lane.allows("pedestrian") and not lane.allows("passenger") for lane in edge.getLanes()

@@ -101,7 +101,7 @@ def load_agent_class(spec: str) -> type[Agent]:
         raise AlgorithmLoadError(
             f"importing '{module_name}' for --algorithm failed: {type(exc).__name__}: {exc}"
         ) from None
-    cls = getattr(module, class_name, None)
+    cls: Any = getattr(module, class_name, None)
     if cls is None or not isinstance(cls, type):
         raise AlgorithmLoadError(f"module '{module_name}' has no class '{class_name}'")
     missing = [
@@ -111,9 +111,10 @@ def load_agent_class(spec: str) -> type[Agent]:
         raise AlgorithmLoadError(
             f"'{spec}' does not implement the agent interface: missing {', '.join(missing)}"
         )
-    if getattr(cls, "__abstractmethods__", None):
+    abstract = getattr(cls, "__abstractmethods__", None)
+    if abstract:
         raise AlgorithmLoadError(
-            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(cls.__abstractmethods__))}"
+            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(abstract))}"
         )
     unknown = [s for s in _sensors_of(cls) if s not in KNOWN_SENSORS]
     if unknown:
@@ -123,7 +124,7 @@ def load_agent_class(spec: str) -> type[Agent]:
     return cls
 
 
-def _sensors_of(cls: type) -> list[str]:
+def _sensors_of(cls: Any) -> list[str]:
     try:
         return list(cls.sensors(cls.__new__(cls)))
     except Exception:  # sensors() that needs setup() first: checked when the episode starts

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from pedsafe_sumo.params import ParameterError, register_validator
+from pedsafe_sumo.params import Bounds, ParameterError, check_upper_bounds, register_validator
 
 #: Shares summing to 1 within this tolerance are accepted (TOML decimals such as 0.1 + 0.2 are inexact).
 SHARE_SUM_TOLERANCE = 1e-6
@@ -17,6 +17,38 @@ SHARE_SUM_TOLERANCE = 1e-6
 TURN_MOVEMENTS = ("left", "straight", "right")
 RISK_TYPES = ("unaware", "hasten", "yield")
 AGE_GROUP_KEYS = ("age_min_years", "age_max_years", "weight_share", "speed_mean_mps", "speed_p15_mps")
+
+#: A running human tops out at about 12.4 m/s (the 100 m sprint record): no pedestrian speed above it.
+HUMAN_SPRINT_MPS = 12.5
+TRAFFIC_UPPER_BOUNDS: Bounds = {
+    # Demand is drawn for every entering lane over warm-up + episode: a huge rate never finishes drawing.
+    "headway_rate_per_s": (1.0, "one departure a second per lane, twice a lane's saturation flow"),
+    "speed_nonintersection_log_mu": (4.0, "a median speed of exp(4) = 55 m/s (197 km/h)"),
+    "speed_intersection_log_mu": (4.0, "a median speed of exp(4) = 55 m/s (197 km/h)"),
+    "speed_nonintersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
+    "speed_intersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
+    "vehicle_length_m": (30.0, "longer than a truck with trailer (25 m)"),
+    "vehicle_min_gap_m": (20.0, "four car lengths at standstill"),
+}
+PEDESTRIAN_UPPER_BOUNDS: Bounds = {
+    "arrival_rate_per_h": (20_000.0, "5.5 pedestrians a second at one junction, a stadium crowd"),
+    "speed_factor_female": (3.0, "triples the fitted walking speeds"),
+    "speed_factor_male": (3.0, "triples the fitted walking speeds"),
+    "awareness_ttc_s": (60.0, "a vehicle a minute away"),
+    "reaction_time_s": (10.0, "ten times a typical pedestrian reaction"),
+    "hasten_factor": (5.0, "five times the walking speed"),
+    "hasten_max_speed_mps": (HUMAN_SPRINT_MPS, "a sprinter's top speed"),
+    "step_back_speed_mps": (HUMAN_SPRINT_MPS, "a sprinter's top speed"),
+    "corridor_half_width_m": (20.0, "wider than the study site's road"),
+    "yield_clearance_m": (20.0, "wider than the study site's road"),
+    "body_clearance_m": (5.0, "a pedestrian this far from every vehicle cannot move through a queue"),
+    "gap_startup_clearance_s": (60.0, "twenty times the HCM start-up time (3 s)"),
+}
+AGE_GROUP_UPPER_BOUNDS: Bounds = {
+    "age_max_years": (120.0, "older than anyone recorded"),
+    "speed_mean_mps": (HUMAN_SPRINT_MPS, "a sprinter's top speed"),
+    "speed_p15_mps": (HUMAN_SPRINT_MPS, "a sprinter's top speed"),
+}
 
 
 def _number(section: dict[str, Any], key: str, where: str) -> float:
@@ -72,6 +104,7 @@ def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
         )
     _positive(section, "vehicle_length_m", where)
     _non_negative(section, "vehicle_min_gap_m", where)
+    check_upper_bounds(section, TRAFFIC_UPPER_BOUNDS, where)
 
 
 @register_validator("pedestrians")
@@ -93,6 +126,7 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
     _non_negative(section, "gap_startup_clearance_s", where)
     if not 0.0 < _positive(section, "eye_height_fraction", where) <= 1.0:
         raise ParameterError(f"parameter '{where}.eye_height_fraction' must lie in (0, 1]")
+    check_upper_bounds(section, PEDESTRIAN_UPPER_BOUNDS, where)
 
     groups = section.get("age_groups")
     if not isinstance(groups, dict) or not groups:
@@ -111,6 +145,7 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
                 f"0 <= min <= max, got {low!r}..{high!r}"
             )
         spans.append((low, high, name))
+        check_upper_bounds(group, AGE_GROUP_UPPER_BOUNDS, gwhere)
         _share(group, "weight_share", gwhere)
         mean = _positive(group, "speed_mean_mps", gwhere)
         p15 = _positive(group, "speed_p15_mps", gwhere)

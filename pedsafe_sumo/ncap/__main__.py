@@ -21,7 +21,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.ncap.protocol import NcapError, load_protocol, parse_speeds, select_cells
@@ -34,7 +34,7 @@ RESULT_FILES = ("ncap.csv", "ncap_scores.csv", "run.json", "episodes.parquet")
 
 
 class _OneLineParser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # argparse's usage dump is not one line
+    def error(self, message: str) -> NoReturn:  # argparse's usage dump is not one line
         print(f"error: {message}", file=sys.stderr)
         sys.exit(2)
 

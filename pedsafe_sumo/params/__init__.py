@@ -30,14 +30,44 @@ class ParameterError(ValueError):
 VALIDATORS: dict[str, Callable[[dict[str, Any], str], None]] = {}
 
 
-def register_validator(section: str):
+Validator = Callable[[dict[str, Any], str], None]
+
+
+def register_validator(section: str) -> Callable[[Validator], Validator]:
     """Decorator: register the validator of one top-level section of the parameter file."""
 
-    def wrap(func: Callable[[dict[str, Any], str], None]):
+    def wrap(func: Validator) -> Validator:
         VALIDATORS[section] = func
         return func
 
     return wrap
+
+
+#: An upper bound (or lower bound) of a numeric parameter and why it is there, as the validators use it.
+Bounds = dict[str, tuple[float, str]]
+
+
+def check_upper_bounds(section: dict[str, Any], bounds: Bounds, where: str) -> None:
+    """Refuse a number above its sane upper bound, naming the key, the bound and the reason (one line).
+
+    Validators call this after their own range checks; every number of the parameter file has one, so
+    that no value (`--set traffic.headway_rate_per_s=1e9`) can make a batch run for ever."""
+    for key, (bound, why) in bounds.items():
+        value = section.get(key)
+        if isinstance(value, int | float) and not isinstance(value, bool) and value > bound:
+            raise ParameterError(
+                f"parameter '{where}.{key}' must be at most {bound:g} ({why}), got {value!r}"
+            )
+
+
+def check_lower_bounds(section: dict[str, Any], bounds: Bounds, where: str) -> None:
+    """As check_upper_bounds, for the few numbers whose small values multiply the work of a step."""
+    for key, (bound, why) in bounds.items():
+        value = section.get(key)
+        if isinstance(value, int | float) and not isinstance(value, bool) and value < bound:
+            raise ParameterError(
+                f"parameter '{where}.{key}' must be at least {bound:g} ({why}), got {value!r}"
+            )
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
@@ -90,6 +120,7 @@ def _import_validator_modules() -> None:
         "pedsafe_sumo.perception.params",
         "pedsafe_sumo.control.params",
         "pedsafe_sumo.safety.params",
+        "pedsafe_sumo.conflicts.params",
     ):
         try:
             importlib.import_module(module)

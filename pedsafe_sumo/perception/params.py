@@ -5,7 +5,62 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from pedsafe_sumo.params import ParameterError, register_validator
+from pedsafe_sumo.params import (
+    Bounds,
+    ParameterError,
+    check_lower_bounds,
+    check_upper_bounds,
+    register_validator,
+)
+
+#: Upper bounds of the sensor settings, with why (every ray a step costs time: the bounds keep one step
+#: from taking minutes). Mounts: a sensor more than 10 m from the vehicle's centre is not on it.
+MOUNT_UPPER_BOUNDS: Bounds = {
+    "forward_offset_m": (10.0, "outside the vehicle"),
+    "left_offset_m": (10.0, "outside the vehicle"),
+    "height_m": (10.0, "above any road vehicle"),
+}
+CAMERA_UPPER_BOUNDS: Bounds = {
+    "width_px": (8192.0, "an 8K sensor"),
+    "height_px": (8192.0, "an 8K sensor"),
+    "min_height_px": (8192.0, "an 8K sensor's height"),
+    # CIE76 distances between sRGB colours stay below about 260 (black to blue-white extremes).
+    "delta_e_threshold": (300.0, "larger than the distance of any two sRGB colours"),
+    "background_max_distance_m": (1000.0, "farther than any sight line at the site"),
+}
+#: Sample points per pedestrian = lateral x height fractions, each a ray per step and sensor.
+MAX_SAMPLE_FRACTIONS = 64
+LIDAR_UPPER_BOUNDS: Bounds = {
+    "channels": (256.0, "twice the densest spinning LiDAR (128 channels)"),
+    "range_m": (500.0, "twice the longest automotive LiDAR range"),
+    "min_returns": (100_000.0, "more returns than a scan has"),
+    "cluster_tolerance_m": (10.0, "merges whole cars and pedestrians"),
+}
+LIDAR_LOWER_BOUNDS: Bounds = {
+    # Rays per scan = channels x 360 / resolution: 32 x 7200 at 0.05 deg.
+    "horizontal_resolution_deg": (0.05, "finer than any spinning LiDAR (0.08 deg)"),
+}
+ROADSIDE_UPPER_BOUNDS: Bounds = {"default_height_m": (50.0, "four times a roadside pole (12 m)")}
+V2I_UPPER_BOUNDS: Bounds = {
+    "latency_s": (10.0, "a message 10 s old describes another scene"),
+    "position_noise_sigma_m": (100.0, "noise wider than the junction"),
+}
+OCCLUDER_UPPER_BOUNDS: Bounds = {
+    "level_height_m": (20.0, "four times a storey"),
+    "default_building_height_m": (1000.0, "taller than any building (828 m)"),
+    "canopy_base_m": (150.0, "taller than any tree (116 m)"),
+    "canopy_top_m": (150.0, "taller than any tree (116 m)"),
+    "hedge_height_m": (10.0, "a hedge is not a wall"),
+    "tree_row_spacing_m": (1000.0, "no longer a row"),
+    "tree_trunk_radius_m": (10.0, "wider than any trunk"),
+    "tree_crown_base_m": (150.0, "taller than any tree (116 m)"),
+    "tree_crown_radius_m": (50.0, "wider than any crown"),
+    "tree_height_m": (150.0, "taller than any tree (116 m)"),
+}
+OCCLUDER_LOWER_BOUNDS: Bounds = {
+    # Trees per row = length / spacing: a tiny spacing fills memory with trunks.
+    "tree_row_spacing_m": (1.0, "trunks closer than a metre are a wall"),
+}
 
 
 def _num(table: dict, key: str, where: str) -> float:
@@ -75,13 +130,27 @@ def _camera(t: dict, where: str) -> None:
     _positive(t, "background_max_distance_m", where)
     _fractions(t, "sample_lateral_fractions", where, -1.0, 1.0)
     _fractions(t, "sample_height_fractions", where, 0.0, 1.0)
+    for key in ("sample_lateral_fractions", "sample_height_fractions"):
+        if len(t[key]) > MAX_SAMPLE_FRACTIONS:
+            raise ParameterError(
+                f"parameter '{where}.{key}' must have at most {MAX_SAMPLE_FRACTIONS} values (each is a ray "
+                f"per pedestrian and step), got {len(t[key])}"
+            )
     _probability(t, "miss_probability", where)
+    check_upper_bounds(t, CAMERA_UPPER_BOUNDS, where)
 
 
 def _mount(t: dict, where: str) -> None:
     _num(t, "forward_offset_m", where)
     _num(t, "left_offset_m", where)
     _positive(t, "height_m", where)
+    for key in ("forward_offset_m", "left_offset_m"):
+        if abs(t[key]) > MOUNT_UPPER_BOUNDS[key][0]:
+            raise ParameterError(
+                f"parameter '{where}.{key}' must be within +-{MOUNT_UPPER_BOUNDS[key][0]:g} "
+                f"({MOUNT_UPPER_BOUNDS[key][1]}), got {t[key]!r}"
+            )
+    check_upper_bounds(t, {"height_m": MOUNT_UPPER_BOUNDS["height_m"]}, where)
 
 
 @register_validator("perception")
@@ -94,7 +163,10 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     w = f"{where}.camera"
     _camera(cam, w)
     _mount(cam, w)
-    _num(cam, "yaw_offset_deg", w)
+    if not -360 <= _num(cam, "yaw_offset_deg", w) <= 360:
+        raise ParameterError(
+            f"parameter '{w}.yaw_offset_deg' must be in [-360, 360], got {cam['yaw_offset_deg']!r}"
+        )
     if not -90 < _num(cam, "pitch_down_deg", w) < 90:
         raise ParameterError(f"parameter '{w}.pitch_down_deg' must be in (-90, 90)")
 
@@ -114,6 +186,8 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     _positive_int(lid, "min_returns", w)
     _positive(lid, "cluster_tolerance_m", w)
     _probability(lid, "miss_probability", w)
+    check_upper_bounds(lid, LIDAR_UPPER_BOUNDS, w)
+    check_lower_bounds(lid, LIDAR_LOWER_BOUNDS, w)
 
     rsu = section["roadside_camera"]
     w = f"{where}.roadside_camera"
@@ -121,12 +195,14 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     _positive(rsu, "default_height_m", w)
     if not -90 < _num(rsu, "default_pitch_down_deg", w) < 90:
         raise ParameterError(f"parameter '{w}.default_pitch_down_deg' must be in (-90, 90)")
+    check_upper_bounds(rsu, ROADSIDE_UPPER_BOUNDS, w)
 
     v2i = section["v2i"]
     w = f"{where}.v2i"
     _non_negative(v2i, "latency_s", w)
     _probability(v2i, "packet_loss_probability", w)
     _non_negative(v2i, "position_noise_sigma_m", w)
+    check_upper_bounds(v2i, V2I_UPPER_BOUNDS, w)
 
     occ = section["occluders"]
     w = f"{where}.occluders"
@@ -147,6 +223,8 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     ):
         _positive(occ, key, w)
     _non_negative(occ, "canopy_base_m", w)
+    check_upper_bounds(occ, OCCLUDER_UPPER_BOUNDS, w)
+    check_lower_bounds(occ, OCCLUDER_LOWER_BOUNDS, w)
     if occ["canopy_base_m"] >= occ["canopy_top_m"]:
         raise ParameterError(f"parameter '{w}.canopy_base_m' must be below '{w}.canopy_top_m'")
     if occ["tree_crown_base_m"] >= occ["tree_height_m"]:

@@ -209,7 +209,7 @@ class _Selector:
     def __init__(self, peds, ego: EgoPose):
         self.peds = peds
         self.ego = ego
-        self.everyone = None
+        self.everyone: SensorDetections | None = None
 
     def __call__(self, mask: np.ndarray) -> SensorDetections:
         n = np.count_nonzero(mask)
@@ -276,7 +276,8 @@ def _cast_all(world: WorldSnapshot, plans: list[RayPlan], skip_vehicle, onboard=
         np.concatenate([p.skip_ped for p in live]),
         group_skip,
     )
-    out, pos = [], 0
+    out: list[RayHits | None] = []
+    pos = 0
     for p in plans:
         if not p.group_count.size:
             out.append(None)
@@ -473,7 +474,7 @@ def _receive(messages, ego: EgoPose, sensors: SensorSuite, compiled: bool):
     if len(converted) == 1 and len(set(ped_ids)) == len(ped_ids):
         ids, pixels = ped_ids, px
     else:
-        ids, xys, pxs = [], [], []
+        ids, xys, pxs = [], [], []  # type: ignore[var-annotated]  # lists of ids and (N, 2) arrays
         for ped_ids, px, world_xy in converted:
             for k, pid in enumerate(ped_ids):
                 if pid in ids:

@@ -154,7 +154,9 @@ class StaticOccluders:
     def build(cls, polygons=(), cylinders=()) -> StaticOccluders:
         """polygons: iterable of (id, kind, shape (K, 2), z_base_m, z_top_m, rgb);
         cylinders: iterable of (x_m, y_m, radius_m, z0_m, z1_m, rgb)."""
-        ids, kinds, rgbs = [], [], []
+        ids: list[str] = []
+        kinds: list[int] = []
+        rgbs: list[tuple[float, float, float]] = []
         segs, zb, zt, owner = [], [], [], []
         for pid, kind, shape, z0, z1, rgb in polygons:
             pts = np.asarray(shape, dtype=float).reshape(-1, 2)

@@ -366,8 +366,10 @@ def replay_in_gui(logged: LoggedEpisode, args: argparse.Namespace, plan: ReplayP
             _close_quietly(runner)
             return error(str(exc), 1)
         except runner.session.connection_lost:
-            say(f"sumo-gui was closed after {check.steps_checked} steps, before the episode ended")
-            return 0 if check.ok else 1
+            # No check (no case log, no reference run): nothing counted the steps, nothing can fail.
+            steps = f" after {check.steps_checked} steps" if check is not None else ""
+            say(f"sumo-gui was closed{steps}, before the episode ended")
+            return 0 if check is None or check.ok else 1
         except TimeoutError as exc:
             _close_quietly(runner)
             return error(str(exc), 1)

@@ -128,7 +128,7 @@ def load_logged_episode(
         raise ReplayError(
             f"{run_dir / RUN_FILE} lacks {', '.join(missing)}: cannot rebuild the run's settings"
         )
-    site = run_site(run_info, site)
+    resolved_site = run_site(run_info, site)
     spec = scenario_from_record(run_info["scenarios"], scenario, notes)
     params = params_from_record(run_info["parameters"], notes)
     algorithm = str(run_info["algorithm"])
@@ -137,7 +137,7 @@ def load_logged_episode(
     except AlgorithmLoadError as exc:
         raise ReplayError(f"the run's algorithm cannot be loaded: {exc}") from None
     notes += _version_notes(run_info)
-    if outcome.get("status") == "error":
+    if outcome.get("status") in ("error", "timeout"):  # timeout: the AD stack exceeded --agent-timeout
         notes.append(f"the batch recorded an error for this episode: {outcome.get('error', '')}")
 
     case_log, case_meta = None, None
@@ -151,7 +151,7 @@ def load_logged_episode(
     return LoggedEpisode(
         run_dir=run_dir,
         run_info=run_info,
-        site=site,
+        site=resolved_site,
         spec=spec,
         params=params,
         algorithm=algorithm,
@@ -213,7 +213,8 @@ def params_from_record(recorded: Any, notes: list[str]) -> dict[str, Any]:
     if not isinstance(recorded, dict):
         raise ReplayError("run.json's 'parameters' is not a table")
     params = load_params()
-    added, dropped = [], []
+    added: list[str] = []
+    dropped: list[str] = []
 
     def overlay(base: dict, record: dict, where: str) -> None:
         for key, value in record.items():
@@ -296,7 +297,7 @@ def _version_notes(run_info: dict[str, Any]) -> list[str]:
     from pedsafe_sumo import __version__
 
     notes = []
-    versions = run_info.get("versions") if isinstance(run_info.get("versions"), dict) else {}
+    versions: dict[str, Any] = run_info["versions"] if isinstance(run_info.get("versions"), dict) else {}
     sumo_then, sumo_now = versions.get("sumo"), sumolib.version.gitDescribe()
     if sumo_then and sumo_then != sumo_now:
         notes.append(f"the run used SUMO {sumo_then}, this is SUMO {sumo_now}: trajectories may differ")

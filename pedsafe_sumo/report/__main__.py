@@ -18,6 +18,7 @@ import math
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from pedsafe_sumo.report import figures
 from pedsafe_sumo.report import indexes as idx
@@ -145,7 +146,7 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
     """Stationary contacts, our collision against SUMO's, where PET is defined, the proximity measure:
     printed, and written to tables_dir (indexes.md and one CSV each). Columns a run lacks are a note."""
     episodes = run.episodes
-    sections: list[tuple[str, str, object, object]] = []  # (title, csv name, table, rows function)
+    sections: list[tuple[str, str, Any, Any]] = []  # (title, csv name, table, rows function)
     contacts = idx.stationary_contacts(episodes)
     if contacts is None:
         say(idx.missing_note(episodes, ("contact_stationary",), "the stationary-contact count"))

@@ -162,7 +162,7 @@ TABLE_ONE_TITLE = (
     "Table I: collision rate, mean injury probability P_I, conflict rate (conflict without collision)\n"
     "95% intervals: Wilson for the rates, two-part (share injured x mean P_I of the injured, MOVER) for the "
     "mean P_I; n = episodes counted, "
-    "errors = episodes with status 'error' (left out)"
+    "errors = episodes with status 'error' or 'timeout' (left out)"
 )
 PAIRED_TITLE = (
     "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"

@@ -25,6 +25,7 @@ import pandas as pd
 from scipy.special import expit
 
 from pedsafe_sumo.safety import log as steplog
+from pedsafe_sumo.safety.geometry import FloatOrArray
 
 #: Below this speed a road user is standing and has no path, m/s.
 STANDING_SPEED_MPS = 1e-6
@@ -45,7 +46,7 @@ class ConflictModel:
     #: candidate test: largest |TTC_vehicle - TTC_pedestrian|, s
     max_ttc_difference_s: float = 3.0
 
-    def probability(self, md_m, tmd_s, cs_mps) -> np.ndarray:
+    def probability(self, md_m: FloatOrArray, tmd_s: FloatOrArray, cs_mps: FloatOrArray) -> np.ndarray:
         return expit(
             self.intercept
             + self.md_coef_per_m * np.asarray(md_m, dtype=float)
@@ -57,7 +58,9 @@ class ConflictModel:
 AMINI_2022 = ConflictModel()
 
 
-def minimum_distance(dpx_m, dpy_m, dvx_mps, dvy_mps) -> tuple[np.ndarray, np.ndarray]:
+def minimum_distance(
+    dpx_m: FloatOrArray, dpy_m: FloatOrArray, dvx_mps: FloatOrArray, dvy_mps: FloatOrArray
+) -> tuple[np.ndarray, np.ndarray]:
     """(MD in m, TMD in s) of a relative position dp and relative velocity dv under constant velocity."""
     dpx, dpy = np.asarray(dpx_m, dtype=float), np.asarray(dpy_m, dtype=float)
     dvx, dvy = np.asarray(dvx_mps, dtype=float), np.asarray(dvy_mps, dtype=float)
@@ -68,7 +71,14 @@ def minimum_distance(dpx_m, dpy_m, dvx_mps, dvy_mps) -> tuple[np.ndarray, np.nda
 
 
 def path_crossing_times_s(
-    ego_x_m, ego_y_m, ego_vx_mps, ego_vy_mps, ped_x_m, ped_y_m, ped_vx_mps, ped_vy_mps
+    ego_x_m: FloatOrArray,
+    ego_y_m: FloatOrArray,
+    ego_vx_mps: FloatOrArray,
+    ego_vy_mps: FloatOrArray,
+    ped_x_m: FloatOrArray,
+    ped_y_m: FloatOrArray,
+    ped_vx_mps: FloatOrArray,
+    ped_vy_mps: FloatOrArray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) for the ego and the pedestrian to reach the crossing point of their straight paths.
 
@@ -89,7 +99,7 @@ def path_crossing_times_s(
     return np.where(ok, s, np.nan), np.where(ok, u, np.nan)
 
 
-def conflict_steps(log, model: ConflictModel = AMINI_2022) -> pd.DataFrame:
+def conflict_steps(log: pd.DataFrame, model: ConflictModel = AMINI_2022) -> pd.DataFrame:
     """The per-step conflict measures of a log: one row per step.
 
     Columns: time_s, ttc_vehicle_s, ttc_pedestrian_s (to the conflict point, NaN if the paths do not
@@ -142,7 +152,9 @@ class ConflictResult:
     conflict_probability: float
 
 
-def episode_conflict(log, model: ConflictModel = AMINI_2022, last_step: int | None = None) -> ConflictResult:
+def episode_conflict(
+    log: pd.DataFrame, model: ConflictModel = AMINI_2022, last_step: int | None = None
+) -> ConflictResult:
     """The episode's conflict flag and the measures at its riskiest eligible step.
 
     Eligible steps are candidates whose CS exceeds the minimum conflicting speed; among them the one of
@@ -168,6 +180,6 @@ def episode_conflict(log, model: ConflictModel = AMINI_2022, last_step: int | No
     )
 
 
-def conflict_without_collision(conflict, collision):
+def conflict_without_collision(conflict: FloatOrArray, collision: FloatOrArray) -> np.ndarray:
     """Table I's conflict: a conflict in an episode without a collision (element-wise on arrays)."""
     return np.logical_and(conflict, np.logical_not(collision))

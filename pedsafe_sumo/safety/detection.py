@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from pedsafe_sumo.safety import log as steplog
 
@@ -22,7 +23,7 @@ class FirstDetection:
     detected_by: str
 
 
-def first_detection(log) -> FirstDetection:
+def first_detection(log: pd.DataFrame) -> FirstDetection:
     """The first step at which the AD stack perceives the pedestrian (the `perceived` column)."""
     a = steplog.as_arrays(log)
     perceived = np.flatnonzero(a[steplog.PERCEIVED])

@@ -8,8 +8,17 @@ from __future__ import annotations
 
 import numpy as np
 
+#: A number or an array of numbers (the functions here broadcast over arrays, as numpy does).
+FloatOrArray = float | np.ndarray
 
-def to_rectangle_frame(x_m, y_m, centre_x_m, centre_y_m, yaw_rad) -> tuple[np.ndarray, np.ndarray]:
+
+def to_rectangle_frame(
+    x_m: FloatOrArray,
+    y_m: FloatOrArray,
+    centre_x_m: FloatOrArray,
+    centre_y_m: FloatOrArray,
+    yaw_rad: FloatOrArray,
+) -> tuple[np.ndarray, np.ndarray]:
     """World point(s) -> the rectangle's frame (origin at its centre, +x along its heading)."""
     dx = np.asarray(x_m, dtype=float) - centre_x_m
     dy = np.asarray(y_m, dtype=float) - centre_y_m
@@ -17,7 +26,9 @@ def to_rectangle_frame(x_m, y_m, centre_x_m, centre_y_m, yaw_rad) -> tuple[np.nd
     return cos * dx + sin * dy, -sin * dx + cos * dy
 
 
-def box_signed_distance_m(local_x_m, local_y_m, half_length_m, half_width_m) -> np.ndarray:
+def box_signed_distance_m(
+    local_x_m: FloatOrArray, local_y_m: FloatOrArray, half_length_m: FloatOrArray, half_width_m: FloatOrArray
+) -> np.ndarray:
     """Signed distance from a point (in the rectangle frame) to an axis-aligned box centred on the origin.
 
     Positive outside (Euclidean distance to the nearest edge or corner), zero on the boundary, negative
@@ -31,7 +42,14 @@ def box_signed_distance_m(local_x_m, local_y_m, half_length_m, half_width_m) -> 
 
 
 def rectangle_circle_distance_m(
-    rect_x_m, rect_y_m, rect_yaw_rad, rect_length_m, rect_width_m, circle_x_m, circle_y_m, circle_radius_m
+    rect_x_m: FloatOrArray,
+    rect_y_m: FloatOrArray,
+    rect_yaw_rad: FloatOrArray,
+    rect_length_m: FloatOrArray,
+    rect_width_m: FloatOrArray,
+    circle_x_m: FloatOrArray,
+    circle_y_m: FloatOrArray,
+    circle_radius_m: FloatOrArray,
 ) -> np.ndarray:
     """Signed clearance between an oriented rectangle and a circle, m: <= 0 means they touch or overlap.
 
@@ -45,7 +63,14 @@ def rectangle_circle_distance_m(
     )
 
 
-def slab_entry_time_s(px, py, vx, vy, half_x, half_y) -> np.ndarray:
+def slab_entry_time_s(
+    px: FloatOrArray,
+    py: FloatOrArray,
+    vx: FloatOrArray,
+    vy: FloatOrArray,
+    half_x: FloatOrArray,
+    half_y: FloatOrArray,
+) -> np.ndarray:
     """First time t >= 0 at which p + v t lies in [-half_x, half_x] x [-half_y, half_y] (inf if never)."""
     t_enter = np.zeros(np.broadcast(px, py, vx, vy).shape)
     t_exit = np.full(t_enter.shape, np.inf)
@@ -62,7 +87,15 @@ def slab_entry_time_s(px, py, vx, vy, half_x, half_y) -> np.ndarray:
     return np.where(t_enter <= t_exit, t_enter, np.inf)
 
 
-def circle_entry_time_s(px, py, vx, vy, cx, cy, radius) -> np.ndarray:
+def circle_entry_time_s(
+    px: FloatOrArray,
+    py: FloatOrArray,
+    vx: FloatOrArray,
+    vy: FloatOrArray,
+    cx: FloatOrArray,
+    cy: FloatOrArray,
+    radius: FloatOrArray,
+) -> np.ndarray:
     """First time t >= 0 at which p + v t lies within `radius` of (cx, cy) (inf if never)."""
     rx, ry = px - cx, py - cy
     c = rx * rx + ry * ry - radius * radius
@@ -76,7 +109,13 @@ def circle_entry_time_s(px, py, vx, vy, cx, cy, radius) -> np.ndarray:
 
 
 def rectangle_circle_contact_time_s(
-    local_x_m, local_y_m, local_vx_mps, local_vy_mps, half_length_m, half_width_m, radius_m
+    local_x_m: FloatOrArray,
+    local_y_m: FloatOrArray,
+    local_vx_mps: FloatOrArray,
+    local_vy_mps: FloatOrArray,
+    half_length_m: FloatOrArray,
+    half_width_m: FloatOrArray,
+    radius_m: FloatOrArray,
 ) -> np.ndarray:
     """Time until a circle moving at constant velocity first touches a fixed box, s (0 if touching now).
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import expit
 
+from pedsafe_sumo.safety.geometry import FloatOrArray
+
 KMH_PER_MPS = 3.6  # [km/h per m/s]
 
 
@@ -23,7 +25,7 @@ class InjuryModel:
     #: logit of the probability from impact speed (km/h) and age (years)
     logit: Callable[[np.ndarray, np.ndarray], np.ndarray]
 
-    def probability(self, impact_speed_mps, age_years) -> np.ndarray:
+    def probability(self, impact_speed_mps: FloatOrArray, age_years: FloatOrArray) -> np.ndarray:
         speed_mps = np.asarray(impact_speed_mps, dtype=float)
         age = np.asarray(age_years, dtype=float)
         if np.any(speed_mps < 0):
@@ -71,7 +73,9 @@ def get_injury_model(name: str) -> InjuryModel:
         raise ValueError(f"unknown injury model '{name}'; known models: {known}") from None
 
 
-def injury_probability(impact_speed_mps, age_years, model: str = "saade2020"):
+def injury_probability(
+    impact_speed_mps: FloatOrArray, age_years: FloatOrArray, model: str = "saade2020"
+) -> FloatOrArray:
     """Probability of injury (as the named model defines it) for a pedestrian hit at the given speed.
 
     `impact_speed_mps` in m/s (converted to km/h inside), `age_years` in years; arrays broadcast.

@@ -5,8 +5,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from pedsafe_sumo.params import ParameterError, register_validator
+from pedsafe_sumo.params import Bounds, ParameterError, check_upper_bounds, register_validator
 from pedsafe_sumo.safety.proximity import PARAM_KEYS
+
+SAFETY_UPPER_BOUNDS: Bounds = {
+    "close_pass_clearance_m": (20.0, "wider than the study site's road: every step would be a close pass"),
+    "close_pass_min_speed_mps": (50.0, "the ego's vehicle type is capped at 50 m/s"),
+    "drac_threshold_mps2": (15.0, "1.5 g, beyond the grip of tyres on dry asphalt"),
+}
 
 
 @register_validator("safety")
@@ -17,3 +23,4 @@ def validate_safety(section: dict[str, Any], where: str) -> None:
             raise ParameterError(f"{where}.{key} must be a finite number, got {value!r}")
         if value < 0:
             raise ParameterError(f"{where}.{key} must be >= 0, got {value}")
+    check_upper_bounds(section, SAFETY_UPPER_BOUNDS, where)

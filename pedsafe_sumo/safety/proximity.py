@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from pedsafe_sumo.safety import log as steplog
-from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.safety.geometry import FloatOrArray, rectangle_circle_distance_m
 from pedsafe_sumo.safety.surrogates import ttc_steps_s
 
 if sys.version_info >= (3, 11):
@@ -108,7 +108,7 @@ def _clearance(a: dict[str, np.ndarray]) -> np.ndarray:
     )
 
 
-def drac_from_ttc_mps2(ego_speed_mps, ttc_s) -> np.ndarray:
+def drac_from_ttc_mps2(ego_speed_mps: FloatOrArray, ttc_s: FloatOrArray) -> np.ndarray:
     """DRAC = v^2 / (2 d) with d = v TTC the ego's distance to contact: v / (2 TTC), m/s^2.
 
     NaN where the pedestrian is not in or entering the ego's path (TTC NaN), where they touch (TTC 0:
@@ -129,7 +129,9 @@ def _drac(a: dict[str, np.ndarray]) -> np.ndarray:
     return drac_from_ttc_mps2(a[steplog.EGO_SPEED], ttc_steps_s(a))
 
 
-def close_pass_steps(clearance_m, ego_speed_mps, model: ProximityModel) -> np.ndarray:
+def close_pass_steps(
+    clearance_m: FloatOrArray, ego_speed_mps: FloatOrArray, model: ProximityModel
+) -> np.ndarray:
     """Steps of a close pass: clearance below the threshold while the ego moves faster than the minimum."""
     clearance, speed = np.asarray(clearance_m, dtype=float), np.asarray(ego_speed_mps, dtype=float)
     return (clearance < model.close_pass_clearance_m) & (speed > model.close_pass_min_speed_mps)

@@ -10,9 +10,14 @@ import pandas as pd
 from scipy import stats
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
+from pedsafe_sumo.safety.geometry import FloatOrArray
 
 TABLE_INPUT_COLUMNS = ("scenario", "condition", "collision", "injury_probability", "conflict", "status")
 ERROR_STATUS = "error"
+TIMEOUT_STATUS = "timeout"
+#: Statuses of episodes that did not run to their end (an error, or an AD stack past its per-step time
+#: limit): counted apart in n_error and left out of every rate and of the paired tests.
+FAILED_STATUSES = (ERROR_STATUS, TIMEOUT_STATUS)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -42,7 +47,7 @@ def mcnemar_exact(b: int, c: int) -> float:
     return float(stats.binomtest(int(b), int(b + c), 0.5, alternative="two-sided").pvalue)
 
 
-def zero_inflated_mean_interval(values, confidence: float = 0.95) -> tuple[float, float, float]:
+def zero_inflated_mean_interval(values: FloatOrArray, confidence: float = 0.95) -> tuple[float, float, float]:
     """Mean of values in [0, 1] that are mostly 0 (per-episode P_I), with an interval that holds there.
 
     A two-part model, mean = q m with q the share of positive values and m their mean, combined by MOVER
@@ -79,7 +84,7 @@ def zero_inflated_mean_interval(values, confidence: float = 0.95) -> tuple[float
     return mean, float(math.exp(log_q + log_m - down)), float(min(1.0, math.exp(log_q + log_m + up)))
 
 
-def paired_counts(sv, v2i) -> tuple[int, int, int, int]:
+def paired_counts(sv: FloatOrArray, v2i: FloatOrArray) -> tuple[int, int, int, int]:
     """Counts of a paired binary outcome: (both, sv only, v2i only, neither)."""
     sv, v2i = np.asarray(sv, dtype=bool), np.asarray(v2i, dtype=bool)
     if sv.shape != v2i.shape:
@@ -95,17 +100,17 @@ def paired_counts(sv, v2i) -> tuple[int, int, int, int]:
 def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     """The paper's Table I, one row per scenario and condition (in order of first appearance).
 
-    Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error", left
-    out), collision_rate with collision_low/high (Wilson), injury_mean with injury_low/high
-    (`zero_inflated_mean_interval` of the per-episode P_I), conflict_rate with conflict_low/high
-    (Wilson), where a conflict counts only in an episode without a collision.
+    Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error" or
+    "timeout", left out), collision_rate with collision_low/high (Wilson), injury_mean with
+    injury_low/high (`zero_inflated_mean_interval` of the per-episode P_I), conflict_rate with
+    conflict_low/high (Wilson), where a conflict counts only in an episode without a collision.
     """
     missing = [c for c in TABLE_INPUT_COLUMNS if c not in episodes.columns]
     if missing:
         raise ValueError(f"episodes lack column(s): {', '.join(missing)}")
     rows = []
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
-        errors = (group["status"] == ERROR_STATUS).to_numpy()
+        errors = group["status"].isin(FAILED_STATUSES).to_numpy()
         ok = group[~errors]
         n = len(ok)
         collisions = ok["collision"].to_numpy(dtype=bool)
@@ -137,7 +142,8 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
 def paired_mcnemar(episodes: pd.DataFrame, outcome: str = "collision") -> pd.DataFrame:
     """Per scenario, the exact McNemar test of a binary outcome between the paired sv and v2i episodes.
 
-    Pairs are matched on (scenario, episode); a pair where either side has status "error" is dropped.
+    Pairs are matched on (scenario, episode); a pair where either side has status "error" or "timeout"
+    is dropped.
     Columns: scenario, n_pairs, both, sv_only, v2i_only, neither, p_value.
     """
     missing = [
@@ -156,7 +162,7 @@ def paired_mcnemar(episodes: pd.DataFrame, outcome: str = "collision") -> pd.Dat
         pairs = sides["sv"][["status", outcome]].merge(
             sides["v2i"][["status", outcome]], left_index=True, right_index=True, suffixes=("_sv", "_v2i")
         )
-        pairs = pairs[(pairs["status_sv"] != ERROR_STATUS) & (pairs["status_v2i"] != ERROR_STATUS)]
+        pairs = pairs[~pairs["status_sv"].isin(FAILED_STATUSES) & ~pairs["status_v2i"].isin(FAILED_STATUSES)]
         both, sv_only, v2i_only, neither = paired_counts(pairs[f"{outcome}_sv"], pairs[f"{outcome}_v2i"])
         rows.append(
             {

@@ -17,6 +17,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import pandas as pd
 
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import (
@@ -29,7 +30,7 @@ from pedsafe_sumo.safety.geometry import (
 )
 
 
-def ttc_steps_s(log) -> np.ndarray:
+def ttc_steps_s(log: pd.DataFrame) -> np.ndarray:
     """Per-step TTC, s (NaN where the two would never touch under constant velocity)."""
     a = steplog.as_arrays(log)
     evx, evy = steplog.ego_velocity_mps(a)
@@ -44,7 +45,7 @@ def ttc_steps_s(log) -> np.ndarray:
     return np.where(np.isfinite(t), t + 0.0, np.nan)  # + 0.0 turns -0.0 into 0.0
 
 
-def min_ttc_s(log, last_step: int | None = None) -> float:
+def min_ttc_s(log: pd.DataFrame, last_step: int | None = None) -> float:
     """Smallest per-step TTC over the steps up to `last_step` (all if None), s; NaN if never on course."""
     ttc = ttc_steps_s(log)
     if last_step is not None:
@@ -88,7 +89,7 @@ def _stay_s(
     return arrival, departure
 
 
-def pet_s(log) -> float:
+def pet_s(log: pd.DataFrame) -> float:
     """Post-encroachment time at the first crossing of the logged centre paths, s (NaN if none)."""
     a = steplog.as_arrays(log)
     point = first_polyline_crossing(a[steplog.EGO_X], a[steplog.EGO_Y], a[steplog.PED_X], a[steplog.PED_Y])

@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -91,6 +93,27 @@ VEHICLE_CLASSES = {
 #: Shares of the classes among queued and waiting vehicles (assumption: Beijing urban fleet, where
 #: SUVs and MPVs make up about a third of new passenger cars).
 QUEUE_CLASS_WEIGHTS = {"car": 0.55, "suv": 0.35, "van": 0.10}
+
+
+#: Upper bound of every numeric scenario field, with why: above it a value stages no meaningful scene,
+#: or makes an episode (or the drawing of one) run for ever. `--set` beyond one is refused in one line.
+SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
+    # |offset|: at 10 s the ego starts 100-200 m away at urban speeds, the length of the approach.
+    "conflict_offset_max_s": (10.0, "the ego would start beyond the approach"),
+    "ped_start_delay_s": (60.0, "twice the default episode length"),
+    "midblock_distance_max_m": (200.0, "longer than the study site's approach (182 m)"),
+    "parked_gap_max_m": (20.0, "a gap of four cars is no longer a gap between queued vehicles"),
+    # 20 vehicles with their gaps fill 100-160 m: the whole approach; each is staged in SUMO.
+    "queue_vehicles": (20.0, "20 queued vehicles fill the study site's 182 m approach"),
+    "queue_gap_max_m": (20.0, "a queue with gaps of four cars is no queue"),
+    "blend_gap_max_m": (5.0, "ten times the LiDAR cluster tolerance: no longer blending"),
+    # The ego's vehicle type has maxSpeed 50 m/s (sim/episode.py): SUMO would cap anything above it.
+    "ego_speed_max_mps": (50.0, "the ego's vehicle type is capped at 50 m/s (180 km/h)"),
+    # 600 s at 0.05 s steps are 12,000 steps; the default is 30 s.
+    "time_limit_s": (600.0, "20 times the default 30 s episode"),
+    # The warm-up draws warmup + time limit seconds of demand on every entering lane.
+    "background_warmup_s": (600.0, "vehicles that entered 10 minutes before have long left the site"),
+}
 
 
 @dataclass(frozen=True)
@@ -222,11 +245,26 @@ class ScenarioSpec:
         for ok, rule in checks:
             if not ok:
                 raise ScenarioError(f"scenario '{self.name}': {rule} does not hold")
+        bounds = [(key, getattr(self, key), bound, why) for key, (bound, why) in SPEC_UPPER_BOUNDS.items()]
+        low, why = (
+            -SPEC_UPPER_BOUNDS["conflict_offset_max_s"][0],
+            SPEC_UPPER_BOUNDS["conflict_offset_max_s"][1],
+        )
+        if self.conflict_offset_min_s < low:
+            raise ScenarioError(
+                f"scenario '{self.name}': conflict_offset_min_s must be at least {low:g} ({why}), "
+                f"got {self.conflict_offset_min_s:g}"
+            )
+        for key, value, bound, why in bounds:
+            if value > bound:
+                raise ScenarioError(
+                    f"scenario '{self.name}': {key} must be at most {bound:g} ({why}), got {value:g}"
+                )
 
-    def with_overrides(self, overrides: dict[str, str | float]) -> ScenarioSpec:
+    def with_overrides(self, overrides: Mapping[str, str | float]) -> ScenarioSpec:
         """A copy with fields replaced from --set key=value pairs (values parsed as numbers)."""
         names = {f.name for f in dataclasses.fields(self)} - {"name", "description"}
-        changes = {}
+        changes: dict[str, Any] = {}
         for key, value in overrides.items():
             if key not in names:
                 raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
@@ -534,13 +572,13 @@ def draw_episode(
     ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size)
     conflict_time_s = (ego_conflict_pos - front_pos) / ego_speed_mps
     pedestrian = PedestrianSetup(
-        path_xy=tuple(tuple(float(c) for c in p) for p in path),
+        path_xy=tuple((float(p[0]), float(p[1])) for p in path),
         start_delay_s=start_delay_s,
         age_years=float(pedestrian_traits["age_years"]),
         gender=str(pedestrian_traits["gender"]),
         risk=str(pedestrian_traits["risk"]),
         walking_speed_mps=float(pedestrian_traits["walking_speed_mps"]),
-        clothing_rgb=tuple(int(c) for c in clothing),
+        clothing_rgb=(int(clothing[0]), int(clothing[1]), int(clothing[2])),
         radius_m=radius_m,
         height_m=height_m,
     )

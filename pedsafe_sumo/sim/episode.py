@@ -35,6 +35,7 @@ import pandas as pd
 from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianPose, PedestrianWalker, VehicleBodies
 from pedsafe_sumo.behaviour.sight import ego_in_sight
 from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
+from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
 from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
@@ -253,9 +254,12 @@ class EpisodeRunner:
         injury_model: str = "saade2020",
         gui_settings_file: Path | None = None,
         gui_options: Sequence[str] = (),
+        agent_timeout_s: float = DEFAULT_AGENT_TIMEOUT_S,
     ) -> None:
         """`gui_settings_file` replaces the site's sumo-gui view settings and `gui_options` are added to
-        the sumo-gui command line (replay: window size, labels); both are ignored headless."""
+        the sumo-gui command line (replay: window size, labels); both are ignored headless.
+        `agent_timeout_s` limits each run_step call (pedsafe_sumo.control.timeout)."""
+        self.agent_timeout_s = check_timeout_s(agent_timeout_s)
         self.site = site
         self.gui_settings_file = gui_settings_file or site.file("view.xml")
         self.gui_options = tuple(gui_options)
@@ -444,23 +448,23 @@ class EpisodeRunner:
             api.vehicletype.setHeight("background", size.height_m)
             api.vehicletype.setImperfection("background", 0.0)
             api.vehicletype.setMaxSpeed("background", 55.56)
-        for vehicle in setup.background:
-            route_id = "bg_" + "|".join(vehicle.route)
+        for bg in setup.background:
+            route_id = "bg_" + "|".join(bg.route)
             if route_id not in self._routes_added:
-                api.route.add(route_id, list(vehicle.route))
+                api.route.add(route_id, list(bg.route))
                 self._routes_added.add(route_id)
             api.vehicle.add(
-                vehicle.vehicle_id,
+                bg.vehicle_id,
                 route_id,
                 typeID="background",
-                depart=repr(vehicle.depart_s),
-                departLane=str(vehicle.lane_index),
-                departPos=repr(vehicle.depart_pos_m),
+                depart=repr(bg.depart_s),
+                departLane=str(bg.lane_index),
+                departPos=repr(bg.depart_pos_m),
                 # The fastest safe speed: a lognormal-tail desired speed (30+ m/s) just before a junction
                 # would be refused by SUMO; the speed factor set on departure brings it up afterwards.
                 departSpeed="max",
             )
-            api.vehicle.setColor(vehicle.vehicle_id, (*vehicle.colour_rgb, 255))
+            api.vehicle.setColor(bg.vehicle_id, (*bg.colour_rgb, 255))
         ped = setup.pedestrian
         api.vehicletype.copy("DEFAULT_PEDTYPE", "ped_type")
         api.vehicletype.setWidth("ped_type", 2 * ped.radius_m)
@@ -584,6 +588,8 @@ class EpisodeRunner:
         pose = PedestrianPose(start_x, start_y, start_heading, 0.0, "waiting")
         eye_height_m = self.params["pedestrians"]["eye_height_fraction"] * ped.height_m
         _move_pedestrian(api, pose, ped.radius_m)
+        # run_step under the per-step time limit: AgentTimeoutError ends the episode (status "timeout").
+        run_step = guard_step(agent.run_step, self.agent_timeout_s).start()
         try:
             while True:
                 t0 = clock()
@@ -654,7 +660,7 @@ class EpisodeRunner:
                     tuple(reported),
                     self.step_length_s,
                 )
-                command: Command = agent.run_step(observation, time_s)
+                command: Command = run_step(observation, time_s)
                 target_mps = max(0.0, float(command.target_speed_mps))
                 t3 = clock()
                 timings["agent_s"] += t3 - t2
@@ -733,7 +739,9 @@ class EpisodeRunner:
                 api.simulation.step()
                 timings["sumo_s"] += clock() - t4
         finally:
-            agent.close()
+            run_step.stop()
+            if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
+                agent.close()
 
         log = pd.DataFrame(rows)
         # SUMO's verdict counts where it looks: a pedestrian on a crossing or walking area at the

@@ -16,6 +16,10 @@ from pedsafe_sumo.control.reference import ReferenceStack
 KILL_SEED_ENV = "PEDSAFE_TEST_KILL_SEED"
 #: KillsWorkerOnce: kill only while this file does not exist (it is created just before the kill).
 KILL_MARKER_ENV = "PEDSAFE_TEST_KILL_MARKER"
+#: Seed of the episode whose run_step sleeps for ever (SleepsForever).
+SLEEP_SEED_ENV = "PEDSAFE_TEST_SLEEP_SEED"
+#: When SleepsForever falls asleep in that episode [s of simulated time].
+SLEEP_AT_S = 1.0
 
 
 def _kill_this_process() -> None:
@@ -48,6 +52,21 @@ class KillsWorkerAlways(ReferenceStack):
         if config["seed"] == int(os.environ[KILL_SEED_ENV]):
             _kill_this_process()
         super().setup(config)
+
+
+class SleepsForever(ReferenceStack):
+    """The reference stack, except that on the chosen seed its run_step never returns from t = SLEEP_AT_S
+    on (a hung planner); every other episode drives exactly like the reference."""
+
+    def setup(self, config):
+        self._hangs = config["seed"] == int(os.environ[SLEEP_SEED_ENV])
+        super().setup(config)
+
+    def run_step(self, observation, time_s):
+        if self._hangs and time_s >= SLEEP_AT_S:
+            while True:
+                time.sleep(3600)
+        return super().run_step(observation, time_s)
 
 
 class NoRunStep:

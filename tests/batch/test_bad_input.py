@@ -65,6 +65,28 @@ def assert_refused(capsys, argv: list[str], message: str) -> str:
         ([*CROSSING, "--cluster", "local:2", "--workers", "2"], "exclude each other"),
         ([*CROSSING, "--workers", "0"], "--workers must be at least 1"),
         ([*CROSSING, "--resume"], "--resume needs --out DIR"),
+        # Upper bounds (issue 19): values that would make a batch run for ever are refused up front.
+        ([*CROSSING, "--set", "queue_vehicles=1e9"], "queue_vehicles must be at most 20"),
+        ([*CROSSING, "--set", "time_limit_s=1e12"], "time_limit_s must be at most 600"),
+        ([*CROSSING, "--set", "traffic.headway_rate_per_s=1e9"], "headway_rate_per_s' must be at most 1 "),
+        (
+            [*CROSSING, "--set", "perception.lidar.horizontal_resolution_deg=0.000001"],
+            "horizontal_resolution_deg' must be at least 0.05",
+        ),
+        (
+            [*CROSSING, "--set", "perception.occluders.tree_row_spacing_m=0.000000001"],
+            "tree_row_spacing_m' must be at least 1",
+        ),
+        ([*CROSSING, "--set", "algorithm.max_decel_mps2=1e9"], "max_decel_mps2' must be at most 15"),
+        (["--scenario", "crossing", "--episodes", "10000000"], "--episodes must be at most 1,000,000"),
+        ([*CROSSING, "--seed", str(2**64)], "--seed must be at most 2**63 - 1"),
+        ([*CROSSING, "--workers", "100000"], "--workers must be at most 256"),
+        ([*CROSSING, "--chunk-size", "1000000"], "--chunk-size must be at most 10,000"),
+        ([*CROSSING, "--cluster", "local:100000"], "starts at most 256 local workers"),
+        ([*CROSSING, "--agent-timeout", "0"], "--agent-timeout must be > 0 and at most 3600"),
+        ([*CROSSING, "--agent-timeout", "1e9"], "--agent-timeout must be > 0 and at most 3600"),
+        ([*CROSSING, "--agent-timeout", "nan"], "--agent-timeout must be > 0 and at most 3600"),
+        ([*CROSSING, "--agent-timeout", "soon"], "invalid float value: 'soon'"),
     ],
 )
 def test_bad_command_line(capsys, tmp_path, args, message):
@@ -185,3 +207,61 @@ def test_resume_needs_a_run_to_resume(capsys, tmp_path):
     (tmp_path / "other" / "run.json").write_text("{broken")
     assert_refused(capsys, ["--resume", "--out", str(tmp_path / "other")], "run.json is unreadable")
     assert sorted(p.name for p in (tmp_path / "other").iterdir()) == ["notes.txt", "run.json"]
+
+
+def test_a_huge_queue_is_refused_by_the_real_command_line_not_run(tmp_path):
+    """The issue's example: `--set queue_vehicles=1e9` used to stage a billion vehicles (the batch hung)."""
+    out = tmp_path / "out"
+    proc = batch(*CROSSING, "--set", "queue_vehicles=1e9", "--out", str(out), timeout=120)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "queue_vehicles must be at most 20" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()
+
+
+def foreign_directory(path):
+    """A user's directory with files of their own (and a sub-folder), no run of ours."""
+    (path / "photos").mkdir(parents=True)
+    (path / "notes.txt").write_text("mine")
+    (path / "photos" / "cat.jpg").write_bytes(bytes(range(256)))
+    (path / "data.csv").write_text("a,b\n1,2\n")
+    return path
+
+
+def test_out_refuses_a_foreign_directory_and_leaves_it_byte_identical(capsys, tmp_path):
+    out = foreign_directory(tmp_path / "mine")
+    before = tree_digest(out)
+    names_before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    assert_refused(
+        capsys, [*CROSSING, "--out", str(out)], "is a directory that is not empty and holds no run"
+    )
+    assert tree_digest(out) == before
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == names_before  # nothing added, no .lock
+
+
+def test_out_refuses_the_root_directory(capsys):
+    assert_refused(capsys, [*CROSSING, "--out", "/"], "--out / is a directory that is not empty")
+
+
+def test_out_refuses_a_directory_with_only_a_hidden_file(capsys, tmp_path):
+    (tmp_path / "hidden").mkdir()
+    (tmp_path / "hidden" / ".keep").write_text("")
+    assert_refused(capsys, [*CROSSING, "--out", str(tmp_path / "hidden")], "holds no run")
+    assert [p.name for p in (tmp_path / "hidden").iterdir()] == [".keep"]
+
+
+def test_out_accepts_an_empty_directory(tmp_path):
+    from pedsafe_sumo.batch.__main__ import parse_args, prepare
+
+    (tmp_path / "empty").mkdir()
+    plan = prepare(parse_args([*CROSSING, "--out", str(tmp_path / "empty")]))
+    assert plan.out == tmp_path / "empty" and plan.config.agent_timeout_s == 10.0
+
+
+@pytest.mark.slow
+def test_out_refuses_a_foreign_directory_through_the_real_command_line(tmp_path):
+    out = foreign_directory(tmp_path / "mine")
+    before = tree_digest(out)
+    proc = batch(*CROSSING, "--out", str(out), timeout=120)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "holds no run" in proc.stderr and "Traceback" not in proc.stderr
+    assert tree_digest(out) == before

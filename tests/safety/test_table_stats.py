@@ -127,3 +127,20 @@ def test_paired_mcnemar_drops_pairs_with_an_error():
     got = paired_mcnemar(_episodes()).iloc[0]
     assert (got["n_pairs"], got["both"], got["sv_only"], got["v2i_only"], got["neither"]) == (4, 0, 1, 1, 2)
     assert got["p_value"] == 1.0
+
+
+def test_timeout_rows_are_counted_apart_like_errors():
+    """An episode whose AD stack exceeded --agent-timeout (status "timeout") is out of every rate and
+    every pair, exactly like an error: the table equals the one without that row, plus one in n_error."""
+    episodes = _episodes()
+    timed_out = episodes.iloc[[0]].assign(
+        condition="v2i", episode=99, collision=True, injury_probability=1.0, conflict=True, status="timeout"
+    )
+    with_timeout = table_one(pd.concat([episodes, timed_out], ignore_index=True))
+    without = table_one(episodes)
+    assert list(with_timeout["n_error"]) == [1, 1] and list(without["n_error"]) == [1, 0]
+    pd.testing.assert_frame_equal(with_timeout.drop(columns="n_error"), without.drop(columns="n_error"))
+    # A pair with a timeout on either side is dropped from the paired test.
+    paired = episodes.copy()
+    paired.loc[(paired["episode"] == 0) & (paired["condition"] == "v2i"), "status"] = "timeout"
+    assert paired_mcnemar(paired).iloc[0]["n_pairs"] == paired_mcnemar(episodes).iloc[0]["n_pairs"] - 1
