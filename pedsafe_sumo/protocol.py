@@ -251,7 +251,8 @@ def field_reasons(source: str) -> dict[str, str]:
 def scenario_value_reasons(source: str) -> dict[tuple[str, str], str]:
     """(scenario, field) -> the comment above that field's value in the scenario's SCENARIOS entry."""
     reasons: dict[tuple[str, str], str] = {}
-    name, block = "", []
+    name = ""
+    block: list[str] = []
     lines = source.split("\nSCENARIOS", 1)[-1].splitlines()
     for previous, raw in zip(["", *lines], lines):
         line = raw.strip()

@@ -407,7 +407,12 @@ def prepare(args: argparse.Namespace) -> Plan:
     return plan
 
 
-def _with_protocol(args, arguments: dict[str, Any], explicit: dict[str, Any], recorded) -> tuple[Any, dict]:
+def _with_protocol(
+    args: argparse.Namespace,
+    arguments: dict[str, Any],
+    explicit: dict[str, Any],
+    recorded: dict[str, Any] | None,
+) -> tuple[Any, dict[str, Any]]:
     """The protocol's values in place of the flags: a protocol fixes everything but the number of
     episodes and workers (and where the run goes). Another flag with --protocol is refused."""
     from pedsafe_sumo.protocol import load_protocol

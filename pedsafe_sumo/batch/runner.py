@@ -238,7 +238,7 @@ def error_row(task: Task, condition: str, message: str, status: str = ERROR_STAT
     return row
 
 
-def scenario_spec(name: str, overrides: dict[str, Any]):
+def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
     `<scenario>:<field>` keys (a protocol's per-scenario values) for this one."""
     from pedsafe_sumo.scenarios.registry import get_scenario

@@ -169,7 +169,7 @@ def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | N
     static = load_static_occluders(site.file("poly.xml"), params["perception"]["occluders"])
     from pedsafe_sumo.scenarios.geometry import load_turn
 
-    problems = {}
+    problems: dict[str, str | None] = {}
     for name, spec in specs.items():
         try:
             turn = load_turn(site, spec.turn) if spec.placement == "turn" else None

@@ -605,13 +605,13 @@ def _pedestrian(traits: dict, clothing, start_delay_s: float, path) -> Pedestria
     if traits["age_years"] < 19:
         height_m -= 0.05
     return PedestrianSetup(
-        path_xy=tuple(tuple(float(c) for c in p) for p in path),
+        path_xy=tuple((float(p[0]), float(p[1])) for p in path),
         start_delay_s=start_delay_s,
         age_years=float(traits["age_years"]),
         gender=str(traits["gender"]),
         risk=str(traits["risk"]),
         walking_speed_mps=float(traits["walking_speed_mps"]),
-        clothing_rgb=tuple(int(c) for c in clothing),
+        clothing_rgb=(int(clothing[0]), int(clothing[1]), int(clothing[2])),
         radius_m=0.3,
         height_m=height_m,
     )
@@ -747,7 +747,7 @@ def stage_signals(
     until_s = setup.conflict_time_s + spec.signal_hold_after_s
     # The ego from the start (it sees its signal all the way to the stop line), the pedestrian from
     # stepping off the kerb, both until after the conflict.
-    required: dict[int, tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
+    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
     if ped_link != NO_LINK:
         step_off_s = min(setup.pedestrian.start_delay_s, until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
