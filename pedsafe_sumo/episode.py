@@ -24,9 +24,16 @@ from pedsafe_sumo.network.hosting import check_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.connection import SimulatorError
-from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeResult, EpisodeRunner
+from pedsafe_sumo.sim.episode import (
+    CONDITIONS,
+    DEFAULT_ALGORITHM,
+    EpisodeResult,
+    EpisodeRunner,
+    conflict_step,
+)
 
 SENSOR_NAMES = {
     "onboard_camera": "onboard camera",
@@ -66,6 +73,7 @@ def describe(result: EpisodeResult, algorithm: str) -> list[str]:
         f"  closest approach: {max(gap.min(), 0.0):.2f} m between car body and pedestrian "
         f"at t={closest.time_s:.2f} s"
     )
+    lines += describe_signals(result)
     if outcome["collision"]:
         impact_mps = outcome["impact_speed_mps"]
         lines.append(
@@ -93,6 +101,27 @@ def describe(result: EpisodeResult, algorithm: str) -> list[str]:
         f"after {len(log)} steps"
     )
     return lines
+
+
+def describe_signals(result: EpisodeResult) -> list[str]:
+    """Each road user's signal at the staged conflict, as SUMO showed it."""
+    staging = result.setup.signals
+    if staging is None or not result.signal_states:
+        return ["  signals: none (the junction has no traffic light, or the episode was not staged in it)"]
+    step = conflict_step(result.log, result.setup)
+    state = result.signal_states[step]
+    users = [("ego", staging.ego_link_index), ("pedestrian", staging.ped_link_index)]
+    if result.setup.parked:
+        users.append(("occluder (kerb-lane right turn)", staging.occluder_link_index))
+    parts = [
+        f"{name} {colour_of_link(state, link)}" + (f" (link {link})" if link != NO_LINK else "")
+        for name, link in users
+    ]
+    return [
+        f"  signals at the conflict (t={result.log['time_s'].iloc[step]:.2f} s): {', '.join(parts)}; "
+        f"traffic light {staging.tls_id} program "
+        f"{staging.program_id}, started {staging.cycle_start_s:.2f} s into its cycle"
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,7 +9,9 @@ worlds) in its own run directory OUT/<key>=<value>,... ; a combination whose run
 holds episodes.parquet is not run again and one stopped part-way is resumed (`--resume`), so a
 stopped sweep continues where it stopped. At the end
 OUT/sweep.csv and OUT/sweep.md hold Table I of every combination with its settings, and
-OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key.
+OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key;
+OUT/findings.csv and findings.png say which of the paper's qualitative findings hold in each
+combination (pedsafe_sumo/report/findings.py).
 Every --set / --vary key is validated for every combination before anything runs.
 """
 
@@ -51,7 +53,9 @@ def label(combination: dict[str, str]) -> str:
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.sweep", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", required=True, help=f"{', '.join(SCENARIOS)} or all")
+    parser.add_argument(
+        "--scenario", required=True, help=f"{', '.join(SCENARIOS)}, a comma-separated list of them, or all"
+    )
     parser.add_argument("--condition", default="both", help="sv, v2i or both [both]")
     parser.add_argument(
         "--episodes", type=int, default=200, help="episodes per scenario and combination [200]"
@@ -69,9 +73,10 @@ def parse_args(argv):
 
 
 def validate(args) -> list[dict[str, str]]:
-    scenarios = list(SCENARIOS) if args.scenario == "all" else [args.scenario]
-    if args.scenario != "all" and args.scenario not in SCENARIOS:
-        raise UsageError(f"unknown scenario '{args.scenario}' (known: {', '.join(SCENARIOS)}, all)")
+    scenarios = list(SCENARIOS) if args.scenario == "all" else args.scenario.split(",")
+    unknown = [name for name in scenarios if name not in SCENARIOS]
+    if unknown:
+        raise UsageError(f"unknown scenario '{unknown[0]}' (known: {', '.join(SCENARIOS)}, all)")
     if args.episodes < 1:
         raise UsageError(f"--episodes must be at least 1, got {args.episodes}")
     site = resolve_site(args.site)
@@ -176,9 +181,22 @@ def main(argv: list[str] | None = None) -> int:
     keys = list(combos[0])
     (args.out / "sweep.md").write_text(_markdown(table, keys) + "\n", encoding="utf-8")
     plot(table, keys, args.out / "sweep.png")
+    findings = write_findings(args.out, combos)
     print(_markdown(table, keys))
-    print(f"written: {args.out / 'sweep.csv'}, sweep.md, sweep.png")
+    print(findings.to_string(index=False))
+    print(f"written: {args.out / 'sweep.csv'}, sweep.md, sweep.png, findings.csv, findings.png")
     return 0
+
+
+def write_findings(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
+    """OUT/findings.csv and findings.png: the paper's qualitative findings in every combination
+    (pedsafe_sumo/report/findings.py)."""
+    from pedsafe_sumo.report.findings import findings_figure, findings_table
+
+    table = findings_table({label(combo): out / label(combo) for combo in combos})
+    table.to_csv(out / "findings.csv", index=False)
+    findings_figure(table, out / "findings.png", title="the paper's qualitative findings, per combination")
+    return table
 
 
 def _markdown(table: pd.DataFrame, keys: list[str]) -> str:

@@ -75,6 +75,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "algorithm": DEFAULT_ALGORITHM,
     "perception": None,
     "chunk_size": None,
+    "protocol": None,
     "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
     "keep_logs": KEEP_EVENTS,
 }
@@ -149,7 +150,10 @@ class _OneLineParser(argparse.ArgumentParser):
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", help=f"{', '.join(SCENARIOS)} or all (required unless --resume)")
+    parser.add_argument(
+        "--scenario",
+        help=f"{', '.join(SCENARIOS)}, a comma-separated list, or all (required unless --resume)",
+    )
     parser.add_argument("--condition", help="sv, v2i or both (paired: same seed) [both]")
     parser.add_argument(
         "--episodes",
@@ -208,6 +212,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "a conflict, in cases/; 'all' = those and every episode's log, one Parquet file per chunk in "
         f"steplogs/ [{KEEP_EVENTS}]",
     )
+    parser.add_argument(
+        "--protocol",
+        type=Path,
+        metavar="FILE.toml",
+        help="run a protocol file (protocols/): it fixes every value; only --episodes and --workers may "
+        "override it (docs/protocols.md)",
+    )
     return parser.parse_args(argv)
 
 
@@ -228,6 +239,8 @@ def _explicit_arguments(args: argparse.Namespace) -> dict[str, Any]:
     given = {name: getattr(args, name) for name in RUN_ARGUMENT_DEFAULTS if getattr(args, name) is not None}
     if "params" in given:
         given["params"] = str(Path(given["params"]).resolve())
+    if "protocol" in given:
+        given["protocol"] = str(Path(given["protocol"]))
     return given
 
 
@@ -308,12 +321,19 @@ def prepare(args: argparse.Namespace) -> Plan:
                 "empty directory (nothing in it is touched)"
             )
         arguments = {**RUN_ARGUMENT_DEFAULTS, **explicit}
+    protocol = None
+    if arguments["protocol"] is not None:
+        protocol, arguments = _with_protocol(args, arguments, explicit, recorded)
     scenario = arguments["scenario"]
     if scenario is None:
         raise UsageError(f"--scenario is required ({', '.join(SCENARIOS)} or all)")
-    if scenario != "all" and scenario not in SCENARIOS:
-        raise UsageError(f"unknown scenario '{scenario}' (known: {', '.join(SCENARIOS)}, all)")
-    scenarios = list(SCENARIOS) if scenario == "all" else [scenario]
+    # One scenario, a comma-separated list (as a protocol's runs record it), or all.
+    scenarios = (
+        protocol.scenarios if protocol else list(SCENARIOS) if scenario == "all" else scenario.split(",")
+    )
+    unknown = [name for name in scenarios if name not in SCENARIOS]
+    if unknown:
+        raise UsageError(f"unknown scenario '{unknown[0]}' (known: {', '.join(SCENARIOS)}, all)")
     if arguments["condition"] not in (*CONDITIONS, "both"):
         raise UsageError(f"unknown condition '{arguments['condition']}' (known: sv, v2i, both)")
     conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
@@ -339,12 +359,15 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(str(exc)) from None
     site = resolve_site(arguments["site"])
     params_file = Path(arguments["params"]) if arguments["params"] else None
-    specs, params = configure(scenarios, params_file, arguments["set"])
+    if protocol is not None:
+        specs, params = protocol.specs(), protocol.params()
+    else:
+        specs, params = configure(scenarios, params_file, arguments["set"])
     stack = stack_spec(arguments["algorithm"], arguments.get("perception"))
     load_agent_class(stack)
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
-    if scenario == "all":  # every scenario the site can host; the others are named with the reason
+    if scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
         scenarios, skipped = split_hosted(site, specs, params, conditions)
         for name, why in skipped.items():
             print(f"skipping scenario '{name}' on site {site.name}: {why}")
@@ -367,6 +390,9 @@ def prepare(args: argparse.Namespace) -> Plan:
         "chunk_size_pairs": arguments["chunk_size"],
     }
     scenario_overrides, _ = parse_set(arguments["set"])
+    if protocol is not None:
+        identity["protocol"] = protocol.record()
+        scenario_overrides = protocol.worker_overrides()
     versions = worker_versions()
     config = WorkerConfig(
         reference,
@@ -384,6 +410,41 @@ def prepare(args: argparse.Namespace) -> Plan:
     if recorded is not None:
         _check_same_run(plan, recorded)
     return plan
+
+
+def _with_protocol(
+    args: argparse.Namespace,
+    arguments: dict[str, Any],
+    explicit: dict[str, Any],
+    recorded: dict[str, Any] | None,
+) -> tuple[Any, dict[str, Any]]:
+    """The protocol's values in place of the flags: a protocol fixes everything but the number of
+    episodes and workers (and where the run goes). Another flag with --protocol is refused."""
+    from pedsafe_sumo.protocol import load_protocol
+
+    fixed = (
+        "scenario", "condition", "seed", "site", "params", "set", "algorithm", "chunk_size", "cluster",
+        "agent_timeout",
+    )  # fmt: skip
+    given = [name for name in fixed if getattr(args, name, None) not in (None, [])]
+    if args.protocol is not None and given:
+        flags = ", ".join(f"--{name.replace('_', '-')}" for name in given)
+        raise UsageError(
+            f"--protocol fixes every value: {flags} cannot be given with it (only --episodes, --workers)"
+        )
+    protocol = load_protocol(Path(arguments["protocol"]))
+    if recorded is not None and recorded.get("protocol", {}).get("sha256") != protocol.sha256:
+        raise UsageError(f"{arguments['protocol']} has changed since the run started (its SHA-256 differs)")
+    header = protocol.header
+    return protocol, {
+        **arguments,
+        "scenario": "all" if protocol.scenarios == list(SCENARIOS) else ",".join(protocol.scenarios),
+        "condition": header["conditions"],
+        "episodes": explicit.get("episodes", arguments["episodes"] if recorded else header["episodes"]),
+        "seed": header["seed"],
+        "site": header["site"],
+        "algorithm": header["algorithm"],
+    }
 
 
 def _check_same_run(plan: Plan, recorded: dict[str, Any]) -> None:

@@ -51,7 +51,8 @@ class WorkerConfig:
 
     site: str
     params: dict[str, Any]
-    scenario_overrides: dict[str, str]
+    #: --set scenario fields ("field") and a protocol's per-scenario values ("scenario:field").
+    scenario_overrides: dict[str, Any]
     algorithm: str
     #: SHA-256 of each site file as the driver read it (file name -> digest). A worker whose files differ
     #: (another machine, another checkout) refuses to run instead of giving other results.
@@ -237,15 +238,23 @@ def error_row(task: Task, condition: str, message: str, status: str = ERROR_STAT
     return row
 
 
+def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
+    """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
+    `<scenario>:<field>` keys (a protocol's per-scenario values) for this one."""
+    from pedsafe_sumo.scenarios.registry import get_scenario
+
+    common = {key: value for key, value in overrides.items() if ":" not in key}
+    own = {key.split(":", 1)[1]: value for key, value in overrides.items() if key.startswith(f"{name}:")}
+    return get_scenario(name).with_overrides(common).with_overrides(own)
+
+
 def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any], list[Any]]:
     """Both conditions of one paired episode: its rows, both results when either had an event (the case
     logs), and every result that ran (for --keep-logs all)."""
-    from pedsafe_sumo.scenarios.registry import get_scenario
-
     runner = _runner_for(config)
     rows, results = [], []
     try:
-        spec = get_scenario(task.scenario).with_overrides(config.scenario_overrides)
+        spec = scenario_spec(task.scenario, config.scenario_overrides)
         setup = runner.draw_setup(spec, task.seed)
     except Exception as exc:  # the pair cannot even be set up: both rows are errors
         message = f"{type(exc).__name__}: {exc}"

@@ -21,6 +21,7 @@ from pedsafe_sumo.scenarios.registry import (
     BackgroundVehicle,
     EpisodeSetup,
     PedestrianSetup,
+    SignalStaging,
     VehicleSetup,
     VehicleSize,
 )
@@ -87,6 +88,10 @@ def setup_from_dict(data: dict[str, Any]) -> EpisodeSetup:
         background=tuple(
             BackgroundVehicle(**{k: _tuples(v) for k, v in b.items()}) for b in data.get("background", [])
         ),
+        # Cases written before scenarios were placed in the signal program have none of these.
+        conflict_time_s=data.get("conflict_time_s", math.nan),
+        ped_crossing_id=data.get("ped_crossing_id", ""),
+        signals=SignalStaging(**data["signals"]) if data.get("signals") else None,
     )
 
 

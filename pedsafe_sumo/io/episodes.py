@@ -19,6 +19,8 @@ EPISODE_COLUMNS = (
     "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
     # collision semantics and end conditions (issue 12; safety.collision, sim.episode)
     "contact_stationary", "end_reason",
+    # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
+    "ego_signal", "ped_signal",
 )  # fmt: skip
 BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
@@ -26,6 +28,7 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
+    "ego_signal", "ped_signal",
 )  # fmt: skip
 INT_COLUMNS = ("episode", "seed")
 _NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)

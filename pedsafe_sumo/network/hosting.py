@@ -40,9 +40,10 @@ class StagingPoint:
     start: bool = False
 
 
-def staging_points(spec, approach) -> list[StagingPoint]:
+def staging_points(spec, approach, turn=None) -> list[StagingPoint]:
     """Where the scenario's pedestrian stands and walks until the middle of the approach's farthest lane
-    (network frame, m)."""
+    (network frame, m); for a turning scenario, along the crosswalk over the road turned into (`turn`,
+    scenarios.geometry.load_turn), from the end the pedestrian starts at."""
     from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES
 
     lanes = len(approach.lane_ids)
@@ -59,6 +60,17 @@ def staging_points(spec, approach) -> list[StagingPoint]:
                 f"crosswalk {approach.crosswalk_id}, {f * reach:.0%} across",
                 (ax + f * reach * (bx - ax), ay + f * reach * (by - ay)),
                 start=f == 0.0,
+            )
+            for f in np.linspace(0.0, 1.0, 5)
+        ]
+    if spec.placement == "turn":
+        near, far = turn.crosswalk_path
+        (ax, ay), (bx, by) = (near, far) if spec.ped_start_corner == "near" else (far, near)
+        return [
+            StagingPoint(
+                f"crosswalk {turn.crosswalk_id}, {f:.0%} across",
+                (ax + f * (bx - ax), ay + f * (by - ay)),
+                start=f == 0,
             )
             for f in np.linspace(0.0, 1.0, 5)
         ]
@@ -109,7 +121,9 @@ def _seen(spec, pose, points: list[StagingPoint], static) -> np.ndarray:
     return (result.visible_fraction >= spec.min_visible_fraction) & (result.height_px >= spec.min_height_px)
 
 
-def hosting_problem(spec, approach, roadside_units: dict, params: dict[str, Any], static=None) -> str | None:
+def hosting_problem(
+    spec, approach, roadside_units: dict, params: dict[str, Any], static=None, turn=None
+) -> str | None:
     """Why the site cannot host `spec` under V2I (one line), or None when it can."""
     from pedsafe_sumo.perception.pipeline import SensorSuite
 
@@ -121,7 +135,7 @@ def hosting_problem(spec, approach, roadside_units: dict, params: dict[str, Any]
 
     static = static if static is not None else StaticOccluders.empty()
     suite = SensorSuite.from_params(params["perception"], units)
-    points = staging_points(spec, approach)
+    points = staging_points(spec, approach, turn)
     seen = np.zeros(len(points), dtype=bool)
     for pose in suite.roadside_poses:
         seen |= _seen(suite.roadside, pose, points, static)
@@ -153,7 +167,17 @@ def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | N
     except ValueError as exc:
         return {name: f"cannot be staged: {exc}" for name in specs}
     static = load_static_occluders(site.file("poly.xml"), params["perception"]["occluders"])
-    return {name: hosting_problem(spec, approach, by_id, params, static) for name, spec in specs.items()}
+    from pedsafe_sumo.scenarios.geometry import load_turn
+
+    problems: dict[str, str | None] = {}
+    for name, spec in specs.items():
+        try:
+            turn = load_turn(site, spec.turn) if spec.placement == "turn" else None
+        except ValueError as exc:
+            problems[name] = f"cannot be staged: {exc}"
+            continue
+        problems[name] = hosting_problem(spec, approach, by_id, params, static, turn)
+    return problems
 
 
 def split_hosted(site, specs: dict, params: dict[str, Any], conditions) -> tuple[list[str], dict[str, str]]:
@@ -216,7 +240,13 @@ def hosted_count(site, poles: list[dict], poly_file: str) -> int:
         )
         for p in poles
     }
-    return sum(hosting_problem(spec, approach, units, params, static) is None for spec in SCENARIOS.values())
+    # The scenarios staged on the watched approach; the turning ones (issue 13) are hosted where these
+    # poles happen to see the crosswalk turned into, and do not move the poles the build places.
+    return sum(
+        hosting_problem(spec, approach, units, params, static) is None
+        for spec in SCENARIOS.values()
+        if spec.placement != "turn"
+    )
 
 
 @lru_cache(maxsize=4)

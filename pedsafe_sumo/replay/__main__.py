@@ -444,7 +444,9 @@ def _legend(scene_colours: bool) -> str:
 
 
 def gui_settings(delay_ms_per_step: float, step_length_s: float) -> str:
-    """sumo-gui view settings of the replay: the site's real-world colours, POI labels, the delay.
+    """sumo-gui view settings of the replay: the site's real-world colours, POI labels, the signal heads'
+    states (link rules: a red, yellow or green bar at the end of each controlled lane and crosswalk,
+    drawn from the traffic light's state at every step), the delay.
 
     sumo-gui 1.28 counts its delay in milliseconds per simulated second (it scales the value by the
     step length, whatever its help text says): 1000 plays in real time. --delay is per step.
@@ -455,6 +457,7 @@ def gui_settings(delay_ms_per_step: float, step_length_s: float) -> str:
         '    <scheme name="real world">\n'
         '        <pois poiType_show="1" poiType_size="50" poiType_color="255,255,255"\n'
         '              poiType_constantSize="1"/>\n'
+        '        <edges showLinkRules="1" showLinkDecals="1"/>\n'
         "    </scheme>\n"
         f'    <delay value="{gui_delay:g}"/>\n'
         "</viewsettings>\n"

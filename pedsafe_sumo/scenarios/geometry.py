@@ -117,3 +117,92 @@ def load_approach(site: Site) -> Approach:
         crosswalk_width_m=crossing.getLane(0).getWidth(),
         junction_id=junction.getID(),
     )
+
+
+@dataclass(frozen=True)
+class Turn:
+    """A turning movement from the watched approach onto another arm of the junction."""
+
+    direction: str  # "right" or "left"
+    #: Index (kerb to median, as in Approach.lane_ids) of the approach lane the turn starts from.
+    lane_index: int
+    #: The approach, then the road the ego turns into.
+    route: tuple[str, str]
+    #: The ego's path: the approach lane's centreline, the junction's internal lane(s) of the
+    #: connection, then the first lane of the road turned into (network frame, metres).
+    path_xy: tuple[tuple[float, float], ...]
+    #: Length of the approach lane (where the path enters the junction) [m].
+    approach_length_m: float
+    #: The crosswalk over the road turned into, oriented from the corner nearer the approach's stop
+    #: line ("near": the corner the ego turns around on a right turn) to the other.
+    crosswalk_id: str
+    crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
+
+
+#: SUMO's connection directions of the turns (https://sumo.dlr.de/docs/Networks/PlainXML.html).
+_TURN_DIRECTIONS = {"right": "r", "left": "l"}
+
+
+@lru_cache(maxsize=8)
+def load_turn(site: Site, direction: str) -> Turn:
+    """The `direction` turn of the watched approach: from the kerb lane (right) or the median lane
+    (left), onto the arm whose heading differs by the nearest to 90 degrees; raises ValueError when
+    the approach has no such connection or the arm no crosswalk."""
+    if direction not in _TURN_DIRECTIONS:
+        raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
+    approach = load_approach(site)
+    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
+    lane = net.getLane(approach.lane_ids[lane_index])
+    connections = [c for c in lane.getOutgoing() if c.getDirection() == _TURN_DIRECTIONS[direction]]
+    if not connections:
+        raise ValueError(f"site {site.name}: no {direction} turn from lane {lane.getID()}")
+    (ax, ay), (bx, by) = lane.getShape()[-2:]
+    heading_in = math.atan2(by - ay, bx - ax)
+    wanted = -math.pi / 2 if direction == "right" else math.pi / 2
+
+    def turn_error(connection) -> float:
+        (px, py), (qx, qy) = connection.getToLane().getShape()[:2]
+        change = (math.atan2(qy - py, qx - px) - heading_in + math.pi) % (2 * math.pi) - math.pi
+        return abs(change - wanted)
+
+    connection = min(connections, key=turn_error)
+    path = [tuple(p) for p in lane.getShape()]
+    internal = net.getLane(connection.getViaLaneID())
+    while internal.getEdge().getFunction() == "internal":
+        path += [tuple(p) for p in internal.getShape()]
+        internal = internal.getOutgoing()[0].getToLane()
+    path += [tuple(p) for p in internal.getShape()]
+    # Drop repeated points where one lane's shape ends at the next one's start.
+    path_xy = [path[0]]
+    for point in path[1:]:
+        if math.dist(point, path_xy[-1]) > 1e-6:
+            path_xy.append(point)
+    target = connection.getTo()
+    crossing = next(
+        (
+            c
+            for c in net.getEdges(withInternal=True)
+            if c.getFunction() == "crossing"
+            and target in c._crossingEdges
+            and c.getToNode().getID() == approach.junction_id
+        ),
+        None,
+    )
+    if crossing is None:
+        raise ValueError(
+            f"site {site.name}: no crosswalk over {target.getID()}, the road the {direction} turn enters"
+        )
+    a, b = (tuple(p) for p in (crossing.getLane(0).getShape()[0], crossing.getLane(0).getShape()[-1]))
+    stop_line = approach.lane_shapes[lane_index][-1]
+    if math.dist(b, stop_line) < math.dist(a, stop_line):
+        a, b = b, a
+    return Turn(
+        direction=direction,
+        lane_index=lane_index,
+        route=(approach.edge_id, target.getID()),
+        path_xy=tuple(path_xy),
+        approach_length_m=approach.lane_lengths_m[lane_index],
+        crosswalk_id=crossing.getID(),
+        crosswalk_path=(a, b),
+    )

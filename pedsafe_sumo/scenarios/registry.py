@@ -1,20 +1,26 @@
-"""The three safety-critical scenarios of the paper, as frozen data in one registry.
+"""The safety-critical scenarios, as frozen data in one registry.
 
 `--scenario NAME` is a lookup in SCENARIOS; `--set key=value` replaces fields of the spec (an unknown
 key or a value out of range is an error). `draw_episode(spec, approach, seed, ...)` turns a spec and
 a seed into one concrete initial world (EpisodeSetup): the same seed gives the same world, whatever
 the condition (SV or V2I) it is then run under.
 
-Staging (see scenarios/geometry.py): the ego drives the kerb-far (left) lane of the watched approach;
-the pedestrian comes from the kerb-side sidewalk and crosses towards the median:
-- crossing: on the signalised crosswalk at the stop line, stepping out in front of a black vehicle
-  stopped at the stop line in the kerb lane (the head of a short queue), which hides them from the
-  ego (the "multiple threat" crosswalk crash);
-- jaywalking: mid-block, 30-45 m before the crosswalk, through the gap between vehicles queued or
-  parked in the kerb lane; the ego cruises at a stable (non-intersection) speed;
+Staging (see scenarios/geometry.py and docs/engine.md): the occluder stands in the kerb lane of the
+watched approach; the ego drives the lane next to it on the side the pedestrian crosses towards (the
+pedestrian comes from the kerb-side sidewalk and crosses towards the median). Every staging is placed in
+the junction's real signal program (scenarios/signals.py): the ego has green in every scenario.
+- crossing: the pedestrian crosses on the crosswalk at the stop line against the red (red-light running
+  by pedestrians, Zhu et al. 2021), stepping out in front of a black vehicle stopped at the stop line in
+  the kerb lane (the head of a short queue), which hides them from the ego (the "multiple threat"
+  crosswalk crash). The kerb lane carries the right turn: its head vehicle waits at the stop line on
+  green, as right-turners do, for the pedestrians on the crosswalk of the road it turns into (the
+  program gives that crosswalk its walk signal with the approach's green); the queue waits behind it;
+- jaywalking: mid-block, 30-45 m before the crosswalk (no signal: ped_signal none), through the gap
+  between vehicles queued or parked in the kerb lane; the ego cruises at a stable speed on green;
 - background_blending: standing just behind the rear bumper of a vehicle waiting at the stop line in
-  the kerb lane, closer to it than the LiDAR cluster tolerance and dressed in its colour, so that seen
-  from the ego the vehicle is right behind them, then crossing towards the median.
+  the kerb lane (a right-turner yielding, as in crossing), closer to it than the LiDAR can separate and
+  dressed in its colour, so that seen from the ego the vehicle is right behind them, then crossing
+  towards the median beside the crosswalk while it shows red.
 """
 
 from __future__ import annotations
@@ -27,7 +33,14 @@ from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.scenarios.geometry import Approach
+from pedsafe_sumo.scenarios.geometry import Approach, Turn
+from pedsafe_sumo.scenarios.signals import (
+    NO_LINK,
+    SIGNAL_STATES,
+    JunctionSignals,
+    SignalStagingError,
+    draw_cycle_start_s,
+)
 
 #: Car body colours drawn for occluders and waiting vehicles (RGB 0-255): white, black, silver, grey,
 #: red, blue - the common colours of the Beijing fleet.
@@ -50,6 +63,13 @@ CLOTHING_COLOURS_RGB = (
 )
 OCCLUDER_BLACK_RGB = (20, 20, 20)
 EGO_BLUE_RGB = (30, 110, 255)
+
+
+#: Scenario fields that hold text; every other field is a number.
+STRING_FIELDS = (
+    "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
+    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class",
+)  # fmt: skip
 
 
 class ScenarioError(ValueError):
@@ -127,15 +147,17 @@ class ScenarioSpec:
     #: Bumper-to-bumper gaps inside the queue [m].
     queue_gap_min_m: float = 1.5
     queue_gap_max_m: float = 3.0
-    #: Gap between the blending pedestrian's body and the waiting vehicle's rear [m], below the LiDAR
-    #: cluster tolerance (0.5 m). The LiDAR merges them only when a return on the pedestrian lies
-    #: within the tolerance of one on the vehicle; its returns on a 0.3 m-radius body face the ego,
-    #: 0.3-0.5 m in front of the body's back, so over 200 starts it separated the standing pedestrian
-    #: within 0.25 s in 96% with this range and in 45% with 0-0.1 m. The paper explains its blending
-    #: results by camera and LiDAR complementing each other (perception failure rare); the gap sweep
-    #: in EXPERIMENTS.md shows how the rates follow the gap.
-    blend_gap_min_m: float = 0.1
-    blend_gap_max_m: float = 0.4
+    #: Gap between the blending pedestrian's body circle and the waiting vehicle's rear [m]. Background
+    #: blending as the paper defines it (issue 13 item 3): the LiDAR cannot separate them. It merges
+    #: them when a return on the body lies within the cluster tolerance (0.5 m) of one on the vehicle;
+    #: the body's returns face the ego, the nearest to the vehicle at the silhouette's edges, 0.3 m (the
+    #: body radius) plus the gap in front of the bumper, plus up to ~0.2 m where the 0.2 deg azimuth
+    #: step misses the very edge at 30-40 m. So only a circle touching the bumper stays merged; the
+    #: circle is deeper than a standing adult (chest depth about 0.25-0.3 m), so this is a person with
+    #: their back about 0.15 m from it. Measured at the start, under SV: 0 of 30 detected by the LiDAR
+    #: centred at gap 0, 8 of 30 at 0-0.1 m, 27 of 30 at the former 0.1-0.4 m (docs/engine.md).
+    blend_gap_min_m: float = 0.0
+    blend_gap_max_m: float = 0.0
     #: Ego initial speeds outside this range are clipped (the lognormal tails reach 1.5 and 25 m/s) [m/s].
     ego_speed_min_mps: float = 2.0
     ego_speed_max_mps: float = 20.0
@@ -152,6 +174,29 @@ class ScenarioSpec:
     #: watches it: the corner pole for crossing and jaywalking; for background blending also the
     #: far-side pole, because from the corner the waiting vehicle hides the pedestrian behind it.
     roadside_units: str = "rsu_camera_0"
+    #: The signal each road user has at the conflict (green, yellow, red or none), from the junction's
+    #: program (scenarios/signals.py): the episode starts at a point of the cycle where the ego's and the
+    #: pedestrian's signals show these from the start until `signal_hold_after_s` after the staged
+    #: conflict. The ego has green in every scenario: a straight-through ego never meets red by accident.
+    ego_signal: str = "green"
+    #: crossing: the pedestrian crosses against the red (red-light running by pedestrians, the violation
+    #: the paper cites, Zhu et al. 2021); none: no signal controls where they cross (mid-block).
+    ped_signal: str = "red"
+    #: How long after the staged conflict (the ego's front at the conflict point at its initial speed) the
+    #: signal states must still hold [s]: the +-0.6 s conflict window plus a reaction (assumption).
+    signal_hold_after_s: float = 2.0
+    #: Turning scenarios (placement "turn"): "right" or "left", and the end of the crosswalk over the
+    #: road turned into that the pedestrian starts from ("near": nearer the approach's stop line, the
+    #: corner a right-turner turns around).
+    turn: str = ""
+    ped_start_corner: str = "near"
+    #: How long the pedestrian's signal must show `ped_signal`: "conflict" from stepping off until after
+    #: the conflict (crossing against the red all the way); "step_off" when they step off only (a
+    #: pedestrian who started on the walk signal may still be on the crosswalk in the clearance
+    #: interval that follows it, as the law allows).
+    ped_signal_hold: str = "conflict"
+    #: Class of the vehicle the blending pedestrian stands behind ("" draws it like a queued vehicle).
+    waiting_vehicle_class: str = ""
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -159,7 +204,14 @@ class ScenarioSpec:
 
     def __post_init__(self) -> None:
         checks = [
-            (self.placement in ("crosswalk", "midblock", "behind_waiting_vehicle"), "placement"),
+            (self.placement in ("crosswalk", "midblock", "behind_waiting_vehicle", "turn"), "placement"),
+            ((self.placement == "turn") == (self.turn in ("right", "left")), "turn is right or left (only)"),
+            (self.ped_start_corner in ("near", "far"), "ped_start_corner is near or far"),
+            (self.ped_signal_hold in ("conflict", "step_off"), "ped_signal_hold is conflict or step_off"),
+            (
+                self.waiting_vehicle_class in ("", *VEHICLE_CLASSES),
+                f"waiting_vehicle_class in {sorted(VEHICLE_CLASSES)} or empty",
+            ),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
@@ -186,6 +238,9 @@ class ScenarioSpec:
             (self.background_traffic in (0, 1), "background_traffic is 0 or 1"),
             (self.background_warmup_s >= 0, "background_warmup_s >= 0"),
             (all(self.roadside_unit_ids), "roadside_units is a comma-separated list of POI ids"),
+            (self.ego_signal in SIGNAL_STATES, f"ego_signal in {SIGNAL_STATES}"),
+            (self.ped_signal in SIGNAL_STATES, f"ped_signal in {SIGNAL_STATES}"),
+            (self.signal_hold_after_s >= 0, "signal_hold_after_s >= 0"),
         ]
         for ok, rule in checks:
             if not ok:
@@ -213,7 +268,7 @@ class ScenarioSpec:
         for key, value in overrides.items():
             if key not in names:
                 raise ScenarioError(f"unknown scenario parameter '{key}' (known: {', '.join(sorted(names))})")
-            if key in ("placement", "ego_speed_fit", "occluder_class", "roadside_units"):
+            if key in STRING_FIELDS:
                 changes[key] = str(value)
                 continue
             try:
@@ -231,10 +286,11 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     for spec in (
         ScenarioSpec(
             "crossing",
-            "a pedestrian on the signalised crosswalk steps out in front of a black vehicle stopped in the "
-            "kerb lane, which hides them from the ego",
+            "a pedestrian crossing against the red on the signalised crosswalk steps out in front of a "
+            "black right-turner waiting on green in the kerb lane, which hides them from the ego (green)",
             placement="crosswalk",
             ego_speed_fit="intersection",
+            ped_signal="red",
         ),
         ScenarioSpec(
             "jaywalking",
@@ -242,6 +298,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             "queued in the kerb lane, while the ego cruises at a stable speed",
             placement="midblock",
             ego_speed_fit="non_intersection",
+            ped_signal="none",
         ),
         ScenarioSpec(
             "background_blending",
@@ -249,7 +306,46 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             "closer to it than the LiDAR cluster tolerance",
             placement="behind_waiting_vehicle",
             ego_speed_fit="intersection",
+            ped_signal="red",
             roadside_units="rsu_camera_0,rsu_camera_1",
+        ),
+        ScenarioSpec(
+            "right_turn",
+            "the ego turns right on green from the kerb lane; a pedestrian steps onto the crosswalk of the "
+            "road it turns into with the walk signal, from the corner the ego turns around",
+            placement="turn",
+            ego_speed_fit="intersection",
+            turn="right",
+            ped_start_corner="near",
+            ped_signal="green",
+            ped_signal_hold="step_off",
+            # China's Road Traffic Safety Law Implementation Regulations, art. 46: at most 30 km/h when
+            # turning.
+            ego_speed_max_mps=8.33,
+            # Staging bound, not a behaviour fit: the pedestrian steps off within the 11 s walk signal
+            # that comes with the ego's green, so the ego (starting 3 m before the stop line) must reach
+            # the crosswalk within it: at 2.0-2.5 m/s 19 of 1,500 draws could not be staged (protocol
+            # paper-v2; paper-v1 had 2.0).
+            ego_speed_min_mps=2.5,
+            # The corner pole does not see where the pedestrian starts (the west crosswalk's north end);
+            # the far-side pole does (network/hosting.py; protocol paper-v3).
+            roadside_units="rsu_camera_0,rsu_camera_1",
+        ),
+        ScenarioSpec(
+            "left_turn",
+            "the ego turns left on a permissive green from the median lane; a pedestrian crosses the road "
+            "it turns into with the walk signal, from the far corner",
+            placement="turn",
+            ego_speed_fit="intersection",
+            turn="left",
+            ped_start_corner="far",
+            ped_signal="green",
+            ped_signal_hold="step_off",
+            ego_speed_max_mps=8.33,
+            # Staging bound, not a behaviour fit: the ego enters the junction on green and reaches the
+            # far crosswalk (about 40 m of turn on Xueqing) within the approach's green (16 s with its
+            # yellow-free part); slower left-turners cannot be staged there (issue 13, docs/engine.md).
+            ego_speed_min_mps=3.5,
         ),
     )
 }
@@ -318,6 +414,29 @@ class EpisodeSetup:
     conflict_offset_s: float
     time_limit_s: float
     background: tuple[BackgroundVehicle, ...] = ()
+    #: Seconds from the start until the ego's front reaches `conflict_xy` at its initial speed (the
+    #: staged conflict; the signal states are placed around it).
+    conflict_time_s: float = math.nan
+    #: The signalised crossing whose signal faces the pedestrian ("" when none does: mid-block).
+    ped_crossing_id: str = ""
+    #: Where the junction's signal program stands at the start (None: not staged, e.g. an old case).
+    signals: SignalStaging | None = None
+
+
+@dataclass(frozen=True)
+class SignalStaging:
+    """The junction's traffic light at the start of an episode, and the links of its road users."""
+
+    tls_id: str
+    program_id: str
+    #: Time of the program's cycle at the episode's t = 0 [s].
+    cycle_start_s: float
+    #: Link indices (SUMO's linkIndex) of the ego's connection and of the pedestrian's crossing
+    #: (signals.NO_LINK when no signal controls where they cross).
+    ego_link_index: int
+    ped_link_index: int
+    #: The right turn of the kerb lane, where the occluders wait (signals.NO_LINK when it has none).
+    occluder_link_index: int = NO_LINK
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
@@ -345,15 +464,23 @@ def draw_episode(
     pedestrian_traits: dict,
     ego_speed_mps: float,
     rng: np.random.Generator,
+    turn: Turn | None = None,
 ) -> EpisodeSetup:
-    """Place one episode of `spec` on the approach.
+    """Place one episode of `spec` on the approach (for a turning scenario, on `turn`).
 
     `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
     demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
     (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
     """
+    if spec.placement == "turn":
+        if turn is None:
+            raise ScenarioError(f"scenario '{spec.name}' needs the geometry of its {spec.turn} turn")
+        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, rng)
     ego_size = VEHICLE_CLASSES["car"]
-    kerb_lane, ego_lane = 0, len(approach.lane_ids) - 1
+    # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
+    # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
+    kerb_lane = 0
+    ego_lane = adjacent_lane(kerb_lane, +1, len(approach.lane_ids))
     kerb_lane_id = approach.lane_ids[kerb_lane]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
     radius_m = 0.3
@@ -418,12 +545,15 @@ def draw_episode(
     else:  # behind_waiting_vehicle
         gap_m = float(rng.uniform(spec.blend_gap_min_m, spec.blend_gap_max_m))
         waiting = random_vehicle("waiting_0", stop_line_pos - 0.5)
+        if spec.waiting_vehicle_class:
+            waiting = dataclasses.replace(waiting, size=VEHICLE_CLASSES[spec.waiting_vehicle_class])
         cross_pos = waiting.front_pos_m - waiting.size.length_m - gap_m - radius_m
-        # They already stand in the gap behind the vehicle, on its kerb-side half: seen from the ego
-        # behind them, the vehicle's rear is their background from the first frame. (Starting on the
-        # sidewalk, beside the vehicle as seen from the ego, both onboard sensors saw them before they
-        # ever blended: the first 500-pair run gave SV and V2I identical detection distances.)
-        start_offset_m = -(waiting.size.width_m / 2 - radius_m)
+        # They already stand right behind the vehicle, centred on its rear: seen from the ego behind
+        # them, the vehicle's rear surrounds them on both sides from the first frame. (On its kerb-side
+        # half, the LiDAR found the vehicle's returns on one side only and separated them at the start
+        # in 3 of 30 episodes even at gap 0; from the sidewalk both onboard sensors saw them before
+        # they ever blended.)
+        start_offset_m = 0.0
         path = approach.across(kerb_lane, cross_pos, start_offset_m, far_offset_m)
         parked.append(waiting)
         clothing = waiting.colour_rgb
@@ -440,6 +570,7 @@ def draw_episode(
         start_delay_s += (ego_size.length_m - front_pos) / ego_speed_mps
         front_pos = ego_size.length_m
     ego = VehicleSetup("ego", approach.lane_ids[ego_lane], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size)
+    conflict_time_s = (ego_conflict_pos - front_pos) / ego_speed_mps
     pedestrian = PedestrianSetup(
         path_xy=tuple((float(p[0]), float(p[1])) for p in path),
         start_delay_s=start_delay_s,
@@ -461,7 +592,121 @@ def draw_episode(
         conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
         time_limit_s=spec.time_limit_s,
+        conflict_time_s=float(conflict_time_s),
+        # Mid-block no signal faces the pedestrian; at the stop line (on the crosswalk or just beside
+        # it, behind the waiting vehicle) the crosswalk's signal does.
+        ped_crossing_id="" if spec.placement == "midblock" else approach.crosswalk_id,
     )
+
+
+def _pedestrian(traits: dict, clothing, start_delay_s: float, path) -> PedestrianSetup:
+    """The pedestrian of an episode (body sizes by gender and age, as in draw_episode)."""
+    height_m = {"m": 1.72, "f": 1.60}.get(traits["gender"], 1.66)
+    if traits["age_years"] < 19:
+        height_m -= 0.05
+    return PedestrianSetup(
+        path_xy=tuple((float(p[0]), float(p[1])) for p in path),
+        start_delay_s=start_delay_s,
+        age_years=float(traits["age_years"]),
+        gender=str(traits["gender"]),
+        risk=str(traits["risk"]),
+        walking_speed_mps=float(traits["walking_speed_mps"]),
+        clothing_rgb=(int(clothing[0]), int(clothing[1]), int(clothing[2])),
+        radius_m=0.3,
+        height_m=height_m,
+    )
+
+
+#: SUMO inserts a vehicle before a minor (yielding) link only if it could stop before it: even with the
+#: ego's hard insertion decel (sim/episode.py) it refused fronts within 2 m of the stop line at 2-8.3 m/s
+#: (measured on Xueqing's right and left turns); 3 m leaves a margin.
+TURN_START_BEFORE_STOP_LINE_M = 3.0
+
+
+def _draw_turn_episode(
+    spec: ScenarioSpec,
+    approach: Approach,
+    turn: Turn,
+    seed: int,
+    traits: dict,
+    ego_speed_mps: float,
+    rng: np.random.Generator,
+) -> EpisodeSetup:
+    """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
+    left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
+    gives it), the ego turns on its green and must yield to them."""
+    import sumolib
+
+    ego_size = VEHICLE_CLASSES["car"]
+    ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
+    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
+    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    near, far = turn.crosswalk_path
+    start, end = (near, far) if spec.ped_start_corner == "near" else (far, near)
+    # From 1 m back on the sidewalk to 1 m beyond the crosswalk's other end.
+    length = math.dist(start, end)
+    ux, uy = (end[0] - start[0]) / length, (end[1] - start[1]) / length
+    path = ((start[0] - ux, start[1] - uy), (end[0] + ux, end[1] + uy))
+    conflict_xy = _crossing_with_polyline(turn.path_xy, path)
+    walk_to_conflict_s = math.dist(path[0], conflict_xy) / traits["walking_speed_mps"]
+    start_delay_s = spec.ped_start_delay_s
+    ego_conflict_pos = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(conflict_xy, turn.path_xy)
+    arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
+    front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
+    # The ego starts on the approach lane with its whole body on it, TURN_START_BEFORE_STOP_LINE_M
+    # before the stop line at the latest.
+    latest_m = turn.approach_length_m - TURN_START_BEFORE_STOP_LINE_M
+    if front_pos > latest_m:
+        # The pedestrian would reach the conflict before the ego could come from the stop line: they
+        # wait longer on the kerb instead.
+        start_delay_s += (front_pos - latest_m) / ego_speed_mps
+        front_pos = latest_m
+    if front_pos < ego_size.length_m:
+        start_delay_s += (ego_size.length_m - front_pos) / ego_speed_mps
+        front_pos = ego_size.length_m
+    ego = VehicleSetup(
+        "ego", approach.lane_ids[turn.lane_index], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size
+    )
+    return EpisodeSetup(
+        scenario=spec.name,
+        seed=seed,
+        ego=ego,
+        ego_route=turn.route,
+        pedestrian=_pedestrian(traits, clothing, start_delay_s, path),
+        parked=(),
+        conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
+        conflict_offset_s=conflict_offset_s,
+        time_limit_s=spec.time_limit_s,
+        conflict_time_s=float((ego_conflict_pos - front_pos) / ego_speed_mps),
+        ped_crossing_id=turn.crosswalk_id,
+    )
+
+
+def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
+    """First intersection of the pedestrian's straight path with a polyline (the ego's turn path)."""
+    (ax, ay), (bx, by) = path
+    for (px, py), (qx, qy) in zip(polyline[:-1], polyline[1:]):
+        d1x, d1y, d2x, d2y = bx - ax, by - ay, qx - px, qy - py
+        denom = d1x * d2y - d1y * d2x
+        if abs(denom) < 1e-12:
+            continue
+        t = ((px - ax) * d2y - (py - ay) * d2x) / denom
+        u = ((px - ax) * d1y - (py - ay) * d1x) / denom
+        if 0 <= t <= 1 and 0 <= u <= 1:
+            return ax + t * d1x, ay + t * d1y
+    raise ScenarioError("the pedestrian's path does not cross the ego's turn")
+
+
+def adjacent_lane(occluder_lane: int, towards: int, n_lanes: int) -> int:
+    """The lane next to `occluder_lane` in the direction the pedestrian crosses (+1: towards the
+    median, lanes counted from the kerb), where the ego drives."""
+    lane = occluder_lane + towards
+    if not 0 <= lane < n_lanes:
+        raise ScenarioError(
+            f"the approach has {n_lanes} vehicle lane(s): no lane next to lane {occluder_lane} on the side "
+            "the pedestrian crosses towards"
+        )
+    return lane
 
 
 def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[float, float]:
@@ -478,3 +723,42 @@ def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[floa
         if 0 <= t <= 1 and 0 <= u <= 1:
             return ax + t * d1x, ay + t * d1y
     raise ValueError("the pedestrian's path does not cross the ego's lane")
+
+
+def stage_signals(
+    spec: ScenarioSpec, setup: EpisodeSetup, junction: JunctionSignals | None, rng: np.random.Generator
+) -> EpisodeSetup:
+    """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
+    (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
+    start, and the pedestrian's from the moment they step off, until `signal_hold_after_s` after the
+    staged conflict. SignalStagingError when the program has no such time (the message says which)."""
+    if junction is None:
+        # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so
+        # (ego_signal and ped_signal "none").
+        return setup
+    ego_link = junction.vehicle_link(setup.ego.lane_id, setup.ego_route[1])
+    ped_link = junction.crossing_link(setup.ped_crossing_id) if setup.ped_crossing_id else NO_LINK
+    if (ped_link == NO_LINK) != (spec.ped_signal == "none"):
+        where = f"crossing {setup.ped_crossing_id}" if setup.ped_crossing_id else "a mid-block crossing"
+        raise SignalStagingError(
+            f"scenario '{spec.name}': ped_signal {spec.ped_signal} does not fit {where} "
+            f"({'signalised' if ped_link != NO_LINK else 'no signal'})"
+        )
+    until_s = setup.conflict_time_s + spec.signal_hold_after_s
+    # The ego from the start (it sees its signal all the way to the stop line), the pedestrian from
+    # stepping off the kerb, both until after the conflict.
+    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
+    if ped_link != NO_LINK:
+        step_off_s = min(setup.pedestrian.start_delay_s, until_s)
+        ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
+        required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
+    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, rng)
+    staging = SignalStaging(
+        tls_id=junction.program.tls_id,
+        program_id=junction.program.program_id,
+        cycle_start_s=round(cycle_start_s, 6),
+        ego_link_index=ego_link,
+        ped_link_index=ped_link,
+        occluder_link_index=junction.turn_link(setup.parked[0].lane_id, "r") if setup.parked else NO_LINK,
+    )
+    return dataclasses.replace(setup, signals=staging)

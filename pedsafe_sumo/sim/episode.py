@@ -62,16 +62,19 @@ from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
-from pedsafe_sumo.scenarios.geometry import load_approach
+from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
     VEHICLE_CLASSES,
     BackgroundVehicle,
     EpisodeSetup,
     ScenarioSpec,
+    SignalStaging,
     VehicleSetup,
     draw_episode,
+    stage_signals,
 )
+from pedsafe_sumo.scenarios.signals import SignalStagingError, colour_of_link, load_junction_signals
 from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
@@ -82,6 +85,8 @@ CONDITIONS = ("sv", "v2i")
 DEFAULT_ALGORITHM = "pedsafe_sumo.control.reference:ReferenceStack"
 STEP_LENGTH_S = 0.05
 PED_ID = "ped"
+#: The ego's SUMO deceleration [m/s2]: only SUMO's insertion check reads it (see _add_vehicle).
+EGO_INSERTION_DECEL_MPS2 = 50.0
 EGO_ID = "ego"
 #: How far around the pedestrian SUMO searches for a lane to map them onto after each moveToXY [m].
 #: SUMO's default (100 m) makes the call scan every lane and walking area of the junction each step
@@ -107,6 +112,8 @@ class EpisodeResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     #: SUMO's own record of the ego-pedestrian collision: {"time_s", "ego_speed_mps", "type"}, or {}.
     sumo_collision: dict[str, Any] = field(default_factory=dict)
+    #: SUMO's link-state string of the junction's traffic light at every logged step ("" without one).
+    signal_states: list[str] = field(default_factory=list)
 
 
 #: The files of a site an episode reads (besides the sumo-gui view settings): the network, the
@@ -127,6 +134,8 @@ class SiteData:
     background_lanes: list
     edge_lengths: dict[str, float]
     route_edges: dict[str, tuple[str, ...]]
+    #: The main junction's traffic-light program and link indices (None when it has no traffic light).
+    signals: Any = None
 
 
 def load_site_data(site: Site, params: dict[str, Any]) -> SiteData:
@@ -147,7 +156,71 @@ def load_site_data(site: Site, params: dict[str, Any]) -> SiteData:
         background_lanes=background_lanes,
         edge_lengths={lane.edge_id: lane.length_m for lane in demand_site.entering_lanes},
         route_edges={rid: edges for edges, rid in route_ids(background_lanes).items()},
+        signals=_junction_signals(site, approach.junction_id),
     )
+
+
+def _junction_signals(site: Site, junction_id: str):
+    """The junction's signal program read from the site's network, or None when it has no traffic light."""
+    try:
+        return load_junction_signals(site.file("net.xml"), junction_id)
+    except SignalStagingError as exc:
+        if "has no traffic light" in str(exc):
+            return None
+        raise
+
+
+def start_signals(api, staging: SignalStaging | None, program=None) -> None:
+    """Put the junction's traffic light at the staged point of its cycle, at the episode's t = 0.
+
+    SUMO must run the program the staging was drawn from (read from the same network): a program with
+    other phases would give other signal states, so that is an error, not a silent difference.
+    """
+    if staging is None:
+        return
+    tls = staging.tls_id
+    if api.trafficlight.getProgram(tls) != staging.program_id:
+        api.trafficlight.setProgram(tls, staging.program_id)
+    logic = next(
+        (p for p in api.trafficlight.getAllProgramLogics(tls) if p.programID == staging.program_id), None
+    )
+    if logic is None:
+        raise RuntimeError(f"SUMO has no program {staging.program_id} for traffic light {tls}")
+    durations_s = [float(phase.duration) for phase in logic.phases]
+    if program is not None and (
+        tuple(durations_s) != program.durations_s or tuple(p.state for p in logic.phases) != program.states
+    ):
+        raise RuntimeError(
+            f"SUMO runs another program {staging.program_id} for traffic light {tls} than the one the "
+            "episode was staged in (read from the site's network)"
+        )
+    elapsed_s = staging.cycle_start_s % sum(durations_s)
+    for index, duration_s in enumerate(durations_s):
+        if elapsed_s < duration_s or index == len(durations_s) - 1:
+            api.trafficlight.setPhase(tls, index)
+            api.trafficlight.setPhaseDuration(tls, duration_s - elapsed_s)
+            return
+        elapsed_s -= duration_s
+
+
+def conflict_step(log: pd.DataFrame, setup: EpisodeSetup) -> int:
+    """Row of the log at the staged conflict: the first step at or after `setup.conflict_time_s` (the
+    ego's front at the conflict point had nobody reacted), or the last step when the episode ended
+    before it (a collision just before it). Not the closest approach: once an ego has stopped for the
+    pedestrian their closest approach can come many seconds later, under the next phase."""
+    times = log["time_s"].to_numpy()
+    index = int(np.searchsorted(times, setup.conflict_time_s - 1e-9))
+    return min(index, len(times) - 1)
+
+
+def signals_at_conflict(log: pd.DataFrame, states: Sequence[str], setup: EpisodeSetup) -> tuple[str, str]:
+    """(ego_signal, ped_signal) that SUMO showed at the staged conflict (conflict_step). `states` holds
+    SUMO's link-state string of every logged step."""
+    staging = setup.signals
+    if staging is None or not len(log):
+        return "none", "none"
+    state = states[conflict_step(log, setup)]
+    return colour_of_link(state, staging.ego_link_index), colour_of_link(state, staging.ped_link_index)
 
 
 def _move_pedestrian(api, pose, radius_m: float) -> None:
@@ -213,6 +286,7 @@ class EpisodeRunner:
         self.background_lanes = data.background_lanes
         self._edge_lengths = data.edge_lengths
         self._route_edges = data.route_edges
+        self.signals = data.signals
         self.session = SumoSession(gui=gui)
 
     def close(self) -> None:
@@ -251,7 +325,9 @@ class EpisodeRunner:
             "risk": person.risk,
             "walking_speed_mps": person.speed_mps,
         }
-        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng)
+        turn = load_turn(self.site, spec.turn) if spec.placement == "turn" else None
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng, turn)
+        setup = stage_signals(spec, setup, self.signals, world_rng)
         if spec.background_traffic:
             setup = dataclasses.replace(setup, background=self._background(spec, traffic_seq))
         return setup
@@ -349,6 +425,13 @@ class EpisodeRunner:
             # The ego's speed is the AD stack's, not SUMO's: allow initial speeds above the limit.
             api.vehicletype.setSpeedFactor(type_id, 2.0)
             api.vehicletype.setMaxSpeed(type_id, 50.0)
+            # SUMO inserts a vehicle before a minor link (a turn that must yield) only if it could stop
+            # before it at its decel; the AD stack, not SUMO, brakes the ego (speed mode 0), so the
+            # check must not refuse a turning ego close to the stop line. Followers keep judging it by
+            # a passenger car's braking (apparent decel).
+            api.vehicletype.setApparentDecel(type_id, api.vehicletype.getDecel(type_id))
+            api.vehicletype.setDecel(type_id, EGO_INSERTION_DECEL_MPS2)
+            api.vehicletype.setEmergencyDecel(type_id, EGO_INSERTION_DECEL_MPS2)
         api.vehicle.add(
             vehicle.vehicle_id,
             route_id,
@@ -432,6 +515,7 @@ class EpisodeRunner:
         api = self.session.api
         tc = api.constants
         self._populate(api, setup)
+        start_signals(api, setup.signals, self.signals.program if self.signals else None)
         api.simulation.step()  # inserts everything at t = 0
         timings["sumo_s"] += clock() - started
 
@@ -502,6 +586,13 @@ class EpisodeRunner:
         ego_index = -1
 
         rows: list[dict[str, Any]] = []
+        # SUMO's link states of the junction at every logged step (for the signals at the conflict).
+        signal_states: list[str] = []
+        tls_state = (
+            (lambda tls=setup.signals.tls_id: api.trafficlight.getRedYellowGreenState(tls))
+            if setup.signals is not None
+            else (lambda: "")
+        )
         sumo_collision = False
         sumo_record: dict[str, Any] = {}
         # SUMO checks vehicle-person contact only on crossings and walking areas: the person's SUMO
@@ -628,6 +719,7 @@ class EpisodeRunner:
                         "command_refused": refused,
                     }
                 )
+                signal_states.append(tls_state())
                 timings["logging_s"] += clock() - t3
                 if on_step is not None:
                     on_step(api, rows[-1])
@@ -680,6 +772,7 @@ class EpisodeRunner:
         indexes = episode_indexes(
             log, ped.age_years, injury_model=self.injury_model, proximity_model=self.proximity_model
         )
+        ego_signal, ped_signal = signals_at_conflict(log, signal_states, setup)
         outcome = {
             "scenario": setup.scenario,
             "condition": condition,
@@ -692,10 +785,12 @@ class EpisodeRunner:
             **indexes,
             "sumo_collision": sumo_witness,
             "end_reason": end_reason,
+            "ego_signal": ego_signal,
+            "ped_signal": ped_signal,
             "status": "ok",
             "error": "",
         }
-        return EpisodeResult(setup, condition, log, outcome, end_reason, timings, sumo_record)
+        return EpisodeResult(setup, condition, log, outcome, end_reason, timings, sumo_record, signal_states)
 
     @staticmethod
     def _sumo_collision(api, time_s: float) -> dict[str, Any]:

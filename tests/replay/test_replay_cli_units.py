@@ -59,3 +59,16 @@ def test_delay_per_step_becomes_sumo_gui_delay_per_simulated_second(per_step_ms,
     settings = gui_settings(per_step_ms, step_s)
     assert re.search(r'<delay value="([0-9.]+)"/>', settings).group(1) == f"{gui_delay:g}"
     assert '<scheme name="real world">' in settings
+
+
+def test_replay_view_draws_the_signal_heads_states():
+    """sumo-gui draws each controlled link's state (red, yellow, green bar at the stop line and on the
+    crosswalks) when the view's <edges showLinkRules> is on; the replay's view turns it on, inside the
+    scheme it uses (SUMO's GUISettingsHandler reads <edges> there)."""
+    import xml.etree.ElementTree as ET
+
+    from pedsafe_sumo.replay.__main__ import gui_settings
+
+    root = ET.fromstring(gui_settings(50.0, 0.05))
+    edges = root.find("scheme/edges")
+    assert edges is not None and edges.get("showLinkRules") == "1"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pedsafe_sumo.network.sites import get_site
-from pedsafe_sumo.scenarios.geometry import load_approach
+from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError, draw_episode, get_scenario
 
 TRAITS = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
@@ -21,7 +21,9 @@ def approach():
 
 
 def draw(name, seed, approach, speed=8.0, traits=TRAITS):
-    return draw_episode(get_scenario(name), approach, seed, traits, speed, np.random.default_rng(seed))
+    spec = get_scenario(name)
+    turn = load_turn(get_site("xueqing"), spec.turn) if spec.placement == "turn" else None
+    return draw_episode(spec, approach, seed, traits, speed, np.random.default_rng(seed), turn)
 
 
 def _segments_intersect(p, q, a, b):
@@ -48,7 +50,7 @@ def _footprint(approach, lane_id, front_pos_m, length_m, width_m):
 
 
 def test_registry_holds_the_three_scenarios_of_the_paper():
-    assert sorted(SCENARIOS) == ["background_blending", "crossing", "jaywalking"]
+    assert sorted(SCENARIOS) == ["background_blending", "crossing", "jaywalking", "left_turn", "right_turn"]
     with pytest.raises(ScenarioError, match="unknown scenario 'parking'"):
         get_scenario("parking")
 
@@ -82,7 +84,7 @@ def test_same_seed_same_world_other_seed_other_world(name, approach):
     assert draw(name, 7, approach) != draw(name, 8, approach)
 
 
-@pytest.mark.parametrize("name", sorted(SCENARIOS))
+@pytest.mark.parametrize("name", sorted(n for n, s in SCENARIOS.items() if s.placement != "turn"))
 def test_ego_reaches_the_conflict_point_at_the_drawn_offset(name, approach):
     setup = draw(name, 11, approach)
     ped = setup.pedestrian
@@ -92,9 +94,44 @@ def test_ego_reaches_the_conflict_point_at_the_drawn_offset(name, approach):
     fx, fy, _ = approach.pose(index, setup.ego.front_pos_m)
     ego_s = math.dist((fx, fy), setup.conflict_xy) / setup.ego.speed_mps
     assert ego_s == pytest.approx(ped.start_delay_s + walk_s + setup.conflict_offset_s, abs=0.05)
-    # The path starts on the kerb side of the kerb lane and ends beyond the ego's lane.
+    # The path starts at the kerb lane's centre (blending: behind the waiting vehicle) or on its kerb
+    # side, at least a lane width from the ego lane's centre.
     kerb_x, kerb_y, _ = approach.pose(0, approach.lane_lengths_m[0] - 5)
-    assert math.dist(ped.path_xy[0], setup.conflict_xy) > approach.lane_width_m
+    assert math.dist(ped.path_xy[0], setup.conflict_xy) >= approach.lane_width_m - 0.01
+
+
+@pytest.mark.parametrize("name", ["right_turn", "left_turn"])
+def test_turning_ego_reaches_the_crosswalk_conflict_at_the_drawn_offset(name, approach):
+    """Along the turn path (walked here segment by segment), the ego's front reaches the point where the
+    pedestrian's path crosses it when the pedestrian does, plus the drawn offset; the point lies on the
+    crosswalk over the road turned into, and the ego starts on the approach before the stop line."""
+    turn = load_turn(get_site("xueqing"), get_scenario(name).turn)
+    for seed in range(5):
+        setup = draw(name, seed, approach, speed=5.0)
+        ped = setup.pedestrian
+        path = np.array(turn.path_xy)
+        seg = np.hypot(*np.diff(path, axis=0).T)
+        along = np.concatenate([[0.0], np.cumsum(seg)])
+        # Distance along the path to the conflict point: the segment it lies on.
+        cx, cy = setup.conflict_xy
+        for i in range(len(path) - 1):
+            a, b = path[i], path[i + 1]
+            t = np.dot((cx - a[0], cy - a[1]), b - a) / seg[i] ** 2
+            if -1e-6 <= t <= 1 + 1e-6 and math.dist(a + t * (b - a), (cx, cy)) < 1e-6:
+                conflict_along = along[i] + t * seg[i]
+                break
+        else:
+            raise AssertionError("the conflict point is not on the turn path")
+        ego_s = (conflict_along - setup.ego.front_pos_m) / setup.ego.speed_mps
+        walk_s = math.dist(ped.path_xy[0], setup.conflict_xy) / ped.walking_speed_mps
+        assert ego_s == pytest.approx(ped.start_delay_s + walk_s + setup.conflict_offset_s, abs=1e-6)
+        assert setup.conflict_time_s == pytest.approx(ego_s)
+        assert setup.ego_route == turn.route and setup.ped_crossing_id == turn.crosswalk_id
+        assert 4.6 <= setup.ego.front_pos_m <= turn.approach_length_m - 3.0
+        # The crosswalk's line passes through the conflict point (collinear within a centimetre).
+        (ax, ay), (bx, by) = turn.crosswalk_path
+        cross = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        assert abs(cross) / math.dist((ax, ay), (bx, by)) < 0.01
 
 
 def test_jaywalker_crosses_30_to_45_m_before_the_crosswalk_between_parked_vehicles(approach):
@@ -148,8 +185,13 @@ def test_blending_pedestrian_passes_within_the_lidar_cluster_tolerance_of_the_ve
             (ax, ay), (bx, by)
         )
         gap = dist_to_line - setup.pedestrian.radius_m
-        assert 0.1 - 1e-6 <= gap <= 0.4 + 1e-6
+        spec = get_scenario("background_blending")
+        assert spec.blend_gap_min_m - 1e-6 <= gap <= spec.blend_gap_max_m + 1e-6
         assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
+        # They start centred on the vehicle's rear (on the kerb lane's centreline), facing the median.
+        assert math.dist(setup.pedestrian.path_xy[0], (rear_x, rear_y)) == pytest.approx(
+            setup.pedestrian.radius_m + gap, abs=1e-6
+        )
 
 
 def test_blending_pedestrian_starts_in_front_of_the_vehicle_rear_as_seen_from_the_ego(approach):

@@ -179,10 +179,12 @@ def test_bad_input_to_the_episode_cli_is_one_line_and_exit_2(args, message):
 
 
 @pytest.mark.slow
-def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_the_far_side_pole(runner):
-    """In SUMO, 1-3 s into the episode the pedestrian walks out from behind the waiting vehicle: from
-    the corner pole the vehicle is between them and the camera, from the far-side pole it is not.
-    Frames with a raw roadside detection, per pole, over 12 seeds."""
+def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_both_poles(runner):
+    """In SUMO, 1-3 s into the episode the pedestrian walks out from behind the waiting vehicle (centred
+    on its rear since issue 13). Frames with a raw roadside detection, per pole, over 12 seeds: each
+    pole sees frames the other misses, and the scenario's default (both poles) sees whenever either
+    does. (With the pedestrian on the vehicle's kerb-side half the far pole saw them in more than
+    three times as many frames as the corner pole; centred, the two see about as many.)"""
     spec = get_scenario("background_blending").with_overrides({"time_limit_s": "3.0"})
 
     def frames_seen(units: str, seed: int) -> int:
@@ -196,7 +198,8 @@ def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_the_far_s
     corner = [frames_seen("rsu_camera_0", seed) for seed in range(12)]
     far = [frames_seen("rsu_camera_1", seed) for seed in range(12)]
     default = [frames_seen(spec.roadside_units, seed) for seed in range(12)]
-    assert sum(far) > 3 * sum(corner), (far, corner)
+    assert sum(default) > max(sum(far), sum(corner)) > 0, (default, far, corner)
+    print(f"frames seen of {12 * 40}: corner {sum(corner)}, far {sum(far)}, both {sum(default)}")
     # The scenario's default (both poles) sees whenever either pole does.
     assert all(d >= max(c, f) for d, c, f in zip(default, corner, far))
 

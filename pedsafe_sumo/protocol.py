@@ -1,0 +1,393 @@
+"""Protocols: every value of a study fixed in one dated file before it runs (issue 13 item 4).
+
+    python -m pedsafe_sumo.batch --protocol protocols/paper-v3.toml --out DIR [--episodes N] [--workers K]
+    python -m pedsafe_sumo.protocol write paper-v4 --date 2026-12-01 --out protocols/paper-v4.toml
+
+A protocol file (TOML) holds:
+- [protocol]: name, date, description, scenarios (list), conditions, episodes, seed, site, algorithm;
+- [scenarios.<name>]: every field of each scenario's spec (scenarios/registry.py);
+- [parameters.<section>]: every value of the parameter file (params/defaults.toml).
+Above each value a comment gives its source or, for what the paper does not report, the reason it was
+chosen (`write` copies them from the comments of defaults.toml and of the registry's fields). A
+protocol that leaves out a scenario field or a parameter is refused: nothing falls back silently to
+defaults that may since have changed. The rule (docs/protocols.md): a change after seeing results is a
+new dated file, never an edit; run.json records the file and its SHA-256.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import hashlib
+import json
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import tomllib
+
+from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, validate
+from pedsafe_sumo.scenarios.registry import (
+    SCENARIOS,
+    ScenarioError,
+    ScenarioSpec,
+    get_scenario,
+)
+from pedsafe_sumo.settings import UsageError
+
+#: The keys of a protocol's [protocol] table.
+HEADER_KEYS = (
+    "name",
+    "date",
+    "description",
+    "scenarios",
+    "conditions",
+    "episodes",
+    "seed",
+    "site",
+    "algorithm",
+)
+#: Batch flags a protocol run accepts besides --protocol (and --out, --resume).
+OVERRIDABLE_FLAGS = ("episodes", "workers")
+
+
+class ProtocolError(UsageError):
+    """A protocol file that cannot be run as it stands (one line, exit 2)."""
+
+
+@dataclass(frozen=True)
+class Protocol:
+    path: Path
+    sha256: str
+    header: dict[str, Any]
+    #: Scenario name -> every field of its spec (but name and description), as the file gives them.
+    scenario_fields: dict[str, dict[str, Any]]
+    parameters: dict[str, Any]
+
+    @property
+    def scenarios(self) -> list[str]:
+        return list(self.header["scenarios"])
+
+    def specs(self) -> dict[str, ScenarioSpec]:
+        try:
+            return {
+                name: get_scenario(name).with_overrides(self.scenario_fields[name]) for name in self.scenarios
+            }
+        except ScenarioError as exc:
+            raise ProtocolError(f"protocol {self.path}: {exc}") from None
+
+    def params(self) -> dict[str, Any]:
+        params = load_params(None)
+        missing = sorted(set(_flatten(params)) - set(_flatten(self.parameters)))
+        if missing:
+            raise ProtocolError(
+                f"protocol {self.path} does not fix parameter(s) {', '.join(missing[:5])}"
+                + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+                + ": a protocol names every value (a new dated one: python -m pedsafe_sumo.protocol write)"
+            )
+        try:
+            _overlay_all(params, self.parameters, "")
+            validate(params)
+        except ParameterError as exc:
+            raise ProtocolError(f"protocol {self.path}: {exc}") from None
+        return params
+
+    def worker_overrides(self) -> dict[str, Any]:
+        """Per-scenario field values for the batch workers, as '<scenario>:<field>' keys."""
+        return {
+            f"{name}:{key}": value
+            for name in self.scenarios
+            for key, value in self.scenario_fields[name].items()
+        }
+
+    def record(self) -> dict[str, Any]:
+        """What run.json keeps of the protocol."""
+        return {
+            "file": str(self.path),
+            "sha256": self.sha256,
+            "name": self.header["name"],
+            "date": self.header["date"],
+        }
+
+
+def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        dotted = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict):
+            out.update(_flatten(value, dotted))
+        else:
+            out[dotted] = value
+    return out
+
+
+def _overlay_all(base: dict[str, Any], override: dict[str, Any], where: str) -> None:
+    for key, value in override.items():
+        dotted = f"{where}.{key}" if where else key
+        if key not in base:
+            raise ParameterError(f"unknown parameter '{dotted}'")
+        if isinstance(base[key], dict):
+            if not isinstance(value, dict):
+                raise ParameterError(f"parameter '{dotted}' must be a table")
+            _overlay_all(base[key], value, dotted)
+        else:
+            base[key] = value
+
+
+def spec_fields(spec: ScenarioSpec) -> dict[str, Any]:
+    return {k: v for k, v in dataclasses.asdict(spec).items() if k not in ("name", "description")}
+
+
+def load_protocol(path: Path) -> Protocol:
+    """Read and check a protocol file; raises ProtocolError naming the first problem."""
+    try:
+        data = path.read_bytes()
+        tree = tomllib.loads(data.decode("utf-8"))
+    except FileNotFoundError:
+        raise ProtocolError(f"protocol file not found: {path}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ProtocolError(f"protocol {path} is not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ProtocolError(f"cannot read protocol {path}: {exc.strerror or exc}") from None
+    unknown = sorted(set(tree) - {"protocol", "scenarios", "parameters"})
+    if unknown:
+        raise ProtocolError(f"protocol {path}: unknown table(s) {', '.join(unknown)}")
+    header = tree.get("protocol", {})
+    missing = [key for key in HEADER_KEYS if key not in header]
+    if missing:
+        raise ProtocolError(f"protocol {path}: [protocol] lacks {', '.join(missing)}")
+    extra = sorted(set(header) - set(HEADER_KEYS))
+    if extra:
+        raise ProtocolError(f"protocol {path}: unknown [protocol] key(s) {', '.join(extra)}")
+    scenarios = header["scenarios"]
+    if not isinstance(scenarios, list) or not scenarios or any(s not in SCENARIOS for s in scenarios):
+        raise ProtocolError(f"protocol {path}: scenarios must list known scenarios ({', '.join(SCENARIOS)})")
+    if header["conditions"] not in ("sv", "v2i", "both"):
+        raise ProtocolError(f"protocol {path}: conditions must be sv, v2i or both")
+    for key in ("episodes", "seed"):
+        if not isinstance(header[key], int) or header[key] < (1 if key == "episodes" else 0):
+            raise ProtocolError(f"protocol {path}: {key} must be a whole number (episodes >= 1, seed >= 0)")
+    fields = tree.get("scenarios", {})
+    for name in scenarios:
+        given = fields.get(name)
+        if given is None:
+            raise ProtocolError(f"protocol {path}: no [scenarios.{name}] table")
+        wanted = set(spec_fields(get_scenario(name)))
+        if set(given) != wanted:
+            lacks, unknown_fields = sorted(wanted - set(given)), sorted(set(given) - wanted)
+            raise ProtocolError(
+                f"protocol {path}: [scenarios.{name}] "
+                + (
+                    f"lacks {', '.join(lacks)}"
+                    if lacks
+                    else f"has unknown field(s) {', '.join(unknown_fields)}"
+                )
+            )
+    return Protocol(
+        path=path,
+        sha256=hashlib.sha256(data).hexdigest(),
+        header=header,
+        scenario_fields={name: fields[name] for name in scenarios},
+        parameters=tree.get("parameters", {}),
+    )
+
+
+# ------------------------------------------------------------------------------------------- writing
+def parameter_reasons(defaults_text: str) -> dict[str, str]:
+    """Dotted parameter key -> the comment of defaults.toml that gives its source or reason (the
+    comment on its line, else the comment block above it)."""
+    reasons: dict[str, str] = {}
+    section = ""
+    block: list[str] = []
+    # The comment block above a [section] header explains its keys that have none of their own (and
+    # those of the sections after it that have none either: [pedestrians.age_groups.*]).
+    section_note = ""
+    for raw in defaults_text.splitlines():
+        line = raw.strip()
+        if not line:
+            block = []
+            continue
+        if line.startswith("#"):
+            block.append(line.lstrip("#").strip())
+            continue
+        header = re.match(r"^\[([^\]]+)\]", line)
+        if header:
+            section = header.group(1).strip()
+            section_note = " ".join(block) or section_note
+            block = []
+            continue
+        assignment = re.match(r"^([A-Za-z0-9_]+)\s*=\s*(.*)$", line)
+        if assignment:
+            key = f"{section}.{assignment.group(1)}" if section else assignment.group(1)
+            inline = assignment.group(2).split(" #", 1)
+            text = inline[1].strip() if len(inline) == 2 else " ".join(block)
+            reasons[key] = text or " ".join(block) or section_note
+    return reasons
+
+
+def field_reasons(source: str) -> dict[str, str]:
+    """ScenarioSpec field -> its `#:` comment in scenarios/registry.py."""
+    reasons: dict[str, str] = {}
+    body = source.split("class ScenarioSpec", 1)[1].split("\n    @property", 1)[0]
+    block: list[str] = []
+    last = ""
+    for raw in body.splitlines():
+        line = raw.strip()
+        if line.startswith("#:"):
+            block.append(line[2:].strip())
+            continue
+        field = re.match(r"^([a-z_0-9]+)\s*:\s*[^=]+=", line) or re.match(r"^([a-z_0-9]+)\s*:\s*str$", line)
+        if field:
+            # A field without a comment of its own shares the one above (the max of a min/max pair).
+            reasons[field.group(1)] = " ".join(block) or last
+            last = reasons[field.group(1)]
+        block = []
+    return reasons
+
+
+def scenario_value_reasons(source: str) -> dict[tuple[str, str], str]:
+    """(scenario, field) -> the comment above that field's value in the scenario's SCENARIOS entry."""
+    reasons: dict[tuple[str, str], str] = {}
+    name = ""
+    block: list[str] = []
+    lines = source.split("\nSCENARIOS", 1)[-1].splitlines()
+    for previous, raw in zip(["", *lines], lines):
+        line = raw.strip()
+        if previous.strip() == "ScenarioSpec(":
+            name, block = line.strip('",'), []
+            continue
+        if line.startswith("#"):
+            block.append(line.lstrip("#").strip())
+            continue
+        value = re.match(r"^([a-z_0-9]+)=", line)
+        if value and name and block:
+            reasons[(name, value.group(1))] = " ".join(block)
+        block = []
+    return reasons
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {value!r} to TOML")
+
+
+def _comment(text: str, width: int = 108) -> list[str]:
+    words, lines, line = text.split(), [], "#"
+    for word in words:
+        if len(line) + 1 + len(word) > width:
+            lines.append(line)
+            line = "#"
+        line += " " + word
+    lines.append(line)
+    return lines
+
+
+def protocol_text(header: dict[str, Any]) -> str:
+    """A complete protocol: the header given, every scenario field and parameter as they stand now,
+    each with its source or reason."""
+    from pedsafe_sumo.scenarios import registry
+
+    registry_source = Path(registry.__file__).read_text(encoding="utf-8")
+    p_reasons = parameter_reasons(DEFAULTS_PATH.read_text(encoding="utf-8"))
+    f_reasons = field_reasons(registry_source)
+    v_reasons = scenario_value_reasons(registry_source)
+    out = [
+        f"# Protocol {header['name']}, fixed {header['date']} before any of its runs. Never edit it after",
+        "# a run: a change is a new dated file (docs/protocols.md). Above each value: its source, or for",
+        "# what the paper does not report, the reason it was chosen (python -m pedsafe_sumo.protocol write).",
+        "",
+        "[protocol]",
+    ]
+    for key in HEADER_KEYS:
+        out.append(f"{key} = {_toml_value(header[key])}")
+    for name in header["scenarios"]:
+        spec = get_scenario(name)
+        out += ["", f"[scenarios.{name}]", *_comment(spec.description)]
+        for key, value in spec_fields(spec).items():
+            default = next(f.default for f in dataclasses.fields(ScenarioSpec) if f.name == key)
+            reason = f_reasons.get(key, "")
+            own = v_reasons.get((name, key), "")
+            if default is dataclasses.MISSING:
+                reason = f"{reason} This scenario's value (scenarios/registry.py). {own}"
+            elif value != default:
+                reason = f"{reason} This scenario's value (scenarios/registry.py; default {default!r}). {own}"
+            out += [*_comment(reason or "(no reason recorded)"), f"{key} = {_toml_value(value)}"]
+
+    def tables(tree: dict[str, Any], prefix: str) -> None:
+        leaves = {k: v for k, v in tree.items() if not isinstance(v, dict)}
+        if leaves:
+            out.extend(["", f"[parameters.{prefix}]"])
+            for key, value in leaves.items():
+                dotted = f"{prefix}.{key}"
+                out.extend(
+                    [
+                        *_comment(p_reasons.get(dotted, "") or "(no reason recorded)"),
+                        f"{key} = {_toml_value(value)}",
+                    ]
+                )
+        for key, value in tree.items():
+            if isinstance(value, dict):
+                tables(value, f"{prefix}.{key}")
+
+    for section, tree in load_params(None).items():
+        tables(tree, section)
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m pedsafe_sumo.protocol", description=__doc__.splitlines()[0]
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    write = sub.add_parser("write", help="write a new protocol from today's scenarios and parameters")
+    write.add_argument("name")
+    write.add_argument("--out", type=Path, required=True)
+    write.add_argument("--date", default=datetime.date.today().isoformat())
+    write.add_argument("--description", default="")
+    write.add_argument("--scenarios", default=",".join(SCENARIOS))
+    write.add_argument("--conditions", default="both")
+    write.add_argument("--episodes", type=int, default=10000)
+    write.add_argument("--seed", type=int, default=1)
+    write.add_argument("--site", default="xueqing")
+    write.add_argument("--algorithm", default="pedsafe_sumo.control.reference:ReferenceStack")
+    args = parser.parse_args(argv)
+    if args.out.exists():
+        print(f"error: {args.out} exists: a protocol is never rewritten, choose a new name", file=sys.stderr)
+        return 2
+    header = {
+        "name": args.name,
+        "date": args.date,
+        "description": args.description,
+        "scenarios": [s for s in args.scenarios.split(",") if s],
+        "conditions": args.conditions,
+        "episodes": args.episodes,
+        "seed": args.seed,
+        "site": args.site,
+        "algorithm": args.algorithm,
+    }
+    unknown = [s for s in header["scenarios"] if s not in SCENARIOS]
+    if unknown:
+        print(
+            f"error: unknown scenario(s) {', '.join(unknown)} (known: {', '.join(SCENARIOS)})",
+            file=sys.stderr,
+        )
+        return 2
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(protocol_text(header), encoding="utf-8")
+    load_protocol(args.out).params()  # the file just written must load
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,40 @@
+"""Background blending as the paper defines it (issue 13 item 3): dressed in the colour of the vehicle
+behind them and close enough that the LiDAR cannot separate them, the standing pedestrian is detected
+by neither onboard sensor at the start under SV, in every episode of a seed sweep (real SUMO and the
+real sensor models)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pedsafe_sumo.control.reference import ReferenceStack
+from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.params import load_params
+from pedsafe_sumo.scenarios.registry import get_scenario
+
+
+@pytest.mark.slow
+def test_blending_pedestrian_is_not_detected_onboard_at_the_start_under_sv():
+    from pedsafe_sumo.sim.episode import EpisodeRunner
+
+    spec = get_scenario("background_blending")
+    runner = EpisodeRunner(get_site("xueqing"), load_params(), ReferenceStack)
+    seen_at_start = []
+    try:
+        for seed in range(15):
+            result = runner.run(spec, "sv", seed)
+            first = result.log.iloc[0]
+            setup = result.setup
+            # The staging itself: clothing is the waiting vehicle's colour, the body touches its rear.
+            waiting = setup.parked[0]
+            assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
+            if first["detected_onboard_camera"] or first["detected_onboard_lidar"]:
+                seen_at_start.append(seed)
+            # First detection (if any) is later than the first step.
+            if not math.isnan(result.outcome["first_detection_time_s"]):
+                assert result.outcome["first_detection_time_s"] > first["time_s"]
+    finally:
+        runner.close()
+    assert not seen_at_start, f"detected onboard at the start under SV in seeds {seen_at_start}"
