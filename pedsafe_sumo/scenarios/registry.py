@@ -113,6 +113,9 @@ SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
     "time_limit_s": (600.0, "20 times the default 30 s episode"),
     # The warm-up draws warmup + time limit seconds of demand on every entering lane.
     "background_warmup_s": (600.0, "vehicles that entered 10 minutes before have long left the site"),
+    # The signal must hold its state this long after the staged conflict: a fixed-time cycle is rarely
+    # longer than 180 s, so no start point in the cycle could satisfy a longer hold.
+    "signal_hold_after_s": (180.0, "longer than a signal cycle: no start point in the cycle satisfies it"),
 }
 
 
