@@ -17,7 +17,7 @@ import math
 import sys
 from pathlib import Path
 
-from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.hosting import check_hosting
@@ -137,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
+    parser.add_argument("--perception", help="replace the stack's detector by package.module:Class")
     parser.add_argument("--log", type=Path, help="write the per-step log as CSV (one file per condition)")
     parser.add_argument(
         "--case-dir", type=Path, help="write each episode as a case (Parquet log + JSON world)"
@@ -160,6 +161,7 @@ def main(argv: list[str] | None = None) -> int:
         check_roadside_units(specs, site)
         check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
+        args.algorithm = stack_spec(args.algorithm, args.perception)
         agent_class = load_agent_class(args.algorithm)
         if args.seed < 0:
             raise UsageError(f"--seed must not be negative, got {args.seed}")

@@ -37,7 +37,7 @@ from pedsafe_sumo.batch.executors import BatchError, DaskBackend, ProcessPoolBac
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
-from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
     RUN_FILE,
@@ -73,6 +73,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "params": None,
     "set": [],
     "algorithm": DEFAULT_ALGORITHM,
+    "perception": None,
     "chunk_size": None,
     "protocol": None,
     "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
@@ -192,6 +193,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
     parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--perception", help="replace the stack's detector by package.module:Class (docs/ad_interface.md)"
+    )
     parser.add_argument(
         "--agent-timeout",
         type=float,
@@ -359,7 +363,8 @@ def prepare(args: argparse.Namespace) -> Plan:
         specs, params = protocol.specs(), protocol.params()
     else:
         specs, params = configure(scenarios, params_file, arguments["set"])
-    load_agent_class(arguments["algorithm"])
+    stack = stack_spec(arguments["algorithm"], arguments.get("perception"))
+    load_agent_class(stack)
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
     if scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
@@ -379,7 +384,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "episodes_per_scenario": arguments["episodes"],
         "run_seed": arguments["seed"],
         "episode_seed_rule": EPISODE_SEED_RULE,
-        "algorithm": arguments["algorithm"],
+        "algorithm": stack,
         "parameters": params,
         "site_files_sha256": digests,
         "chunk_size_pairs": arguments["chunk_size"],
@@ -393,7 +398,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         reference,
         params,
         scenario_overrides,
-        arguments["algorithm"],
+        stack,
         digests,
         versions,
         keep_logs=arguments["keep_logs"],

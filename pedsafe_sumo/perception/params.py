@@ -204,6 +204,15 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     _non_negative(v2i, "position_noise_sigma_m", w)
     check_upper_bounds(v2i, V2I_UPPER_BOUNDS, w)
 
+    raw = section.get("raw")
+    if raw is not None:  # absent from the parameters of runs older than issue 15
+        w = f"{where}.raw"
+        for key in ("camera_image_width_px", "camera_image_height_px", "roadside_image_width_px",
+                    "roadside_image_height_px"):  # fmt: skip
+            _positive_int(raw, key, w)
+        _positive(raw, "render_max_distance_m", w)
+        _positive(raw, "signal_visibility_m", w)
+
     occ = section["occluders"]
     w = f"{where}.occluders"
     for key in ("building_type_prefixes", "canopy_type_prefixes", "hedge_type_prefixes"):

@@ -34,7 +34,14 @@ import pandas as pd
 
 from pedsafe_sumo.behaviour.pedestrian import BehaviourParams, PedestrianPose, PedestrianWalker, VehicleBodies
 from pedsafe_sumo.behaviour.sight import ego_in_sight
-from pedsafe_sumo.control.agent import Agent, Command, EgoState, Observation, PerceivedPedestrian
+from pedsafe_sumo.control.agent import (
+    Agent,
+    Command,
+    EgoState,
+    Observation,
+    PerceivedPedestrian,
+    check_sensor_names,
+)
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
@@ -68,7 +75,10 @@ from pedsafe_sumo.scenarios.registry import (
     stage_signals,
 )
 from pedsafe_sumo.scenarios.signals import SignalStagingError, colour_of_link, load_junction_signals
+from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
+from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
+from pedsafe_sumo.sim.road_map import load_net_map
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
 
 CONDITIONS = ("sv", "v2i")
@@ -544,6 +554,8 @@ class EpisodeRunner:
         walker = PedestrianWalker(ped.path_xy, self._behaviour(ped), start_delay_s=ped.start_delay_s)
         agent = self.agent_class()
         granted = {"onboard_camera", "onboard_lidar"} | ({"v2i"} if condition == "v2i" else set())
+        granted |= granted_names(condition)  # raw data and world feeds (issue 15), on request only
+        check_sensor_names(agent.sensors(), type(agent).__name__)
         agent.setup(
             {
                 # The parameter file's [algorithm] settings (older run.json files have none).
@@ -553,11 +565,15 @@ class EpisodeRunner:
                 "seed": seed,
                 "step_length_s": self.step_length_s,
                 "sensors": sorted(set(agent.sensors()) & granted),
+                "sensor_mounts": sensor_mounts(self.params["perception"]),
             }
         )
         wanted = set(agent.sensors()) & granted
         sensors = self.sensors_for(spec)
         link = V2ILink(sensors.v2i, np.random.default_rng(streams[3])) if "v2i" in wanted else None
+        feeds = ObservationFeeds.for_agent(
+            api, EGO_ID, wanted, condition, self.site.file("net.xml"), sensors, self.params["perception"]
+        )
         ped_ids = (PED_ID,)
         ped_radii = np.array([ped.radius_m], dtype=float)
         ped_heights = np.array([ped.height_m], dtype=float)
@@ -632,14 +648,9 @@ class EpisodeRunner:
                 t1 = clock()
                 timings["snapshot_s"] += t1 - t0
 
-                detections = perceive(
-                    snapshot,
-                    EgoPose(ego_x, ego_y, ego_yaw, EGO_ID),
-                    sensors,
-                    perception_rng,
-                    time_s,
-                    link,
-                )
+                ego_pose = EgoPose(ego_x, ego_y, ego_yaw, EGO_ID)
+                detections = perceive(snapshot, ego_pose, sensors, perception_rng, time_s, link)
+                extra = feeds.step(snapshot, ego_pose, ego_index, time_s) if feeds is not None else {}
                 t2 = clock()
                 timings["perception_s"] += t2 - t1
 
@@ -659,9 +670,16 @@ class EpisodeRunner:
                     EgoState(ego_x, ego_y, ego_yaw, ego_speed, ego_length, ego_width),
                     tuple(reported),
                     self.step_length_s,
+                    **extra,
                 )
                 command: Command = run_step(observation, time_s)
                 target_mps = max(0.0, float(command.target_speed_mps))
+                refused, steer = "", None
+                if wants_lateral(command):  # lane change or path (issue 15); refusals are logged
+                    net = load_net_map(str(self.site.file("net.xml")))
+                    refused, steer = plan_lateral(
+                        api, EGO_ID, command, net, (ego_x, ego_y), ego_length, target_mps, self.step_length_s
+                    )
                 t3 = clock()
                 timings["agent_s"] += t3 - t2
 
@@ -698,6 +716,7 @@ class EpisodeRunner:
                         "braking": bool(command.info.get("braking", False)),
                         "ped_state": pose.state,
                         "sumo_collision": sumo_collision,
+                        "command_refused": refused,
                     }
                 )
                 signal_states.append(tls_state())
@@ -723,6 +742,8 @@ class EpisodeRunner:
 
                 t4 = clock()
                 api.vehicle.setSpeed(EGO_ID, target_mps)
+                if steer is not None:
+                    steer()
                 bodies = VehicleBodies(centre_x, centre_y, yaw, lengths, widths, half_diagonals)
                 pose = walker.step(
                     self.step_length_s,
