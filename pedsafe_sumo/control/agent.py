@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -253,7 +254,7 @@ def load_agent_class(spec: str) -> type[Agent]:
     return cls
 
 
-def check_sensor_names(names, who: str) -> None:
+def check_sensor_names(names: Iterable[str], who: str) -> None:
     """Refuse, in one line, sensor names outside ALL_SENSORS."""
     unknown = [s for s in names if s not in ALL_SENSORS]
     if unknown:
@@ -293,7 +294,7 @@ def with_perception(agent_class: type[Agent], perception_class: type) -> type[Ag
     feeds (not our detections), and its run_step sees the perception's road users."""
 
     class PluggedStack(agent_class):  # type: ignore[misc, valid-type]
-        def __init__(self, *args, **kwargs) -> None:
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
             super().__init__(*args, **kwargs)
             self._perception = perception_class()
 
@@ -342,9 +343,10 @@ def load_perception_class(spec: str) -> type:
         raise AlgorithmLoadError(
             f"'{spec}' does not implement the perception interface: missing {', '.join(missing)}"
         )
-    if getattr(cls, "__abstractmethods__", None):
+    abstract_methods = getattr(cls, "__abstractmethods__", None)
+    if abstract_methods:
         raise AlgorithmLoadError(
-            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(cls.__abstractmethods__))}"
+            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(abstract_methods))}"
         )
     check_sensor_names(_sensors_of(cls), spec)
     return cls

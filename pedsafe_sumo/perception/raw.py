@@ -131,18 +131,18 @@ def lidar_point_cloud(
     local[:, :, 0] = np.cos(azimuths)[:, None] * ce[None, :]
     local[:, :, 1] = np.sin(azimuths)[:, None] * ce[None, :]
     local[:, :, 2] = se[None, :]
-    local = local.reshape(-1, 3)
+    beams = local.reshape(-1, 3)
     c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-    direction = np.empty_like(local)
-    direction[:, 0] = c * local[:, 0] - s * local[:, 1]
-    direction[:, 1] = s * local[:, 0] + c * local[:, 1]
-    direction[:, 2] = local[:, 2]
+    direction = np.empty_like(beams)
+    direction[:, 0] = c * beams[:, 0] - s * beams[:, 1]
+    direction[:, 1] = s * beams[:, 0] + c * beams[:, 1]
+    direction[:, 2] = beams[:, 2]
     o = np.asarray(pose.position_m, dtype=float)
     origin = np.broadcast_to(o, direction.shape)
     t_max = np.tile(_reach(float(o[2]), se, spec.range_m, _top_m(world)), n_az)
     t, kind, index = _cast_columns(world, origin, direction, t_max, n_ch, skip_vehicle, spec.range_m)
     hit = (kind != KIND_NONE) & (t <= spec.range_m)
-    points = local[hit] * t[hit][:, None]
+    points = beams[hit] * t[hit][:, None]
     if not labels:
         return points, None
     return points, _labels(world, kind[hit], index[hit])

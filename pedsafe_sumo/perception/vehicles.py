@@ -72,23 +72,23 @@ def camera_sees_vehicles(
             counts.append(len(pts))
     if not points:
         return out
-    pts = np.asarray(points)
-    pc = pts @ rot.T + trans
+    surface_xyz = np.asarray(points)
+    pc = surface_xyz @ rot.T + trans
     with np.errstate(divide="ignore", invalid="ignore"):
         u = f * pc[:, 0] / pc[:, 2] + cx
         v = f * pc[:, 1] / pc[:, 2] + cy
     in_image = (pc[:, 2] > _NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
-    vec = pts - cam
+    vec = surface_xyz - cam
     dist = np.sqrt((vec * vec).sum(axis=1))
     counts_arr = np.asarray(counts, dtype=np.int64)
     hits = cast_rays(
         world,
-        np.broadcast_to(cam, pts.shape),
+        np.broadcast_to(cam, surface_xyz.shape),
         vec / dist[:, None],
         dist + 0.01,
         np.cumsum(counts_arr) - counts_arr,
         counts_arr,
-        np.full(pts.shape[0], -1, dtype=np.int64),
+        np.full(surface_xyz.shape[0], -1, dtype=np.int64),
         skip_vehicle,
     )
     owner = np.repeat(np.asarray(owners), counts_arr)

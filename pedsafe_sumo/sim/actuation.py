@@ -97,7 +97,7 @@ def plan_lateral(
             return "path refused: needs at least two finite points", None
     else:
         lane_id = api.vehicle.getLaneID(ego_id)
-        offset = float(command.lateral_offset_m)
+        offset = float(command.lateral_offset_m) if command.lateral_offset_m is not None else math.nan
         if not math.isfinite(offset):
             return "lateral offset refused: not a finite number", None
         path = _offset_path(net.lanes[lane_id].shape_xy_m, offset)

@@ -26,7 +26,7 @@ from pedsafe_sumo.control.agent import (
 )
 from pedsafe_sumo.perception.raw import lidar_point_cloud, render_image
 from pedsafe_sumo.perception.vehicles import camera_sees_vehicles, lidar_sees_vehicles
-from pedsafe_sumo.sim.road_map import load_net_map
+from pedsafe_sumo.sim.road_map import NetMap, load_net_map
 
 #: What each condition grants beyond the onboard sensors: these travel over the V2I link.
 V2I_ONLY = frozenset({"roadside_camera_image"})
@@ -147,7 +147,7 @@ class ObservationFeeds:
         if "route" in wanted:
             out["route"] = self._route()
         if "road_map" in wanted:
-            out["road_map"] = self.net.road_map
+            out["road_map"] = self._net().road_map
         if "traffic_light" in wanted:
             out["traffic_light"] = self._traffic_light(time_s)
         return out
@@ -184,6 +184,12 @@ class ObservationFeeds:
             )
         return tuple(out)
 
+    def _net(self) -> NetMap:
+        """The parsed net map; loaded at construction whenever route or road_map is wanted."""
+        if self.net is None:
+            raise RuntimeError("the net map was not loaded: neither route nor road_map was asked for")
+        return self.net
+
     def _route(self) -> RouteAhead:
         api, ego = self.api, self.ego_id
         lane_id = api.vehicle.getLaneID(ego)
@@ -191,7 +197,7 @@ class ObservationFeeds:
         key = (lane_id, route_index)
         if key != self._route_key:
             route = tuple(api.vehicle.getRoute(ego))[max(route_index, 0) :]
-            net = self.net
+            net = self._net()
             lanes: list[LaneCentreline] = []
             if lane_id.startswith(":") and lane_id in net.lanes:
                 lanes.append(net.lanes[lane_id])

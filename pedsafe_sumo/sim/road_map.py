@@ -118,21 +118,27 @@ def load_net_map(net_file: str | Path) -> NetMap:
             crossing_tls.setdefault(dst, tl)
         if tl and not src.startswith(":"):
             lane_id = f"{src}_{con.get('fromLane')}"
-            lane = lanes.get(lane_id)
-            if lane is not None and lane.drivable and lane_id not in stop_lines and len(lane.shape_xy_m) >= 2:
-                end, before = lane.shape_xy_m[-1], lane.shape_xy_m[-2]
+            approach_lane = lanes.get(lane_id)
+            if (
+                approach_lane is not None
+                and approach_lane.drivable
+                and lane_id not in stop_lines
+                and len(approach_lane.shape_xy_m) >= 2
+            ):
+                end, before = approach_lane.shape_xy_m[-1], approach_lane.shape_xy_m[-2]
                 dx, dy = end[0] - before[0], end[1] - before[1]
                 norm = math.hypot(dx, dy) or 1.0
-                nx, ny = -dy / norm * lane.width_m / 2, dx / norm * lane.width_m / 2
+                half_width = approach_lane.width_m / 2
+                nx, ny = -dy / norm * half_width, dx / norm * half_width
                 stop_lines[lane_id] = StopLine(
                     lane_id, edge_to_junction.get(src, ""), (end[0] + nx, end[1] + ny),
                     (end[0] - nx, end[1] - ny), tl,
                 )  # fmt: skip
     crosswalks = []
-    for eid, lane in crossing_ids:
-        pts = lane.shape_xy_m
-        left = _offset_segment(pts[0], pts[-1], lane.width_m / 2)
-        right = _offset_segment(pts[0], pts[-1], -lane.width_m / 2)
+    for eid, crossing in crossing_ids:
+        pts = crossing.shape_xy_m
+        left = _offset_segment(pts[0], pts[-1], crossing.width_m / 2)
+        right = _offset_segment(pts[0], pts[-1], -crossing.width_m / 2)
         polygon = (left[0], left[1], right[1], right[0])
         crosswalks.append(Crosswalk(eid, polygon, crossing_tls.get(eid, "")))
     road_map = RoadMap(tuple(crosswalks), tuple(stop_lines.values()))
