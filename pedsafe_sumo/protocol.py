@@ -29,7 +29,7 @@ from typing import Any
 
 import tomllib
 
-from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, validate
+from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, overlay, validate
 from pedsafe_sumo.scenarios.registry import (
     SCENARIOS,
     ScenarioError,
@@ -89,7 +89,7 @@ class Protocol:
                 + ": a protocol names every value (a new dated one: python -m pedsafe_sumo.protocol write)"
             )
         try:
-            _overlay_all(params, self.parameters, "")
+            overlay(params, self.parameters, "")
             validate(params)
         except ParameterError as exc:
             raise ProtocolError(f"protocol {self.path}: {exc}") from None
@@ -122,19 +122,6 @@ def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[dotted] = value
     return out
-
-
-def _overlay_all(base: dict[str, Any], override: dict[str, Any], where: str) -> None:
-    for key, value in override.items():
-        dotted = f"{where}.{key}" if where else key
-        if key not in base:
-            raise ParameterError(f"unknown parameter '{dotted}'")
-        if isinstance(base[key], dict):
-            if not isinstance(value, dict):
-                raise ParameterError(f"parameter '{dotted}' must be a table")
-            _overlay_all(base[key], value, dotted)
-        else:
-            base[key] = value
 
 
 def spec_fields(spec: ScenarioSpec) -> dict[str, Any]:

@@ -82,7 +82,8 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise ParameterError(f"cannot read parameter file {path}: {exc.strerror or exc}") from None
 
 
-def _overlay(base: dict[str, Any], override: dict[str, Any], where: str) -> None:
+def overlay(base: dict[str, Any], override: dict[str, Any], where: str) -> None:
+    """Lay `override` over `base` in place; an unknown key or a value for a table is an error."""
     for key, value in override.items():
         dotted = f"{where}.{key}" if where else key
         if key not in base:
@@ -90,7 +91,7 @@ def _overlay(base: dict[str, Any], override: dict[str, Any], where: str) -> None
         if isinstance(base[key], dict):
             if not isinstance(value, dict):
                 raise ParameterError(f"parameter '{dotted}' must be a table")
-            _overlay(base[key], value, dotted)
+            overlay(base[key], value, dotted)
         else:
             base[key] = value
 
@@ -99,7 +100,7 @@ def load_params(path: str | Path | None = None) -> dict[str, Any]:
     """Defaults, overlaid with the user's file when given, validated section by section."""
     params = _read_toml(DEFAULTS_PATH)
     if path is not None:
-        _overlay(params, _read_toml(Path(path)), "")
+        overlay(params, _read_toml(Path(path)), "")
     validate(params)
     return params
 
@@ -140,6 +141,6 @@ def with_overrides(params: dict[str, Any], overrides: dict[str, Any]) -> dict[st
         for part in parts[:-1]:
             cursor = cursor.setdefault(part, {})
         cursor[parts[-1]] = value
-        _overlay(out, nested, "")
+        overlay(out, nested, "")
     validate(out)
     return out

@@ -45,6 +45,15 @@ V2I_UPPER_BOUNDS: Bounds = {
     "latency_s": (10.0, "a message 10 s old describes another scene"),
     "position_noise_sigma_m": (100.0, "noise wider than the junction"),
 }
+# One ray per pixel: 3840 x 2160 is 8.3 million rays a frame, a 4K sensor and already minutes per episode.
+RAW_UPPER_BOUNDS: Bounds = {
+    "camera_image_width_px": (3840.0, "a 4K image: one ray per pixel, 8.3 million rays a frame"),
+    "camera_image_height_px": (2160.0, "a 4K image: one ray per pixel, 8.3 million rays a frame"),
+    "roadside_image_width_px": (3840.0, "a 4K image: one ray per pixel, 8.3 million rays a frame"),
+    "roadside_image_height_px": (2160.0, "a 4K image: one ray per pixel, 8.3 million rays a frame"),
+    "render_max_distance_m": (2000.0, "five times the study site's diameter"),
+    "signal_visibility_m": (1000.0, "no signal head is legible from further than 1 km"),
+}
 OCCLUDER_UPPER_BOUNDS: Bounds = {
     "level_height_m": (20.0, "four times a storey"),
     "default_building_height_m": (1000.0, "taller than any building (828 m)"),
@@ -212,6 +221,7 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
             _positive_int(raw, key, w)
         _positive(raw, "render_max_distance_m", w)
         _positive(raw, "signal_visibility_m", w)
+        check_upper_bounds(raw, RAW_UPPER_BOUNDS, w)
 
     occ = section["occluders"]
     w = f"{where}.occluders"
