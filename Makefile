@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml requirements.lock Makefile
 	$(PY) -m pip install --quiet -c requirements.lock openpyxl==3.1.5 pydantic==2.14.3 pydantic-settings==2.16.3
 	touch $(STAMP)
 
-# The main job: a batch of paired SV/V2I crossing episodes (about 20 s on 2 cores), its Table I and report.
+# The main job: a batch of paired SV/V2I crossing episodes (about 40 s on 2 cores), its Table I and report.
 run: $(STAMP)
 	$(PY) -m pedsafe_sumo.batch --scenario crossing --out $(RUN_DIR)
 	$(PY) -m pedsafe_sumo.report $(RUN_DIR)
