@@ -224,33 +224,7 @@ def load_agent_class(spec: str) -> type[Agent]:
     if PERCEPTION_JOIN in spec:
         algorithm, _, perception = spec.partition(PERCEPTION_JOIN)
         return with_perception(load_agent_class(algorithm), load_perception_class(perception))
-    if ":" not in spec:
-        raise AlgorithmLoadError(f"--algorithm must look like package.module:ClassName, got '{spec}'")
-    module_name, _, class_name = spec.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise AlgorithmLoadError(f"cannot import module '{module_name}' for --algorithm: {exc}") from None
-    except Exception as exc:  # an error inside the user's module while importing it
-        raise AlgorithmLoadError(
-            f"importing '{module_name}' for --algorithm failed: {type(exc).__name__}: {exc}"
-        ) from None
-    cls: Any = getattr(module, class_name, None)
-    if cls is None or not isinstance(cls, type):
-        raise AlgorithmLoadError(f"module '{module_name}' has no class '{class_name}'")
-    missing = [
-        name for name in ("setup", "sensors", "run_step", "close") if not callable(getattr(cls, name, None))
-    ]
-    if missing:
-        raise AlgorithmLoadError(
-            f"'{spec}' does not implement the agent interface: missing {', '.join(missing)}"
-        )
-    abstract = getattr(cls, "__abstractmethods__", None)
-    if abstract:
-        raise AlgorithmLoadError(
-            f"'{spec}' leaves abstract methods unimplemented: {', '.join(sorted(abstract))}"
-        )
-    check_sensor_names(_sensors_of(cls), spec)
+    cls: type[Agent] = _load_class(spec, "--algorithm", "agent", ("setup", "sensors", "run_step", "close"))
     return cls
 
 
@@ -324,24 +298,30 @@ def with_perception(agent_class: type[Agent], perception_class: type) -> type[Ag
 
 def load_perception_class(spec: str) -> type:
     """Resolve '--perception package.module:ClassName' to a class with setup, sensors, detect, close."""
+    return _load_class(spec, "--perception", "perception", ("setup", "sensors", "detect", "close"))
+
+
+def _load_class(spec: str, flag: str, interface: str, methods: tuple[str, ...]) -> Any:
+    """Import 'package.module:ClassName' for `flag` and check that it implements `methods` (none left
+    abstract) and asks only for known sensors; every problem is one AlgorithmLoadError line."""
     if ":" not in spec:
-        raise AlgorithmLoadError(f"--perception must look like package.module:ClassName, got '{spec}'")
+        raise AlgorithmLoadError(f"{flag} must look like package.module:ClassName, got '{spec}'")
     module_name, _, class_name = spec.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise AlgorithmLoadError(f"cannot import module '{module_name}' for --perception: {exc}") from None
-    except Exception as exc:
+        raise AlgorithmLoadError(f"cannot import module '{module_name}' for {flag}: {exc}") from None
+    except Exception as exc:  # an error inside the user's module while importing it
         raise AlgorithmLoadError(
-            f"importing '{module_name}' for --perception failed: {type(exc).__name__}: {exc}"
+            f"importing '{module_name}' for {flag} failed: {type(exc).__name__}: {exc}"
         ) from None
-    cls = getattr(module, class_name, None)
+    cls: Any = getattr(module, class_name, None)
     if cls is None or not isinstance(cls, type):
         raise AlgorithmLoadError(f"module '{module_name}' has no class '{class_name}'")
-    missing = [n for n in ("setup", "sensors", "detect", "close") if not callable(getattr(cls, n, None))]
+    missing = [name for name in methods if not callable(getattr(cls, name, None))]
     if missing:
         raise AlgorithmLoadError(
-            f"'{spec}' does not implement the perception interface: missing {', '.join(missing)}"
+            f"'{spec}' does not implement the {interface} interface: missing {', '.join(missing)}"
         )
     abstract_methods = getattr(cls, "__abstractmethods__", None)
     if abstract_methods:
