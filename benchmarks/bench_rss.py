@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
 import subprocess
 import sys
 import time
@@ -97,7 +96,9 @@ def main() -> int:
         writer = csv.writer(f)
         writer.writerow(["elapsed_s", "pid", "role", "rss_mib", "episodes_done"])
         writer.writerows(samples)
-    print(f"batch exit {driver.returncode}, wall {wall_s:.1f} s, {len(samples)} samples -> {args.out}/rss.csv")
+    print(
+        f"batch exit {driver.returncode}, wall {wall_s:.1f} s, {len(samples)} samples -> {args.out}/rss.csv"
+    )
     workers = sorted({pid for _, pid, role, _, _ in samples if role == "worker"})
     total_episodes = max((s[4] for s in samples), default=0)
     import matplotlib
