@@ -306,7 +306,9 @@ def export_xosc(logged: LoggedEpisode, path: Path, say) -> int:
         check = _trajectory_check(logged, say)
         ped = setup.pedestrian
         heading_rad = math.atan2(ped.path_xy[1][1] - ped.path_xy[0][1], ped.path_xy[1][0] - ped.path_xy[0][0])
-        recorder = TrackRecorder(ped.radius_m, ped.height_m, ped.clothing_rgb, heading_rad)
+        colours = {v.vehicle_id: v.colour_rgb for v in (setup.ego, *setup.parked)}
+        colours.update({v.vehicle_id: v.colour_rgb for v in setup.background})
+        recorder = TrackRecorder(ped.radius_m, ped.height_m, ped.clothing_rgb, heading_rad, colours)
         result = runner.run(
             logged.spec, logged.condition, logged.seed, setup=setup, on_step=chain(check, recorder)
         )

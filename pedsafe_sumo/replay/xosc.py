@@ -71,7 +71,8 @@ class Track:
 
 class TrackRecorder:
     """A per-step hook (EpisodeRunner.run(on_step=...)): the ego and pedestrian from the log row, every
-    other vehicle from SUMO."""
+    other vehicle from SUMO. `vehicle_rgb`: the colours the episode's setup gave its vehicles (the engine
+    sets the staged ones on their vehicle type, so SUMO's per-vehicle colour is its default there)."""
 
     def __init__(
         self,
@@ -79,8 +80,10 @@ class TrackRecorder:
         ped_height_m: float,
         ped_rgb,
         initial_heading_rad: float,
+        vehicle_rgb: dict[str, tuple[int, int, int]] | None = None,
     ) -> None:
         self.times_s: list[float] = []
+        self._vehicle_rgb = dict(vehicle_rgb or {})
         self.vehicles: dict[str, Track] = {}
         self.pedestrian = Track(2 * ped_radius_m, 2 * ped_radius_m, ped_height_m, _rgb(ped_rgb))
         #: The pedestrian's heading while standing: their path's direction until they first move.
@@ -97,7 +100,7 @@ class TrackRecorder:
                     vehicle.getLength(vid),
                     vehicle.getWidth(vid),
                     vehicle.getHeight(vid),
-                    _rgb(vehicle.getColor(vid)[:3]),
+                    _rgb(self._vehicle_rgb.get(vid) or vehicle.getColor(vid)[:3]),
                 )
             if vid == EGO_ID:
                 track.add(time_s, float(row["ego_x_m"]), float(row["ego_y_m"]), float(row["ego_yaw_rad"]))

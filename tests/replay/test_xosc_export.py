@@ -146,6 +146,10 @@ def test_kerb_lane_vehicles_stand_where_the_recorded_setup_put_them(exported, re
         assert colour == ",".join(str(c) for c in parked["colour_rgb"])
         checked += 1
     assert checked >= 1
+    ego = root.find(".//ScenarioObject[@name='ego']/Vehicle")
+    assert ego.find("Properties/Property[@name='color']").get("value") == ",".join(
+        str(c) for c in setup["ego"]["colour_rgb"]
+    )
 
 
 @pytest.mark.slow
