@@ -110,3 +110,12 @@ def test_a_vehicle_that_leaves_is_removed_one_step_later_and_the_checker_passes(
         "unit.xodr",
         "unit.xosc",
     ]
+
+
+def test_a_failed_export_leaves_an_earlier_one_as_it_was(tmp_path):
+    earlier = {tmp_path / "case.xosc": "earlier scenario", tmp_path / "case.xodr": "earlier road"}
+    for path, text in earlier.items():
+        path.write_text(text)
+    with pytest.raises(RuntimeError, match="netconvert could not write OpenDRIVE"):
+        write_xosc(record(), tmp_path / "missing.net.xml", tmp_path / "case.xosc", "unit test", STEP_S)
+    assert {p: p.read_text() for p in tmp_path.iterdir()} == earlier
