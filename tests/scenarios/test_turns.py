@@ -70,7 +70,7 @@ def test_right_turn_leader_hides_the_pedestrian_at_the_start_under_sv(runner):
 
         def first_step(api, row, poses=poses):
             if not poses:
-                poses.update({v: (api.vehicle.getPosition(v), api.vehicle.getAngle(v)) for v in ("leader_0",)})
+                poses["leader_0"] = (api.vehicle.getPosition("leader_0"), api.vehicle.getAngle("leader_0"))
 
         result = runner.run(spec, "sv", seed, setup=setup, on_step=first_step)
         (fx, fy), angle = poses["leader_0"]
