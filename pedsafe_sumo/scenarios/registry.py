@@ -116,7 +116,6 @@ SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
     # The signal must hold its state this long after the staged conflict: a fixed-time cycle is rarely
     # longer than 180 s, so no start point in the cycle could satisfy a longer hold.
     "signal_hold_after_s": (180.0, "longer than a signal cycle: no start point in the cycle satisfies it"),
-    "turn_leader": (1.0, "0 (off) or 1 (on)"),
     # Beyond a car length onto the road turned into, the leader is no longer across the crosswalk.
     "turn_leader_front_max_m": (5.0, "a car length: the leader would have left the crosswalk"),
 }
