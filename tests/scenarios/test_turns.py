@@ -106,3 +106,25 @@ def test_turning_scenarios_run_under_both_conditions(runner, name):
             assert result.signal_states[step][setup.signals.ped_link_index] in "Gg"
             worlds.append((setup.ego, setup.parked, setup.pedestrian))
         assert worlds[0] == worlds[1]
+
+
+def test_xueqing_lets_no_other_approach_move_while_the_ego_turns_left():
+    """Why left_turn has no occluder on Xueqing (docs/engine.md): in every phase of the real program in
+    which the ego's left turn is green, every vehicle movement of the other approaches is red."""
+    from pedsafe_sumo.scenarios.geometry import load_approach
+    from pedsafe_sumo.scenarios.signals import load_junction_signals
+
+    site = get_site("xueqing")
+    approach, turn = load_approach(site), load_turn(site, "left")
+    junction = load_junction_signals(site.file("net.xml"), approach.junction_id)
+    ego_link = junction.vehicle_link(approach.lane_ids[turn.lane_index], turn.route[1])
+    others = [
+        link
+        for (lane, _), link in junction.vehicle_links.items()
+        if not lane.startswith(approach.edge_id + "_")
+    ]
+    assert others
+    green_phases = [state for state in junction.program.states if state[ego_link] in "Gg"]
+    assert green_phases
+    for state in green_phases:
+        assert all(state[link] == "r" for link in others)
