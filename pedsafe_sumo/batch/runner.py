@@ -35,6 +35,7 @@ from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 ERROR_STATUS = "error"
 #: How often a pool worker checks that its driver is still alive [s].
@@ -272,7 +273,9 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
     rows, results = [], []
     try:
         spec = scenario_spec(task.scenario, config.scenario_overrides)
-        setup, draws = runner.draw_setup_sampled(spec, task.seed, sampler_proposal(task.proposal))
+        setup, draws = runner.draw_setup_sampled(
+            spec, task.seed, sampler_proposal(task.proposal), DEFENSIVE_SHARE if task.proposal else 0.0
+        )
     except Exception as exc:  # the pair cannot even be set up: both rows are errors
         message = f"{type(exc).__name__}: {exc}"
         return [error_row(task, c, message) for c in task.conditions], [], []

@@ -18,6 +18,7 @@ from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
     COLLISION_SCORE,
+    DEFENSIVE_SHARE,
     ELITE_FRACTION,
     cross_entropy_update,
     stage_layout,
@@ -39,6 +40,7 @@ def sampler_identity(arguments: dict[str, Any]) -> dict[str, Any] | None:
         "pilot_episodes": int(arguments["is_pilot_episodes"]),
         "adapt_condition": ADAPT_CONDITION,
         "elite_fraction": ELITE_FRACTION,
+        "defensive_share": DEFENSIVE_SHARE,
         "score": "collision: 1 + impact_speed_mps; otherwise -min_clearance_m",
         "threshold": COLLISION_SCORE,
     }

@@ -40,6 +40,10 @@ NO_APPROACH_SCORE = -1.0e3
 #: Share of a stage's episodes kept as its elite (rho; de Boer et al. 2005 advise 0.01-0.1; 0.1 keeps
 #: 20 elite episodes out of the default 200 pilot pairs, enough to refit about ten families).
 ELITE_FRACTION = 0.1
+#: Share of the nominal in the defensive mixture every proposed stage draws from (sampling/draws.py):
+#: weights stay at most 1 / 0.1 = 10 whatever the fit; Hesterberg (1995) and Owen (2013, sec. 9.11)
+#: suggest 0.1-0.2. Chosen before any batch ran, from the toy's infinite-variance weights, not tuned.
+DEFENSIVE_SHARE = 0.1
 #: Condition whose outcome the proposal is adapted to (the paired V2I episodes share the draws).
 ADAPT_CONDITION = "sv"
 #: Pilot settings: defaults and bounds of --is-pilot-stages and --is-pilot-episodes. Three stages of 200

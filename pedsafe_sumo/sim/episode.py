@@ -318,12 +318,16 @@ class EpisodeRunner:
         return self.draw_setup_sampled(spec, seed)[0]
 
     def draw_setup_sampled(
-        self, spec: ScenarioSpec, seed: int, proposal: Mapping[str, Family] | None = None
+        self,
+        spec: ScenarioSpec,
+        seed: int,
+        proposal: Mapping[str, Family] | None = None,
+        defensive_share: float = 0.0,
     ) -> tuple[EpisodeSetup, Draws]:
         """draw_setup, with the world's random inputs drawn through a Draws (sampling/draws.py): under
         no proposal the same world, under an importance-sampling proposal the world and its weight."""
         world_seq, _, traffic_seq = np.random.SeedSequence(seed).spawn(3)
-        draws = Draws(np.random.default_rng(world_seq), proposal)
+        draws = Draws(np.random.default_rng(world_seq), proposal, defensive_share)
         traits = draw_pedestrian_traits(draws, self.params["pedestrians"])
         _, speed_nonintersection, speed_intersection = traffic_distributions(self.params["traffic"])
         fit = speed_intersection if spec.ego_speed_fit == "intersection" else speed_nonintersection
