@@ -113,7 +113,7 @@ class Draws:
             value = decode(x)
         if q is not None:
             point = np.array([x])
-            self.log_ratio += float(nominal.log_pdf(point)[0] - q.log_pdf(point)[0])  # type: ignore[union-attr]
+            self.log_ratio += float(nominal.log_pdf(point)[0] - q.log_pdf(point)[0])
         self.inputs[name] = x
         self.nominals[name] = nominal
         return value
