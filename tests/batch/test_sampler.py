@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 from batch_cli import batch
 
-from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.batch.__main__ import main, parse_args, prepare
 from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.protocol import main as protocol_main
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
 from pedsafe_sumo.sampling.importance import Product, likelihood_ratio
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
@@ -46,26 +46,17 @@ def test_bad_sampler_flags_are_refused_in_one_line(capsys, tmp_path, extra, mess
 
 def test_the_sampler_may_be_given_beside_a_protocol(tmp_path):
     """A protocol fixes what is estimated; the sampler only how: --sampler is is accepted with it and
-    recorded in the run's identity (compared on --resume)."""
-    args = parse_args(
-        [
-            "--protocol",
-            str(REPO_ROOT / "protocols" / "paper-v4.toml"),
-            "--sampler",
-            "is",
-            "--out",
-            str(tmp_path / "r"),
-        ]
+    recorded in the run's identity (compared on --resume). The protocol is written from today's values
+    (python -m pedsafe_sumo.protocol write), so that the test does not wait for the newest dated one."""
+    protocol = tmp_path / "today.toml"
+    assert (
+        protocol_main(["write", "today", "--out", str(protocol), "--scenarios", "crossing,jaywalking"]) == 0
     )
-    plan = prepare(args)
+    plan = prepare(parse_args(["--protocol", str(protocol), "--sampler", "is", "--out", str(tmp_path / "r")]))
     assert plan.identity["sampler"]["kind"] == "is"
     assert plan.identity["sampler"]["pilot_stages"] == 3 and plan.identity["sampler"]["pilot_episodes"] == 200
-    mc = prepare(
-        parse_args(
-            ["--protocol", str(REPO_ROOT / "protocols" / "paper-v4.toml"), "--out", str(tmp_path / "m")]
-        )
-    )
-    assert mc.identity["sampler"] is None
+    plain = prepare(parse_args(["--protocol", str(protocol), "--out", str(tmp_path / "m")]))
+    assert plain.identity["sampler"] is None
 
 
 IS_RUN = (
