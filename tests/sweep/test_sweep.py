@@ -112,7 +112,7 @@ def test_each_preset_is_one_key_over_a_range_that_holds_its_default():
 def _findings_csv(directory, key, values, holds):
     directory.mkdir(parents=True)
     rows = ["run,v2i_safer_everywhere,jaywalking_most_dangerous,blending_safest,v2i_beyond_13m_in_90pct"]
-    rows += [f"\"{key}={v}\",{','.join(h)}" for v, h in zip(values, holds)]
+    rows += [f'"{key}={v}",{",".join(h)}' for v, h in zip(values, holds)]
     (directory / "findings.csv").write_text("\n".join(rows) + "\n")
 
 
