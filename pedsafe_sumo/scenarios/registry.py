@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.scenarios.geometry import Approach, Turn
+from pedsafe_sumo.scenarios.geometry import Approach, Turn, path_pos_m
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     SIGNAL_STATES,
@@ -443,7 +443,13 @@ class SignalStaging:
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
-    """The lane's centreline continued straight past its end (over the crosswalk into the junction)."""
+    """The centreline the ego drives from the lane over the crosswalk into the junction: its straight-
+    through path as SUMO draws it (the junction's internal lane need not continue the lane straight:
+    0.12-0.15 m aside at Xueqing's crosswalk), or the lane continued straight where it has none."""
+    lanes = approach.through_paths[lane_index] if approach.through_paths else ()
+    if len(lanes) > 1:
+        drawn = [tuple(p) for shape, _ in lanes for p in shape]
+        return [p for k, p in enumerate(drawn) if k == 0 or math.dist(p, drawn[k - 1]) > 1e-6]
     shape = list(approach.lane_shapes[lane_index])
     (px, py), (qx, qy) = shape[-2], shape[-1]
     norm = math.hypot(qx - px, qy - py)
@@ -452,12 +458,10 @@ def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0)
 
 
 def _lane_pos_of(approach: Approach, lane_index: int, xy: tuple[float, float]) -> float:
-    """Distance along the (extended) lane centreline to the point nearest `xy` [m]."""
-    import sumolib
-
-    return sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(
-        xy, _extended_shape(approach, lane_index)
-    )
+    """SUMO distance (lane-length metres) from the start of the lane to the point of its straight-through
+    path (the lane, the junction, the road beyond) nearest `xy`: where a front placed by it is drawn
+    (see scenarios/geometry.py on lane positions)."""
+    return path_pos_m(approach.through_paths[lane_index], xy)
 
 
 def draw_episode(
@@ -638,8 +642,6 @@ def _draw_turn_episode(
     """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
     left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
     gives it), the ego turns on its green and must yield to them."""
-    import sumolib
-
     ego_size = VEHICLE_CLASSES["car"]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
     conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
@@ -653,7 +655,8 @@ def _draw_turn_episode(
     conflict_xy = _crossing_with_polyline(turn.path_xy, path)
     walk_to_conflict_s = math.dist(path[0], conflict_xy) / traits["walking_speed_mps"]
     start_delay_s = spec.ped_start_delay_s
-    ego_conflict_pos = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(conflict_xy, turn.path_xy)
+    # In SUMO's lane-length metres along the turn, which the ego's speed covers.
+    ego_conflict_pos = path_pos_m(turn.lanes, conflict_xy)
     arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
     front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
     # The ego starts on the approach lane with its whole body on it, TURN_START_BEFORE_STOP_LINE_M
