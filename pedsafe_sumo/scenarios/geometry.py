@@ -24,6 +24,7 @@ from functools import lru_cache
 import sumolib
 
 from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.sumo_net import read_net
 
 #: A vehicle's way through the network as SUMO drives it: each lane's drawn shape (network frame, metres)
 #: and SUMO length [m], in driving order (a lane, the junction's internal lane(s), the lane beyond).
@@ -138,7 +139,7 @@ class Approach:
 @lru_cache(maxsize=4)
 def load_approach(site: Site) -> Approach:
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
-    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    net = read_net(str(site.file("net.xml")), withInternal=True)
     junction = net.getNode(info["main_junction"])
     jx, jy = junction.getCoord()
     arm = info["roadside_unit"]["watched_arm"]
@@ -237,7 +238,7 @@ def load_turn(site: Site, direction: str) -> Turn:
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
     approach = load_approach(site)
-    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    net = read_net(str(site.file("net.xml")), withInternal=True)
     lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
     lane = net.getLane(approach.lane_ids[lane_index])
     connections = [c for c in lane.getOutgoing() if c.getDirection() == _TURN_DIRECTIONS[direction]]
