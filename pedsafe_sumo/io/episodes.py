@@ -22,6 +22,10 @@ EPISODE_COLUMNS = (
     "contact_stationary", "end_reason",
     # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
     "ego_signal", "ped_signal",
+    # Importance sampling (issue 17; sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
+    # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
+    # 0 under mc) and its random inputs as JSON.
+    "weight", "sampler_stage", "sampler_inputs",
 )  # fmt: skip
 #: Flags every row states (True or False; an errored episode's writer states False): the Table I rates
 #: count them, so a row without one is refused, never filled with a guess.
@@ -31,9 +35,11 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal",
+    "ego_signal", "ped_signal", "sampler_inputs",
 )  # fmt: skip
-INT_COLUMNS = ("episode", "seed")
+INT_COLUMNS = ("episode", "seed", "sampler_stage")
+#: Values of the sampling columns in rows written before they existed (plain Monte Carlo).
+SAMPLER_DEFAULTS = {"weight": 1.0, "sampler_stage": 0}
 _NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
 FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in _NOT_FLOAT)
 CONDITION_ORDER = {"sv": 0, "v2i": 1}
@@ -54,6 +60,8 @@ def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     (pandas would turn a NaN or the text "False" into True); sumo_collision may be missing (unknown).
     """
     table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
+    for column, value in SAMPLER_DEFAULTS.items():
+        table[column] = table[column].fillna(value)
     for column in BOOL_COLUMNS:
         values = table[column].astype(object)
         bad = ~values.map(_is_flag).astype(bool)
