@@ -6,7 +6,12 @@ right, a signalised crosswalk at the stop line). Everything is derived from the 
 never from hard-coded edge ids, so another site built by tools/build_network.py works the same way.
 
 Frames: SUMO network coordinates (x east, y north, metres); headings in radians counter-clockwise
-from +x. Lane positions are metres from the start of the lane, as in SUMO.
+from +x. Lane positions are metres from the start of the lane, as in SUMO: SUMO moves a vehicle in
+lane-length metres and draws lane position p at p x (drawn length / lane length) along the lane's shape
+(MSLane::interpolateLanePosToGeometryPos), and netconvert may set a lane's length apart from its drawn
+shape (Xueqing's median lane: 181.63 m long, 181.16 m drawn; the junction's straight internal lanes are
+all 42.36 m long, drawn 41.88-42.83 m). Every conversion between the two goes through
+lane_pos_to_offset_m / offset_to_lane_pos_m below (the scenarios and the Euro NCAP staging alike).
 """
 
 from __future__ import annotations
@@ -20,6 +25,73 @@ import sumolib
 
 from pedsafe_sumo.network.sites import Site, compass_sector
 from pedsafe_sumo.sumo_net import read_net
+
+#: A vehicle's way through the network as SUMO drives it: each lane's drawn shape (network frame, metres)
+#: and SUMO length [m], in driving order (a lane, the junction's internal lane(s), the lane beyond).
+LanePath = tuple[tuple[tuple[tuple[float, float], ...], float], ...]
+
+
+def shape_length_m(shape) -> float:
+    """Drawn length of a polyline [m]."""
+    return sum(math.dist(p, q) for p, q in zip(shape[:-1], shape[1:]))
+
+
+def lane_pos_to_offset_m(shape, length_m: float, pos_m: float) -> float:
+    """Where SUMO draws lane position `pos_m` (lane-length metres): the offset along the drawn `shape`."""
+    return pos_m * shape_length_m(shape) / length_m
+
+
+def offset_to_lane_pos_m(shape, length_m: float, offset_m: float) -> float:
+    """The lane position (lane-length metres) SUMO draws at `offset_m` along the drawn `shape`."""
+    return offset_m * length_m / shape_length_m(shape)
+
+
+def lane_path_in(net, lane, next_edge_id: str) -> LanePath:
+    """The lanes a vehicle drives from sumolib `lane` onto the edge `next_edge_id`: the lane, the
+    junction's internal lane(s) of the connection, and the lane it reaches there (a sumolib net read
+    withInternal=True). ValueError when the lane has no connection to that edge."""
+    connections = [c for c in lane.getOutgoing() if c.getTo().getID() == next_edge_id]
+    if not connections:
+        raise ValueError(f"lane {lane.getID()} has no connection to edge {next_edge_id}")
+    return _as_lane_path(_lanes_of(net, connections[0]))
+
+
+def _lanes_of(net, connection) -> list:
+    """The sumolib lanes a vehicle drives through a connection: its from-lane, the junction's internal
+    lane(s) (an internal junction, e.g. before a crosswalk, splits one in two: followed by its via lane,
+    not its to-lane, which skips the second part), and its to-lane."""
+    lanes = [connection.getFromLane()]
+    via = connection.getViaLaneID()
+    current = net.getLane(via) if via else connection.getToLane()
+    for _ in range(8):  # internal lanes split at internal junctions, then the outgoing lane
+        lanes.append(current)
+        if current.getEdge().getFunction() != "internal":
+            break
+        following = current.getOutgoing()[0]
+        via = following.getViaLaneID()
+        current = net.getLane(via) if via else following.getToLane()
+    return lanes
+
+
+def _as_lane_path(lanes) -> LanePath:
+    return tuple((tuple(tuple(p) for p in ln.getShape()), float(ln.getLength())) for ln in lanes)
+
+
+def path_pos_m(path: LanePath, xy: tuple[float, float]) -> float:
+    """SUMO distance (lane-length metres) from the start of `path` to its point nearest `xy`: what a
+    vehicle's front at the path's start drives until it is drawn there."""
+    best: tuple[float, float] | None = None
+    done_m = 0.0
+    for shape, length_m in path:
+        offset_m = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(xy, shape, perpendicular=False)
+        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, offset_m)
+        gap_m = math.dist((x, y), xy)
+        if best is None or gap_m < best[0] - 1e-9:
+            best = (gap_m, done_m + offset_to_lane_pos_m(shape, length_m, offset_m))
+        done_m += length_m
+    if best is None:
+        raise ValueError("empty lane path")
+    return best[1]
 
 
 @dataclass(frozen=True)
@@ -39,14 +111,19 @@ class Approach:
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
     crosswalk_width_m: float
     junction_id: str
+    #: Per vehicle lane (as lane_ids): the lanes of the straight-through movement from it onto
+    #: through_route[1] (the lane alone where it has no such movement).
+    through_paths: tuple[LanePath, ...] = ()
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
-        """(x, y, heading) of the centre of vehicle lane `lane_index` at lane position `pos_m`."""
+        """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
+        SUMO draws a vehicle's front at that lane position."""
         shape = self.lane_shapes[lane_index]
-        pos_m = min(max(pos_m, 0.0), self.lane_lengths_m[lane_index])
-        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, pos_m)
+        length_m = self.lane_lengths_m[lane_index]
+        offset_m = lane_pos_to_offset_m(shape, length_m, min(max(pos_m, 0.0), length_m))
+        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, offset_m)
         # sumolib returns atan2(dy, dx) in radians: counter-clockwise from +x, as used here.
-        return x, y, sumolib.geomhelper.rotationAtShapeOffset(shape, pos_m)
+        return x, y, sumolib.geomhelper.rotationAtShapeOffset(shape, offset_m)
 
     def across(self, lane_index: int, pos_m: float, from_offset_m: float, to_offset_m: float):
         """Two points on the line across the road at a lane position, offsets measured to the left
@@ -88,6 +165,12 @@ def load_approach(site: Site) -> Approach:
     straight = [c.getTo() for lane in vehicle_lanes for c in lane.getOutgoing() if c.getDirection() == "s"]
     if not straight:
         raise ValueError(f"site {site.name}: no straight movement from {edge.getID()}")
+    through_edge_id = straight[0].getID()
+
+    def through_path(lane) -> LanePath:
+        if any(c.getTo().getID() == through_edge_id for c in lane.getOutgoing()):
+            return lane_path_in(net, lane, through_edge_id)
+        return ((tuple(tuple(p) for p in lane.getShape()), float(lane.getLength())),)
 
     crossing = next(
         (
@@ -117,6 +200,7 @@ def load_approach(site: Site) -> Approach:
         crosswalk_path=(tuple(a), tuple(b)),
         crosswalk_width_m=crossing.getLane(0).getWidth(),
         junction_id=junction.getID(),
+        through_paths=tuple(through_path(lane) for lane in vehicle_lanes),
     )
 
 
@@ -138,10 +222,12 @@ class Turn:
     #: line ("near": the corner the ego turns around on a right turn) to the other.
     crosswalk_id: str
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
-    #: The lane of the road turned into that the path ends on, and the distance along `path_xy` at which
-    #: it begins (where the junction ends) [m].
+    #: The lane of the road turned into that the path ends on, and the SUMO distance along the path (lane
+    #: lengths, as path_pos_m) at which it begins (where the junction ends) [m].
     exit_lane_id: str = ""
     exit_start_m: float = 0.0
+    #: The lanes of path_xy with their SUMO lengths: SUMO distances along the path (path_pos_m).
+    lanes: LanePath = ()
 
 
 #: SUMO's connection directions of the turns (https://sumo.dlr.de/docs/Networks/PlainXML.html).
@@ -172,22 +258,17 @@ def load_turn(site: Site, direction: str) -> Turn:
         return abs(change - wanted)
 
     connection = min(connections, key=turn_error)
-    path = [tuple(p) for p in lane.getShape()]
-    internal = net.getLane(connection.getViaLaneID())
-    while internal.getEdge().getFunction() == "internal":
-        path += [tuple(p) for p in internal.getShape()]
-        internal = internal.getOutgoing()[0].getToLane()
-    exit_lane = internal
-    exit_first = len(path)
-    path += [tuple(p) for p in internal.getShape()]
+    driven = _lanes_of(net, connection)
+    path = [tuple(p) for ln in driven for p in ln.getShape()]
+    exit_lane = driven[-1]
     # Drop repeated points where one lane's shape ends at the next one's start.
     path_xy = [path[0]]
     for point in path[1:]:
         if math.dist(point, path_xy[-1]) > 1e-6:
             path_xy.append(point)
-    # Along path_xy, as every distance on the path: up to the exit lane's first point, the step from the
-    # last internal lane to it included (on Xueqing's right turn a 4 m gap over the crosswalk).
-    exit_start_m = sumolib.geomhelper.polyLength(path[: exit_first + 1])
+    # In SUMO's lane-length metres along the driven lanes, as every distance on the path (path_pos_m):
+    # where the exit lane begins, the junction's internal lanes behind.
+    exit_start_m = float(sum(ln.getLength() for ln in driven[:-1]))
     target = connection.getTo()
     crossing = next(
         (
@@ -217,4 +298,5 @@ def load_turn(site: Site, direction: str) -> Turn:
         crosswalk_path=(a, b),
         exit_lane_id=exit_lane.getID(),
         exit_start_m=exit_start_m,
+        lanes=_as_lane_path(driven),
     )

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from pedsafe_sumo.sampling.draws import Draws, as_draws
-from pedsafe_sumo.scenarios.geometry import Approach, Turn
+from pedsafe_sumo.scenarios.geometry import Approach, Turn, path_pos_m
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     SIGNAL_STATES,
@@ -470,7 +470,13 @@ class SignalStaging:
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
-    """The lane's centreline continued straight past its end (over the crosswalk into the junction)."""
+    """The centreline the ego drives from the lane over the crosswalk into the junction: its straight-
+    through path as SUMO draws it (the junction's internal lane need not continue the lane straight:
+    0.12-0.15 m aside at Xueqing's crosswalk), or the lane continued straight where it has none."""
+    lanes = approach.through_paths[lane_index] if approach.through_paths else ()
+    if len(lanes) > 1:
+        drawn = [tuple(p) for shape, _ in lanes for p in shape]
+        return [p for k, p in enumerate(drawn) if k == 0 or math.dist(p, drawn[k - 1]) > 1e-6]
     shape = list(approach.lane_shapes[lane_index])
     (px, py), (qx, qy) = shape[-2], shape[-1]
     norm = math.hypot(qx - px, qy - py)
@@ -479,12 +485,10 @@ def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0)
 
 
 def _lane_pos_of(approach: Approach, lane_index: int, xy: tuple[float, float]) -> float:
-    """Distance along the (extended) lane centreline to the point nearest `xy` [m]."""
-    import sumolib
-
-    return sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(
-        xy, _extended_shape(approach, lane_index)
-    )
+    """SUMO distance (lane-length metres) from the start of the lane to the point of its straight-through
+    path (the lane, the junction, the road beyond) nearest `xy`: where a front placed by it is drawn
+    (see scenarios/geometry.py on lane positions)."""
+    return path_pos_m(approach.through_paths[lane_index], xy)
 
 
 def draw_episode(
@@ -674,8 +678,6 @@ def _draw_turn_episode(
     """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
     left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
     gives it), the ego turns on its green and must yield to them."""
-    import sumolib
-
     draws = as_draws(rng)
     rng = draws.rng
     ego_size = VEHICLE_CLASSES["car"]
@@ -696,7 +698,8 @@ def _draw_turn_episode(
     conflict_xy = _crossing_with_polyline(turn.path_xy, path)
     walk_to_conflict_s = math.dist(path[0], conflict_xy) / traits["walking_speed_mps"]
     start_delay_s = spec.ped_start_delay_s
-    ego_conflict_pos = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(conflict_xy, turn.path_xy)
+    # In SUMO's lane-length metres along the turn, which the ego's speed covers.
+    ego_conflict_pos = path_pos_m(turn.lanes, conflict_xy)
     leader = None
     if leader_draws is not None:
         leader, clear_s = _turn_leader(spec, turn, ego_conflict_pos, ego_speed_mps, *leader_draws)
