@@ -21,6 +21,8 @@ EPISODE_COLUMNS = (
     "contact_stationary", "end_reason",
     # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
     "ego_signal", "ped_signal",
+    # The arm the ego came in on (N, E, S, W; batch --approach, issue 14).
+    "approach",
 )  # fmt: skip
 BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
@@ -28,7 +30,7 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal",
+    "ego_signal", "ped_signal", "approach",
 )  # fmt: skip
 INT_COLUMNS = ("episode", "seed")
 _NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
@@ -53,10 +55,10 @@ def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def sort_rows(table: pd.DataFrame) -> pd.DataFrame:
-    """Rows ordered by (scenario, episode, sv before v2i), index 0..n-1. The key is unique in a run, so
-    the order is the same whichever chunks, workers or sessions the rows came from."""
+    """Rows ordered by (scenario, approach, episode, sv before v2i), index 0..n-1. The key is unique in a
+    run, so the order is the same whichever chunks, workers or sessions the rows came from."""
     table = table.sort_values(
-        ["scenario", "episode", "condition"],
+        ["scenario", "approach", "episode", "condition"] if "approach" in table else ["scenario", "episode", "condition"],
         key=lambda s: s.map(CONDITION_ORDER) if s.name == "condition" else s,
         kind="stable",
     )

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -58,13 +59,50 @@ class Approach:
         )
 
 
-@lru_cache(maxsize=4)
-def load_approach(site: Site) -> Approach:
+#: The arms an approach can come from (compass sectors of the junction, network frame).
+ARMS = ("N", "E", "S", "W")
+
+
+def site_approaches(site: Site) -> dict[str, str]:
+    """Arm -> signal node of every approach the site's build found (the site file's `approaches`; a site
+    file from before them has only its watched arm, at the main junction)."""
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    found = info.get("approaches")
+    if found:
+        return {arm: entry["junction"] for arm, entry in found.items() if "skipped" not in entry}
+    return {info["roadside_unit"]["watched_arm"]: info["main_junction"]}
+
+
+def default_arm(site: Site) -> str:
+    """The site's own approach: the arm its first roadside pole watches (what runs without --approach)."""
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    return str(info["roadside_unit"]["watched_arm"])
+
+
+def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str) -> tuple[str, ...]:
+    """The poles a scenario's `roadside_units` name on approach `arm`: the site's own approach keeps the
+    ids (rsu_camera_0, rsu_camera_1); the build names another approach's poles after its arm
+    (rsu_camera_0_E, rsu_camera_1_E: tools/build_network.py)."""
+    if not arm or arm == site_arm:
+        return tuple(unit_ids)
+    # Only the build's own ids follow the approach; a pole named otherwise (--set roadside_units=...) is
+    # taken as named.
+    return tuple(f"{unit}_{arm}" if re.fullmatch(r"rsu_camera_\d+", unit) else unit for unit in unit_ids)
+
+
+@lru_cache(maxsize=16)
+def load_approach(site: Site, arm: str | None = None) -> Approach:
+    """The approach from `arm` (N, E, S or W; None or "": the site's own approach, default_arm)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
-    junction = net.getNode(info["main_junction"])
+    arm = arm or info["roadside_unit"]["watched_arm"]
+    approaches = site_approaches(site)
+    if arm not in approaches:
+        raise ValueError(
+            f"site {site.name}: no approach from the {arm} (approaches: {', '.join(approaches) or 'none'})"
+        )
+    junction = net.getNode(approaches[arm])
     jx, jy = junction.getCoord()
-    arm = info["roadside_unit"]["watched_arm"]
 
     def sector(x: float, y: float) -> str:
         return compass_sector((jx, jy), (x, y))
@@ -77,7 +115,7 @@ def load_approach(site: Site) -> Approach:
         and sum(lane.allows("passenger") for lane in e.getLanes()) >= 2
     ]
     if not candidates:
-        raise ValueError(f"site {site.name}: the watched arm {arm} has no approach with two vehicle lanes")
+        raise ValueError(f"site {site.name}: the {arm} arm has no approach with two vehicle lanes")
     edge = max(candidates, key=lambda e: e.getLaneNumber())
     vehicle_lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
     sidewalk = edge.getLane(0)
@@ -143,14 +181,14 @@ class Turn:
 _TURN_DIRECTIONS = {"right": "r", "left": "l"}
 
 
-@lru_cache(maxsize=8)
-def load_turn(site: Site, direction: str) -> Turn:
-    """The `direction` turn of the watched approach: from the kerb lane (right) or the median lane
+@lru_cache(maxsize=32)
+def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
+    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane (right) or the median lane
     (left), onto the arm whose heading differs by the nearest to 90 degrees; raises ValueError when
     the approach has no such connection or the arm no crosswalk."""
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
-    approach = load_approach(site)
+    approach = load_approach(site, arm)
     net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
     lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
     lane = net.getLane(approach.lane_ids[lane_index])
