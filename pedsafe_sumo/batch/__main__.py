@@ -191,8 +191,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--site", help=SITE_HELP)
     parser.add_argument(
         "--approach",
-        help="N, E, S, W or all: the arm the ego comes in on (staging, poles and signals follow it); all runs "
-        "every approach the site can host [the site's own approach]",
+        help="N, E, S, W or all: the arm the ego comes in on (staging, poles and signals follow it); all "
+        "runs every approach the site can host [the site's own approach]",
     )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
@@ -451,9 +451,7 @@ def approach_units(
     if not hosted:
         raise UsageError(f"site {site.name} hosts none of these combinations (see the lines above)")
     units = [f"{name}@{arm}" for name, arm in hosted]
-    return units, {
-        f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm) for name, arm in hosted
-    }
+    return units, {f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm) for name, arm in hosted}
 
 
 def _with_protocol(
@@ -675,6 +673,15 @@ def print_table(table: pd.DataFrame) -> None:
 
     summary = table_one(table)
     print("Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the rates):")
+    _print_rows(summary)
+    arms = [arm for arm in table["approach"].unique() if arm] if "approach" in table else []
+    if len(arms) > 1:  # --approach all: the same table per approach
+        for arm in arms:
+            print(f"Table I on approach {arm}:")
+            _print_rows(table_one(table[table["approach"] == arm]))
+
+
+def _print_rows(summary: pd.DataFrame) -> None:
     for _, row in summary.iterrows():
         print(
             f"  {row['scenario']:20s} {row['condition']:4s} n={int(row['n']):5d} "

@@ -58,7 +58,9 @@ def sort_rows(table: pd.DataFrame) -> pd.DataFrame:
     """Rows ordered by (scenario, approach, episode, sv before v2i), index 0..n-1. The key is unique in a
     run, so the order is the same whichever chunks, workers or sessions the rows came from."""
     table = table.sort_values(
-        ["scenario", "approach", "episode", "condition"] if "approach" in table else ["scenario", "episode", "condition"],
+        ["scenario", "approach", "episode", "condition"]
+        if "approach" in table
+        else ["scenario", "episode", "condition"],
         key=lambda s: s.map(CONDITION_ORDER) if s.name == "condition" else s,
         kind="stable",
     )

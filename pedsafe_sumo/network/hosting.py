@@ -157,7 +157,13 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
     """Scenario name -> why the site cannot host it under V2I, or None. On approach `arm` (None: each
     spec's own `approach`, "" meaning the site's), with that approach's poles."""
     from pedsafe_sumo.perception.world import load_roadside_units, load_static_occluders
-    from pedsafe_sumo.scenarios.geometry import approach_unit_ids, default_arm, load_approach, load_turn
+    from pedsafe_sumo.scenarios.geometry import (
+        approach_unit_ids,
+        default_arm,
+        load_approach,
+        load_turn,
+        straight_staging_problem,
+    )
 
     rsu = params["perception"]["roadside_camera"]
     units = load_roadside_units(
@@ -174,6 +180,10 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
             turn = load_turn(site, spec.turn, spec_arm) if spec.placement == "turn" else None
         except ValueError as exc:
             problems[name] = f"cannot be staged: {exc}"
+            continue
+        straight = straight_staging_problem(approach) if spec.placement != "turn" else None
+        if straight:
+            problems[name] = f"cannot be staged: site {site.name}: {straight}"
             continue
         ids = approach_unit_ids(spec.roadside_unit_ids, spec_arm, site_arm)
         spec = dataclasses.replace(spec, roadside_units=",".join(ids))
@@ -224,17 +234,15 @@ def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
     """One line per registered scenario and approach: whether the site hosts it (the build's summary); the
     site's own approach (what runs without --approach) first, its lines without the arm."""
     from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.scenarios.registry import SCENARIOS
-
     from pedsafe_sumo.scenarios.geometry import default_arm, site_approaches
+    from pedsafe_sumo.scenarios.registry import SCENARIOS
 
     params = params or load_params(None)
     lines = []
     own = default_arm(site)
     arms = [own] + [a for a in site_approaches(site) if a != own]
-    for arm, (name, problem) in [
-        (arm, item) for arm in arms for item in site_hosting(site, dict(SCENARIOS), params, arm).items()
-    ]:
+    rows = [(arm, item) for arm in arms for item in site_hosting(site, dict(SCENARIOS), params, arm).items()]
+    for arm, (name, problem) in rows:
         lines.append(
             f"  {name}{'' if arm == own else f' on approach {arm}'}: "
             + (

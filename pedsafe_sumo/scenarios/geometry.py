@@ -39,6 +39,8 @@ class Approach:
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
     crosswalk_width_m: float
     junction_id: str
+    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[1].
+    through_lanes: tuple[int, ...] = ()
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at lane position `pos_m`."""
@@ -154,7 +156,25 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         crosswalk_path=(tuple(a), tuple(b)),
         crosswalk_width_m=crossing.getLane(0).getWidth(),
         junction_id=junction.getID(),
+        through_lanes=tuple(
+            k
+            for k, lane in enumerate(vehicle_lanes)
+            if any(c.getDirection() == "s" and c.getTo() == straight[0] for c in lane.getOutgoing())
+        ),
     )
+
+
+def straight_staging_problem(approach: Approach, ego_lane: int = 1) -> str | None:
+    """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (the lane
+    next to the kerb lane, where crossing, jaywalking and background blending put it), or None. A lane
+    that only turns (on Xueqing's east approach the second lane turns left) would have the ego drive
+    straight from a turning lane, against the lane's marking."""
+    if ego_lane < len(approach.lane_ids) and ego_lane not in approach.through_lanes:
+        return (
+            f"lane {approach.lane_ids[ego_lane]}, where the ego drives, has no straight movement onto "
+            f"{approach.through_route[1]}"
+        )
+    return None
 
 
 @dataclass(frozen=True)
@@ -183,9 +203,9 @@ _TURN_DIRECTIONS = {"right": "r", "left": "l"}
 
 @lru_cache(maxsize=32)
 def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
-    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane (right) or the median lane
-    (left), onto the arm whose heading differs by the nearest to 90 degrees; raises ValueError when
-    the approach has no such connection or the arm no crosswalk."""
+    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane (right)
+    or the median lane (left), onto the arm whose heading differs by the nearest to 90 degrees; raises
+    ValueError when the approach has no such connection or the arm no crosswalk."""
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
     approach = load_approach(site, arm)
