@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -166,3 +167,14 @@ def test_approach_all_runs_what_the_site_hosts_and_the_own_approach_gives_todays
     # The same seeds on S: the same pedestrians, another place.
     south = b[b["approach"] == "S"].reset_index(drop=True)
     assert np.array_equal(south["ped_age"], a["ped_age"]) and list(south["seed"]) == list(a["seed"])
+    # The report takes one approach at a time; its Table I counts that approach's rows.
+    report = [sys.executable, "-m", "pedsafe_sumo.report", str(every)]
+    proc = subprocess.run(report, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "--approach N" in proc.stderr
+    proc = subprocess.run([*report, "--approach", "S"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    table = pd.read_csv(every / "approach_S" / "tables" / "table1.csv")
+    for condition, rows in south.groupby("condition"):
+        row = table[table["condition"].str.lower() == condition].iloc[0]
+        assert row["n"] == len(rows) == 2
+        assert row["collision_rate"] == pytest.approx(rows["collision"].mean())
