@@ -65,6 +65,13 @@ def route_ids(lanes: list[EnteringLane]) -> dict[tuple[str, ...], str]:
     return ids
 
 
+def speed_limit_scale(speed_limit_mps: float, traffic: dict[str, Any]) -> float:
+    """Factor on a speed drawn from the fits for a road whose limit is `speed_limit_mps`: the ratio to the
+    limit where the fits were measured (traffic.fit_speed_limit_mps; the rule and its source are in
+    params/defaults.toml)."""
+    return speed_limit_mps / traffic["fit_speed_limit_mps"]
+
+
 def generate_vehicles(
     lanes: list[EnteringLane], traffic: dict[str, Any], duration_s: float, seed_seq: np.random.SeedSequence
 ) -> list[Vehicle]:
@@ -85,7 +92,7 @@ def generate_vehicles(
         movements = list(probs)
         chosen = rng.choice(len(movements), size=n, p=np.array([probs[m] for m in movements]))
         route_pick = rng.random(n)
-        desired_mps = speeds.sample(rng, n)
+        desired_mps = speeds.sample(rng, n) * speed_limit_scale(lane.speed_limit_mps, traffic)
         for k in range(n):
             options: list[Route] = lane.routes_by_movement[movements[chosen[k]]]
             route = options[min(int(route_pick[k] * len(options)), len(options) - 1)]

@@ -41,6 +41,8 @@ class Approach:
     junction_id: str
     #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[1].
     through_lanes: tuple[int, ...] = ()
+    #: The approach's speed limit (its fastest vehicle lane's) [m/s].
+    speed_limit_mps: float = math.nan
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at lane position `pos_m`."""
@@ -156,6 +158,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         crosswalk_path=(tuple(a), tuple(b)),
         crosswalk_width_m=crossing.getLane(0).getWidth(),
         junction_id=junction.getID(),
+        speed_limit_mps=max(lane.getSpeed() for lane in vehicle_lanes),
         through_lanes=tuple(
             k
             for k, lane in enumerate(vehicle_lanes)

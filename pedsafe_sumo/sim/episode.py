@@ -45,7 +45,7 @@ from pedsafe_sumo.control.agent import (
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
 from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
-from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
+from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids, speed_limit_scale
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -334,7 +334,10 @@ class EpisodeRunner:
         person = sample_pedestrians(world_rng, self.params["pedestrians"], 1)[0]
         _, speed_nonintersection, speed_intersection = traffic_distributions(self.params["traffic"])
         fit = speed_intersection if spec.ego_speed_fit == "intersection" else speed_nonintersection
-        ego_speed_mps = float(fit.sample(world_rng, 1)[0])
+        # Drawn at the fits' speed limit, scaled to the approach's (speed_limit_scale, params/defaults.toml).
+        ego_speed_mps = float(fit.sample(world_rng, 1)[0]) * speed_limit_scale(
+            self.approach.speed_limit_mps, self.params["traffic"]
+        )
         traits = {
             "age_years": person.age_years,
             "gender": person.gender,
