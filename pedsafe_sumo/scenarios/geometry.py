@@ -116,10 +116,10 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         for e in junction.getIncoming()
         if e.getFunction() == ""
         and sector(*e.getShape()[0]) == arm
-        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 2
+        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 1
     ]
     if not candidates:
-        raise ValueError(f"site {site.name}: the {arm} arm has no approach with two vehicle lanes")
+        raise ValueError(f"site {site.name}: the {arm} arm has no approach with a vehicle lane")
     edge = max(candidates, key=lambda e: e.getLaneNumber())
     vehicle_lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
     sidewalk = edge.getLane(0)
@@ -171,8 +171,16 @@ def straight_staging_problem(approach: Approach, ego_lane: int = 1) -> str | Non
     """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (the lane
     next to the kerb lane, where crossing, jaywalking and background blending put it), or None. A lane
     that only turns (on Xueqing's east approach the second lane turns left) would have the ego drive
-    straight from a turning lane, against the lane's marking."""
-    if ego_lane < len(approach.lane_ids) and ego_lane not in approach.through_lanes:
+    straight from a turning lane, against the lane's marking. An approach with one vehicle lane has no lane
+    beside the kerb lane: the vehicle that hides the pedestrian (queued, parked or waiting at the kerb)
+    would stand in the ego's own lane, ahead of it, and the scene would be a car following, not a
+    pedestrian stepping out from behind a vehicle beside the ego."""
+    if ego_lane >= len(approach.lane_ids):
+        return (
+            f"approach {approach.edge_id} has {len(approach.lane_ids)} vehicle lane(s): no lane beside the "
+            "kerb lane for the ego to pass the vehicle that hides the pedestrian"
+        )
+    if ego_lane not in approach.through_lanes:
         return (
             f"lane {approach.lane_ids[ego_lane]}, where the ego drives, has no straight movement onto "
             f"{approach.through_route[1]}"

@@ -101,6 +101,26 @@ def test_a_lane_that_only_turns_is_no_lane_for_the_straight_ego():
         )
 
 
+def test_a_one_lane_approach_hosts_the_turns_and_says_why_not_the_others():
+    """Linye Daxue North Road (the west arm) enters with one vehicle lane: the scenarios that put the ego
+    beside a vehicle in the kerb lane are refused per scenario, naming why; the right turn (the ego in the
+    kerb lane, nothing beside it) is staged there."""
+    from pedsafe_sumo.network.hosting import site_hosting
+    from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.scenarios.registry import SCENARIOS
+
+    approach = load_approach(SITE, "W")
+    edge = NET.getEdge(approach.edge_id)
+    assert sum(lane.allows("passenger") for lane in edge.getLanes()) == 1
+    problems = site_hosting(SITE, dict(SCENARIOS), load_params(None), "W")
+    for name in ("crossing", "jaywalking", "background_blending"):
+        assert problems[name] == (
+            f"cannot be staged: site xueqing: approach {edge.getID()} has 1 vehicle lane(s): no lane beside "
+            "the kerb lane for the ego to pass the vehicle that hides the pedestrian"
+        )
+    assert problems["right_turn"] is None
+
+
 def test_an_episode_on_another_approach_is_staged_there():
     """The ego, the occluders and the pedestrian's path of a crossing episode on the south approach lie on
     that approach; the signal staged is that approach's."""
