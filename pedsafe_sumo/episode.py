@@ -167,9 +167,11 @@ def main(argv: list[str] | None = None) -> int:
         check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
         if args.approach:  # can it be staged there at all (also without V2I)?
-            from pedsafe_sumo.scenarios.geometry import load_approach
+            from pedsafe_sumo.network.hosting import site_hosting
 
-            load_approach(site, args.approach)
+            problem = site_hosting(site, specs, params)[args.scenario] or ""
+            if problem.startswith("cannot be staged"):
+                raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")
         args.algorithm = stack_spec(args.algorithm, args.perception)
         agent_class = load_agent_class(args.algorithm)
         if args.seed < 0:

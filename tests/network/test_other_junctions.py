@@ -220,11 +220,13 @@ def test_every_hosted_scenario_runs_on_every_approach_with_roadside_detections(b
     own = info["rsu_watch_arm"]
     verdicts = _hosting_by_approach(stdout, own)
     hosted = {combo for combo, verdict in verdicts.items() if verdict.startswith("hosted")}
-    # N and S have one vehicle lane each: no lane beside the kerb lane for the straight scenarios.
+    # N and S have one vehicle lane each: every scenario is refused there, saying why.
     for arm in ("N", "S"):
         for name in ("crossing", "jaywalking", "background_blending"):
             assert "has 1 vehicle lane(s): no lane beside the kerb lane" in verdicts[(name, arm)]
-    assert {("crossing", "E"), ("crossing", "W")} <= hosted
+        for name in ("right_turn", "left_turn"):
+            assert "turns from one-lane approaches are not staged" in verdicts[(name, arm)]
+    assert {arm for _, arm in hosted} == {"E", "W"}
     out = tmp_path / "run"
     proc = _run(
         "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "1",
