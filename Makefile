@@ -5,6 +5,9 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# ASAM's OpenSCENARIO/OpenDRIVE checkers in a virtualenv of their own (they need numpy<2; see tools/asam_qc).
+QC_VENV ?= .venv-qc
+QC_STAMP := $(QC_VENV)/.installed
 ifndef RUN_DIR
 RUN_DIR := results/crossing-$(shell date -u +%Y%m%d-%H%M%S)
 endif
@@ -28,7 +31,13 @@ run: $(STAMP)
 	$(PY) -m pedsafe_sumo.batch --scenario crossing --out $(RUN_DIR)
 	$(PY) -m pedsafe_sumo.report $(RUN_DIR)
 
-test: $(STAMP)
+$(QC_STAMP): tools/asam_qc/requirements.txt
+	$(PYTHON) -m venv $(QC_VENV)
+	$(QC_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(QC_VENV)/bin/python -m pip install --quiet -r tools/asam_qc/requirements.txt
+	touch $(QC_STAMP)
+
+test: $(STAMP) $(QC_STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 # Type check (configuration in pyproject.toml: strict on the public interfaces, lenient elsewhere).

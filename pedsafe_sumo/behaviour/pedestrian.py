@@ -19,10 +19,12 @@ plus a start-up and clearance time (HCM's critical headway t_c = L / S_p + t_s).
 still counts as an infinite gap only once it has been seen standing for a reaction time ("visibly
 stopped for them"); before that the pedestrian waits.
 
-Whatever their risk preference, nobody walks into a vehicle's body: a step that would bring the
-pedestrian closer than `body_clearance_m` to any vehicle footprint (moving or parked), and closer than
-they already are, is not taken (state "blocked"). A vehicle moving into a standing pedestrian is then
-the vehicle striking them.
+Whatever their risk preference, nobody walks into a vehicle's body: a step that would overlap a vehicle
+footprint (moving or parked), or that heads towards one while closer than `body_clearance_m` to it, is
+not taken (state "blocked"). "Heads towards" means the distance falls by more than sin(`body_graze_angle_deg`)
+of the step: someone standing against a bumper walks along it and out, as people do, instead of freezing
+because their path runs a fraction of a degree off the bumper's line. A vehicle moving into a standing
+pedestrian is then the vehicle striking them.
 
 The model is pure: the episode loop feeds it the ego's pose, the vehicle footprints and a line-of-sight
 test, and moves the SUMO person to the returned position (traci person.moveToXY), so it works on and
@@ -54,6 +56,7 @@ class BehaviourParams:
     step_back_speed_mps: float = 0.8  # speed of stepping back away from the vehicle's path [m/s]
     yield_clearance_m: float = 1.0  # a yielder's body edge to the vehicle's flank [m]
     body_clearance_m: float = 0.1  # nearest a pedestrian steps towards any vehicle body [m]
+    body_graze_angle_deg: float = 5.0  # inside the clearance, steps this close to parallel go on [deg]
     gap_startup_clearance_s: float = 3.0  # gap acceptance: start-up and clearance time t_s [s]
     stopped_speed_mps: float = 0.1  # a vehicle slower than this stands still [m/s]
     radius_m: float = 0.3  # the pedestrian's body circle [m]
@@ -287,8 +290,9 @@ class PedestrianWalker:
         return time_to_path_s >= critical_s
 
     def _walks_into(self, bodies: VehicleBodies, s_from: float, s_to: float) -> bool:
-        """Whether moving s_from -> s_to brings the body within `body_clearance_m` of a vehicle footprint
-        and closer to it than before."""
+        """Whether moving s_from -> s_to overlaps a vehicle footprint, or brings the body within
+        `body_clearance_m` of one while heading towards it: the distance falls by more than
+        sin(`body_graze_angle_deg`) of the step (walking along a body it stands against is allowed)."""
         x1, y1, _ = self.position(s_to)
         r, margin = self.params.radius_m, self.params.body_clearance_m
         # Cheap bound first (this runs every step): only footprints whose circumscribed circle comes
@@ -310,4 +314,5 @@ class PedestrianWalker:
         )
         before = rectangle_circle_distance_m(*box, x0, y0, r)
         after = rectangle_circle_distance_m(*box, x1, y1, r)
-        return bool(np.any((after < margin) & (after < before)))
+        graze_m = abs(s_to - s_from) * math.sin(math.radians(self.params.body_graze_angle_deg))
+        return bool(np.any((after <= 0.0) | ((after < margin) & (after < before - graze_m))))

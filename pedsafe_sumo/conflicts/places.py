@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import sumolib
+from pedsafe_sumo.sumo_net import read_net
 
 #: Search radius around the point for lanes, m: wider than any lane, so a point on a lane finds it.
 SEARCH_RADIUS_M = 5.0
@@ -24,11 +24,7 @@ class PlaceFinder:
         if not path.is_file():
             raise NetError(f"network file not found: {path}")
         try:
-            # lxml=False: sumolib's lxml reader (used whenever lxml is installed) did not link crossings to
-            # the edges they cross in our tests (sumolib 1.28); the SAX reader does.
-            self.net = sumolib.net.readNet(
-                str(path), withInternal=True, withPedestrianConnections=True, lxml=False
-            )
+            self.net = read_net(str(path), withInternal=True, withPedestrianConnections=True)
         except Exception as exc:  # sumolib raises whatever its SAX parser raises on a broken file
             raise NetError(f"cannot read network {path}: {exc}") from None
         if not self.net.getEdges():

@@ -43,6 +43,7 @@ PEDESTRIAN_UPPER_BOUNDS: Bounds = {
     "corridor_half_width_m": (20.0, "wider than the study site's road"),
     "yield_clearance_m": (20.0, "wider than the study site's road"),
     "body_clearance_m": (5.0, "a pedestrian this far from every vehicle cannot move through a queue"),
+    "body_graze_angle_deg": (45.0, "steeper is walking into the body, not along it"),
     "gap_startup_clearance_s": (60.0, "twenty times the HCM start-up time (3 s)"),
 }
 AGE_GROUP_UPPER_BOUNDS: Bounds = {
@@ -125,6 +126,7 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
     _positive(section, "step_back_speed_mps", where)
     _non_negative(section, "yield_clearance_m", where)
     _non_negative(section, "body_clearance_m", where)
+    _non_negative(section, "body_graze_angle_deg", where)
     _non_negative(section, "gap_startup_clearance_s", where)
     if not 0.0 < _positive(section, "eye_height_fraction", where) <= 1.0:
         raise ParameterError(f"parameter '{where}.eye_height_fraction' must lie in (0, 1]")

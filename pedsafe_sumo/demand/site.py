@@ -19,6 +19,7 @@ import sumolib
 from sumolib.geomhelper import positionAtShapeOffset
 
 from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.sumo_net import read_net
 
 VEHICLE_CLASS = "passenger"
 PEDESTRIAN_CLASS = "pedestrian"
@@ -215,7 +216,7 @@ def load_site(site: str, networks_dir: Path = NETWORKS_DIR, net_file: Path | Non
     """Read the site's network and derive its entering lanes and pedestrian ends."""
     files = site_files(site, networks_dir) if net_file is None else SiteFiles(site, net_file.parent, net_file)
     try:
-        net = sumolib.net.readNet(str(files.net_file), withInternal=True, withPedestrianConnections=True)
+        net = read_net(str(files.net_file), withInternal=True, withPedestrianConnections=True)
     except Exception as exc:  # sumolib raises bare SAX/XML errors; name the file instead of a traceback
         raise SiteError(f"cannot read network {files.net_file}: {exc}") from None
     lanes = find_entering_lanes(net)

@@ -44,6 +44,7 @@ from pedsafe_sumo.scenarios.registry import (
     ScenarioSpec,
     VehicleSetup,
 )
+from pedsafe_sumo.sumo_net import read_net
 
 #: How far the ego's front is past first touching the dummy at the nominal impact step [m].
 CONTACT_OVERLAP_M = 0.001
@@ -74,9 +75,7 @@ def ego_path(net_file: str, lane_id: str, next_edge_id: str) -> tuple[tuple[tupl
     of the movement to `next_edge_id`, and the lane it reaches there. SUMO moves a vehicle by its speed
     in lane-length metres and draws it on the lane's shape, whose drawn length netconvert may make
     differ (Xueqing's median lane: 181.16 m drawn, 181.63 m long)."""
-    import sumolib
-
-    net = sumolib.net.readNet(net_file, withInternal=True)
+    net = read_net(net_file, withInternal=True)
     lane = net.getLane(lane_id)
     connections = [c for c in lane.getOutgoing() if c.getTo().getID() == next_edge_id]
     if not connections:
@@ -118,12 +117,10 @@ def turning_movement(net_file: str, approach: Approach, turn: str) -> tuple[int,
     """(index of the approach lane, exit edge, the exit's crosswalk from end to end) of the farside turn
     (a left turn across the oncoming traffic, in right-hand traffic) or the nearside one (right turn).
     The crosswalk is the main junction's crossing over the exit edge."""
-    import sumolib
-
     wanted = {"farside": "l", "nearside": "r"}.get(turn)
     if wanted is None:
         raise NcapError(f"unknown turn '{turn}' (known: farside, nearside)")
-    net = sumolib.net.readNet(net_file, withInternal=True)
+    net = read_net(net_file, withInternal=True)
     for index, lane_id in enumerate(approach.lane_ids):
         for connection in net.getLane(lane_id).getOutgoing():
             if connection.getDirection() != wanted:

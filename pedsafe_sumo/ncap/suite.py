@@ -22,6 +22,7 @@ from pedsafe_sumo.ncap.scoring import band_colour, cell_score, points_of_test
 from pedsafe_sumo.ncap.staging import StagedCell, spec_for, stage_cell
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeResult, EpisodeRunner
+from pedsafe_sumo.sumo_net import read_net
 
 #: The columns of ncap.csv: the issue's eight, then what explains them.
 CELL_COLUMNS = (
@@ -57,9 +58,7 @@ class NcapRunner(EpisodeRunner):
 @lru_cache(maxsize=64)
 def ego_signal_link(net_file: str, lane_id: str, next_edge_id: str) -> tuple[str, int] | None:
     """(traffic light id, link index) of the connection from `lane_id` to `next_edge_id`, or None."""
-    import sumolib
-
-    net = sumolib.net.readNet(net_file)
+    net = read_net(net_file)
     for connection in net.getLane(lane_id).getOutgoing():
         if connection.getTo().getID() == next_edge_id and connection.getTLSID():
             return connection.getTLSID(), connection.getTLLinkIndex()

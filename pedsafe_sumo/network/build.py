@@ -45,6 +45,7 @@ from pedsafe_sumo.network.sites import (
     resolve_site,
 )
 from pedsafe_sumo.sumo_binaries import sumo_binary
+from pedsafe_sumo.sumo_net import read_net
 
 HERE = Path(__file__).resolve().parent
 NETCONVERT_OPTIONS = HERE / "netconvert.netccfg"
@@ -658,7 +659,7 @@ def build_site(
 
         dropped_underground = _drop_underground(stage / poly_file)
         try:
-            net = sumolib.net.readNet(str(stage / net_file), withInternal=True)
+            net = read_net(str(stage / net_file), withInternal=True)
         except Exception as exc:  # sumolib raises bare SAX errors on a broken network
             raise BuildError(f"cannot read the network {net_from or net_file}: {exc}") from None
         center_xy = net.convertLonLat2XY(center_lon, center_lat)

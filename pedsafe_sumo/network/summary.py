@@ -8,9 +8,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import sumolib
-
 from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.sumo_net import read_net
 
 
 @dataclass
@@ -68,7 +67,7 @@ def _is_road(edge) -> bool:
 
 def summarise(site: Site) -> SiteSummary:
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
-    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    net = read_net(str(site.file("net.xml")), withInternal=True)
     junction = net.getNode(info["main_junction"])
     jx, jy = junction.getCoord()
     root = ET.parse(site.file("net.xml")).getroot()

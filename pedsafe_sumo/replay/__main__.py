@@ -3,6 +3,7 @@
     python -m pedsafe_sumo.replay DIR --episode N --condition sv
     python -m pedsafe_sumo.replay DIR --episode N --condition sv --screenshot case.png --at collision
     python -m pedsafe_sumo.replay DIR --episode N --condition v2i --export-fcd case.fcd.xml
+    python -m pedsafe_sumo.replay DIR --episode N --condition sv --export-xosc case.xosc
 
 The episode runs again with the seed, scenario, parameters and AD stack the run recorded in run.json
 (never today's defaults), and every step is checked against the case log: a difference is reported
@@ -103,6 +104,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="FILE",
         help="write the episode as SUMO FCD XML (headless, no window)",
     )
+    parser.add_argument(
+        "--export-xosc",
+        type=Path,
+        metavar="FILE",
+        help="write the episode as ASAM OpenSCENARIO XML, its road as OpenDRIVE beside it (headless)",
+    )
     return parser.parse_args(argv)
 
 
@@ -113,6 +120,12 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         args.at = "collision"
     if args.screenshot is not None and args.export_fcd is not None:
         raise UsageError("--screenshot and --export-fcd are separate runs: give one of them")
+    if args.export_xosc is not None and (args.screenshot is not None or args.export_fcd is not None):
+        raise UsageError("--export-xosc is a run of its own: give it without --screenshot and --export-fcd")
+    if args.export_xosc is not None and args.export_xosc.suffix.lower() != ".xosc":
+        raise UsageError(
+            f"--export-xosc writes OpenSCENARIO: give a file name ending in .xosc, got {args.export_xosc}"
+        )
     if args.delay is not None and (not math.isfinite(args.delay) or args.delay < 0):
         raise UsageError(f"--delay must be a number of milliseconds >= 0, got {args.delay:g}")
     if not math.isfinite(args.view_width) or args.view_width <= 0:
@@ -212,6 +225,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.export_fcd is not None:
         say_header(logged, print)
         return export_fcd(logged, args.export_fcd, print)
+    if args.export_xosc is not None:
+        say_header(logged, print)
+        return export_xosc(logged, args.export_xosc, print)
 
     has_display = bool(os.environ.get("DISPLAY"))
     can_start_xvfb = (
@@ -275,6 +291,47 @@ def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
         comment=f"pedsafe_sumo replay of {logged.describe()}, run {logged.run_dir}",
     )
     say(f"wrote {path}: {len(recorder.timesteps)} timesteps, ended ({result.end_reason.replace('_', ' ')})")
+    return _verdict(logged, check, result, say)
+
+
+def export_xosc(logged: LoggedEpisode, path: Path, say) -> int:
+    """The episode as OpenSCENARIO + OpenDRIVE (pedsafe_sumo/replay/xosc.py), checked like --export-fcd."""
+    from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
+
+    runner = runner_class(logged)(
+        logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
+    )
+    try:
+        setup = episode_setup(runner, logged, say)
+        check = _trajectory_check(logged, say)
+        ped = setup.pedestrian
+        heading_rad = math.atan2(ped.path_xy[1][1] - ped.path_xy[0][1], ped.path_xy[1][0] - ped.path_xy[0][0])
+        colours = {v.vehicle_id: v.colour_rgb for v in (setup.ego, *setup.parked)}
+        colours.update({v.vehicle_id: v.colour_rgb for v in setup.background})
+        recorder = TrackRecorder(ped.radius_m, ped.height_m, ped.clothing_rgb, heading_rad, colours)
+        result = runner.run(
+            logged.spec, logged.condition, logged.seed, setup=setup, on_step=chain(check, recorder)
+        )
+    except SimulatorError as exc:
+        return error(str(exc), 1)
+    finally:
+        runner.close()
+    try:
+        xosc_path, xodr_path = write_xosc(
+            recorder,
+            logged.site.file("net.xml"),
+            path,
+            f"pedsafe_sumo replay of {logged.describe()}, run {logged.run_dir}",
+            logged.step_length_s,
+        )
+    except (RuntimeError, OSError) as exc:
+        return error(str(exc), 1)
+    left_out = recorder.left_out()
+    say(
+        f"wrote {xosc_path} and {xodr_path}: {len(recorder.times_s)} steps, "
+        f"{len(recorder.exported_vehicles())} vehicles and the pedestrian"
+        + (f" ({len(left_out)} vehicles that entered later left out)" if left_out else "")
+    )
     return _verdict(logged, check, result, say)
 
 

@@ -20,6 +20,7 @@ from functools import lru_cache
 import sumolib
 
 from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.sumo_net import read_net
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,7 @@ def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str) -> tup
 def load_approach(site: Site, arm: str | None = None) -> Approach:
     """The approach from `arm` (N, E, S or W; None or "": the site's own approach, default_arm)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
-    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    net = read_net(str(site.file("net.xml")), withInternal=True)
     arm = arm or info["roadside_unit"]["watched_arm"]
     approaches = site_approaches(site)
     if arm not in approaches:
@@ -220,7 +221,7 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
     approach = load_approach(site, arm)
-    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    net = read_net(str(site.file("net.xml")), withInternal=True)
     lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
     lane = net.getLane(approach.lane_ids[lane_index])
     connections = [c for c in lane.getOutgoing() if c.getDirection() == _TURN_DIRECTIONS[direction]]

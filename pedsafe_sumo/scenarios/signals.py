@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pedsafe_sumo.sumo_net import read_net
+
 SIGNAL_STATES = ("green", "yellow", "red", "none")
 _COLOUR_OF_CHAR = {"G": "green", "g": "green", "s": "green", "y": "yellow", "Y": "yellow", "r": "red",
                    "u": "red", "o": "none", "O": "none"}  # fmt: skip
@@ -207,11 +209,7 @@ class JunctionSignals:
 @lru_cache(maxsize=4)
 def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
     """Read the junction's traffic light (the one with the junction's id) from the network."""
-    import sumolib
-
-    net = sumolib.net.readNet(
-        str(net_file), withInternal=True, withPedestrianConnections=True, withPrograms=True
-    )
+    net = read_net(str(net_file), withInternal=True, withPedestrianConnections=True, withPrograms=True)
     tls = next((t for t in net.getTrafficLights() if t.getID() == junction_id), None)
     if tls is None:
         raise SignalStagingError(f"junction {junction_id} of {net_file.name} has no traffic light")

@@ -840,6 +840,7 @@ class EpisodeRunner:
             step_back_speed_mps=p["step_back_speed_mps"],
             yield_clearance_m=p["yield_clearance_m"],
             body_clearance_m=p["body_clearance_m"],
+            body_graze_angle_deg=p["body_graze_angle_deg"],
             gap_startup_clearance_s=p["gap_startup_clearance_s"],
             stopped_speed_mps=STATIONARY_SPEED_MPS,
             radius_m=ped.radius_m,

@@ -150,6 +150,40 @@ def test_nobody_walks_into_a_standing_vehicle_body():
     assert walker.s_m == pytest.approx(3.0) and pose.state == "walking"
 
 
+def _rear_at_angle(phi_deg):
+    """A 4.5 m x 1.8 m car heading away from the path (+x, turned phi CCW), its rear edge through
+    (30.31, 0): 0.01 m from the body of a pedestrian centred on it at (30, 0). Walking +y along the path,
+    the body's distance to the rear's line is 0.31 cos(phi) - y sin(phi) - 0.3 until past its corner."""
+    phi = np.radians(phi_deg)
+    centre = np.array([30.31, 0.0]) + 2.25 * np.array([np.cos(phi), np.sin(phi)])
+    return VehicleBodies(
+        np.array([centre[0]]), np.array([centre[1]]), np.array([phi]), np.array([4.5]), np.array([1.8])
+    )
+
+
+def test_standing_against_a_bumper_the_pedestrian_walks_along_it_but_never_into_it():
+    # The blending staging: a pedestrian centred behind a waiting car's rear, 0.01 m from it, their path
+    # 0.3 deg off the rear's line. Per 0.075 m step the distance falls 0.075 sin(0.3 deg) = 0.00039 m, under
+    # the graze allowance 0.075 sin(5 deg) = 0.0065 m; at the corner (0.9 m on) 0.0053 m are left, so they
+    # walk on: 2 s at 1.5 m/s from s = 6 m. (Before the graze angle they stood "blocked" for the episode.)
+    walker, pose = run(
+        "unaware", 2.0, ego_xy=(0.0, 0.0), ego_speed=10.0, start_s=6.0, bodies=_rear_at_angle(0.3)
+    )
+    assert walker.s_m == pytest.approx(9.0) and pose.state == "walking"
+    # 10 deg towards the car: the first step closes 0.075 sin(10 deg) = 0.013 m > 0.0065 m, inside the
+    # 0.1 m clearance: refused.
+    walker, pose = run(
+        "unaware", 2.0, ego_xy=(0.0, 0.0), ego_speed=10.0, start_s=6.0, bodies=_rear_at_angle(10.0)
+    )
+    assert walker.s_m == pytest.approx(6.0) and pose.state == "blocked"
+    # 4 deg: each step closes 0.075 sin(4 deg) = 0.0052 m, within the allowance, but never into the body:
+    # 0.31 cos(4 deg) - 0.3 = 0.0092 m at s = 6, 0.0040 m after one step, -0.0012 m (overlap) after two.
+    walker, pose = run(
+        "unaware", 2.0, ego_xy=(0.0, 0.0), ego_speed=10.0, start_s=6.0, bodies=_rear_at_angle(4.0)
+    )
+    assert walker.s_m == pytest.approx(6.075) and pose.state == "blocked"
+
+
 def test_no_reaction_when_the_vehicle_is_far_passed_or_stopped():
     # 40 m away: (40 - 2.55) / 10 = 3.745 s to the body line > 3 s, nobody reacts.
     walker, _ = run("yield", 1.0, ego_xy=(-10.0, 0.0))

@@ -14,17 +14,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import sumolib
 
 from pedsafe_sumo.network.sites import compass_sector, resolve_site
 from pedsafe_sumo.scenarios.geometry import approach_unit_ids, load_approach, site_approaches
+from pedsafe_sumo.sumo_net import read_net
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "batch"))
 from batch_cli import batch  # noqa: E402
 
 SITE = resolve_site("xueqing")
 INFO = json.loads(SITE.file("site.json").read_text(encoding="utf-8"))
-NET = sumolib.net.readNet(str(SITE.file("net.xml")), withInternal=True)
+NET = read_net(SITE.file("net.xml"), withInternal=True)
 #: Unit vectors of the arms (network frame: x east, y north).
 ARM_AXES = {"N": (0.0, 1.0), "E": (1.0, 0.0), "S": (0.0, -1.0), "W": (-1.0, 0.0)}
 

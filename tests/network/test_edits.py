@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import sumolib
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.scenarios.registry import SCENARIOS
 from pedsafe_sumo.sumo_binaries import sumo_binary
+from pedsafe_sumo.sumo_net import read_net
 
 TOOL = REPO_ROOT / "tools" / "build_network.py"
 JUNCTION = "cluster_12817118532_12817118533_12817118534_12817118535_#15more"
@@ -54,11 +54,7 @@ def refused_until_refresh(folder: Path) -> subprocess.CompletedProcess:
 
 
 def _vehicle_lanes(net_file: Path, edge: str) -> list:
-    return [
-        lane
-        for lane in sumolib.net.readNet(str(net_file)).getEdge(edge).getLanes()
-        if lane.allows("passenger")
-    ]
+    return [lane for lane in read_net(str(net_file)).getEdge(edge).getLanes() if lane.allows("passenger")]
 
 
 @pytest.mark.slow
@@ -159,7 +155,7 @@ def test_the_approach_split_in_two(tmp_path):
     assert proc.returncode == 0, proc.stderr
     # The part that reaches the stop line is the approach now; netconvert dropped the crosswalk over the
     # edge it split (its crossing named the old edge): every scenario is refused, saying so.
-    net = sumolib.net.readNet(str(folder / "xueqing.net.xml"), withInternal=True)
+    net = read_net(str(folder / "xueqing.net.xml"), withInternal=True)
     downstream = next(e for e in net.getNode(JUNCTION).getIncoming() if e.getID().startswith(APPROACH))
     assert downstream.getID() == f"{APPROACH}.60"
     crossings = [e for e in net.getEdges(withInternal=True) if e.getFunction() == "crossing"]

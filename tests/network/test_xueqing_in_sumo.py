@@ -7,9 +7,9 @@ import math
 
 import libsumo
 import pytest
-import sumolib
 
 from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.sumo_net import read_net
 
 SITE = get_site("xueqing")
 
@@ -82,7 +82,7 @@ def _nearest_beyond(sidewalk_ends, near, far):
 
 @pytest.mark.slow
 def test_vehicles_through_every_arm_and_pedestrians_across_every_crosswalk(tmp_path):
-    net = sumolib.net.readNet(str(SITE.file("net.xml")), withInternal=True)
+    net = read_net(str(SITE.file("net.xml")), withInternal=True)
     junction = _main_junction(net)
     routes = _vehicle_routes(net, junction)
     walks = _crossing_walks(net, junction)

@@ -16,6 +16,7 @@ import pytest
 import sumolib
 
 from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.sumo_net import read_net
 
 SITE = get_site("xueqing")
 NET_FILE = SITE.file("net.xml")
@@ -23,7 +24,7 @@ NET_FILE = SITE.file("net.xml")
 
 @pytest.fixture(scope="module")
 def net():
-    return sumolib.net.readNet(str(NET_FILE), withInternal=True)
+    return read_net(str(NET_FILE), withInternal=True)
 
 
 @pytest.fixture(scope="module")

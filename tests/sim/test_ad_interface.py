@@ -20,6 +20,7 @@ from pedsafe_sumo.perception.raycast import KIND_PEDESTRIAN
 from pedsafe_sumo.scenarios.registry import SCENARIOS
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.observation import ObservationFeeds
+from pedsafe_sumo.sumo_net import read_net
 from tests.sim.ad_agents import Recorder
 
 SITE = get_site("xueqing")
@@ -171,7 +172,7 @@ def _lane_probe(api, seen):
 
 
 def test_a_lane_change_moves_the_ego_to_the_next_lane_in_sumo(runner):
-    net = sumolib.net.readNet(str(SITE.file("net.xml")))
+    net = read_net(str(SITE.file("net.xml")))
     seen: list = []
 
     class Once(Recorder):
@@ -249,7 +250,7 @@ def test_route_and_map_come_from_the_network(runner):
     _, observations = _run(
         runner, ["route", "road_map"], hook=lambda api, row: lanes_seen.append(api.vehicle.getLaneID("ego"))
     )
-    net = sumolib.net.readNet(str(SITE.file("net.xml")), withInternal=True)
+    net = read_net(str(SITE.file("net.xml")), withInternal=True)
     crossings = [e for e in net.getEdges(withInternal=True) if e.getFunction() == "crossing"]
     road_map = observations[0].road_map
     assert len(road_map.crosswalks) == len(crossings)
@@ -270,7 +271,7 @@ def test_route_and_map_come_from_the_network(runner):
 def test_a_path_of_points_is_followed_in_sumo(runner):
     """A path drawn by hand 0.8 m left of the ego's lane (each segment of SUMO's lane shape shifted
     along its own left normal): SUMO puts the ego 0.8 m left of its lane centre, at the commanded speed."""
-    net = sumolib.net.readNet(str(SITE.file("net.xml")))
+    net = read_net(str(SITE.file("net.xml")))
     shape = net.getLane("177353854#0_2").getShape()
     path = []
     for (x0, y0), (x1, y1) in zip(shape, shape[1:]):
