@@ -37,6 +37,13 @@ from pedsafe_sumo.batch.executors import BatchError, DaskBackend, ProcessPoolBac
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
+from pedsafe_sumo.batch.sampled import (
+    SAMPLER_IS,
+    SAMPLER_MC,
+    plan_sampled_chunks,
+    run_sampled,
+    sampler_identity,
+)
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
@@ -53,6 +60,13 @@ from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.safety.stats import ERROR_STATUS
+from pedsafe_sumo.sampling.stages import (
+    DEFAULT_PILOT_EPISODES,
+    DEFAULT_PILOT_STAGES,
+    MAX_PILOT_EPISODES,
+    MAX_PILOT_STAGES,
+    MIN_PILOT_EPISODES,
+)
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
@@ -79,6 +93,9 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
     "keep_logs": KEEP_EVENTS,
     "approach": None,
+    "sampler": SAMPLER_MC,
+    "is_pilot_stages": DEFAULT_PILOT_STAGES,
+    "is_pilot_episodes": DEFAULT_PILOT_EPISODES,
 }
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
@@ -103,6 +120,7 @@ IDENTITY_KEYS = (
     "parameters",
     "site_files_sha256",
     "chunk_size_pairs",
+    "sampler",
 )
 #: Versions that must be the same on --resume (another SUMO or pedsafe_sumo may give other episodes).
 PINNED_VERSIONS = ("pedsafe_sumo", "sumo")
@@ -217,6 +235,29 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="which per-step logs to keep: 'events' = both conditions of every pair with a collision or "
         "a conflict, in cases/; 'all' = those and every episode's log, one Parquet file per chunk in "
         f"steplogs/ [{KEEP_EVENTS}]",
+    )
+    parser.add_argument(
+        "--sampler",
+        choices=(SAMPLER_MC, SAMPLER_IS),
+        help="mc: plain Monte Carlo from the nominal distributions; is: importance sampling, the proposal "
+        "adapted by cross-entropy pilot stages, every row weighted (docs/sampling.md); may be given "
+        f"with --protocol [{SAMPLER_MC}]",
+    )
+    parser.add_argument(
+        "--is-pilot-stages",
+        type=int,
+        dest="is_pilot_stages",
+        metavar="N",
+        help=f"--sampler is: cross-entropy pilot stages per scenario, 1 to {MAX_PILOT_STAGES} "
+        f"[{DEFAULT_PILOT_STAGES}]",
+    )
+    parser.add_argument(
+        "--is-pilot-episodes",
+        type=int,
+        dest="is_pilot_episodes",
+        metavar="PAIRS",
+        help=f"--sampler is: episode pairs per pilot stage, {MIN_PILOT_EPISODES} to {MAX_PILOT_EPISODES:,}; "
+        f"they come on top of --episodes and count in the cost [{DEFAULT_PILOT_EPISODES}]",
     )
     parser.add_argument(
         "--protocol",
@@ -359,6 +400,21 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(
             f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
         )
+    if arguments["sampler"] == SAMPLER_MC and (
+        "is_pilot_stages" in explicit or "is_pilot_episodes" in explicit
+    ):
+        raise UsageError("--is-pilot-stages and --is-pilot-episodes need --sampler is")
+    if not 1 <= arguments["is_pilot_stages"] <= MAX_PILOT_STAGES:
+        raise UsageError(
+            f"--is-pilot-stages must lie in 1..{MAX_PILOT_STAGES}, got {arguments['is_pilot_stages']}"
+        )
+    if not MIN_PILOT_EPISODES <= arguments["is_pilot_episodes"] <= MAX_PILOT_EPISODES:
+        raise UsageError(
+            f"--is-pilot-episodes must lie in {MIN_PILOT_EPISODES}..{MAX_PILOT_EPISODES:,}, "
+            f"got {arguments['is_pilot_episodes']}"
+        )
+    if arguments["sampler"] == SAMPLER_IS and arguments["condition"] == "v2i":
+        raise UsageError("--sampler is adapts its proposal on the SV condition: --condition sv or both")
     try:
         agent_timeout_s = check_timeout_s(arguments["agent_timeout"])
     except (TypeError, ValueError) as exc:
@@ -397,6 +453,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "parameters": params,
         "site_files_sha256": digests,
         "chunk_size_pairs": arguments["chunk_size"],
+        "sampler": sampler_identity(arguments),
     }
     scenario_overrides, _ = parse_set(arguments["set"])
     if protocol is not None:
@@ -513,6 +570,10 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
     chunks_total = len(plan.scenarios) * math.ceil(
         identity["episodes_per_scenario"] / identity["chunk_size_pairs"]
     )
+    per_scenario = identity["episodes_per_scenario"]
+    if identity["sampler"] is not None:  # importance sampling: the pilot stages come on top
+        chunks_total = len(plan_sampled_chunks(plan.scenarios, plan.conditions, identity, {}))
+        per_scenario += identity["sampler"]["pilot_stages"] * identity["sampler"]["pilot_episodes"]
     return {
         "state": STATE_RUNNING,
         "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
@@ -521,7 +582,7 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
         # Where the site's files were (the digests above say what they held): replay finds them here.
         "site_path": str(resolve_site(plan.arguments["site"], verify=False).directory.resolve()),
         "chunks_total": chunks_total,
-        "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
+        "episodes_total": len(plan.scenarios) * per_scenario * len(plan.conditions),
         "arguments": plan.arguments,
         "keep_logs": plan.arguments["keep_logs"],
         "workers": backend.n_workers,
@@ -589,13 +650,17 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
     for note in getattr(backend, "notes", []):
         print(f"note: {note}", file=sys.stderr)
 
-    chunks = plan_chunks(
-        plan.scenarios,
-        plan.conditions,
-        plan.identity["episodes_per_scenario"],
-        plan.identity["run_seed"],
-        plan.identity["chunk_size_pairs"],
-    )
+    if plan.identity.get("sampler") is not None:
+        # Importance sampling: the chunks' layout is known, their proposals only stage by stage.
+        chunks = plan_sampled_chunks(plan.scenarios, plan.conditions, plan.identity, {})
+    else:
+        chunks = plan_chunks(
+            plan.scenarios,
+            plan.conditions,
+            plan.identity["episodes_per_scenario"],
+            plan.identity["run_seed"],
+            plan.identity["chunk_size_pairs"],
+        )
     recorded = run_dir.manifest.chunks
     todo = [chunk for chunk in chunks if chunk.key not in recorded]
     total = sum(chunk.n_rows for chunk in chunks)
@@ -629,7 +694,10 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
             if run_dir.record(chunk, output, session_index, time.perf_counter() - started):
                 bar.update(chunk.n_rows)
 
-        backend.run(plan.config, todo, on_chunk_done)
+        if plan.identity.get("sampler") is not None:
+            chunks = run_sampled(plan, backend, run_dir, run_info, on_chunk_done)
+        else:
+            backend.run(plan.config, todo, on_chunk_done)
     session_wall_s = time.perf_counter() - started
 
     table = run_dir.finalize(chunks)
@@ -669,16 +737,29 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
 
 
 def print_table(table: pd.DataFrame) -> None:
+    from pedsafe_sumo.report.tables import is_weighted, table_one_of_run
     from pedsafe_sumo.safety.stats import table_one
 
-    summary = table_one(table)
-    print("Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the rates):")
+    def summarise(rows: pd.DataFrame) -> pd.DataFrame:
+        return table_one_of_run(rows) if is_weighted(rows) else table_one(rows)
+
+    summary = summarise(table)
+    if is_weighted(table):
+        print(
+            "Table I (importance sampling: weighted estimates of the final stage, 95% central-limit "
+            "intervals; see tables/table1.csv for ess and the episodes run, pilots included):"
+        )
+    else:
+        print(
+            "Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the "
+            "rates):"
+        )
     _print_rows(summary)
     arms = [arm for arm in table["approach"].unique() if arm] if "approach" in table else []
     if len(arms) > 1:  # --approach all: the same table per approach
         for arm in arms:
             print(f"Table I on approach {arm}:")
-            _print_rows(table_one(table[table["approach"] == arm]))
+            _print_rows(summarise(table[table["approach"] == arm]))
 
 
 def _print_rows(summary: pd.DataFrame) -> None:

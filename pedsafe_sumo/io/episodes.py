@@ -23,6 +23,10 @@ EPISODE_COLUMNS = (
     "ego_signal", "ped_signal",
     # The arm the ego came in on (N, E, S, W; batch --approach, issue 14).
     "approach",
+    # Importance sampling (issue 17; sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
+    # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
+    # 0 under mc) and its random inputs as JSON.
+    "weight", "sampler_stage", "sampler_inputs",
 )  # fmt: skip
 BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
@@ -30,9 +34,11 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal", "approach",
+    "ego_signal", "ped_signal", "approach", "sampler_inputs",
 )  # fmt: skip
-INT_COLUMNS = ("episode", "seed")
+INT_COLUMNS = ("episode", "seed", "sampler_stage")
+#: Values of the sampling columns in rows written before they existed (plain Monte Carlo).
+SAMPLER_DEFAULTS = {"weight": 1.0, "sampler_stage": 0}
 _NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
 FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in _NOT_FLOAT)
 CONDITION_ORDER = {"sv": 0, "v2i": 1}
@@ -41,6 +47,8 @@ CONDITION_ORDER = {"sv": 0, "v2i": 1}
 def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in."""
     table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
+    for column, value in SAMPLER_DEFAULTS.items():
+        table[column] = table[column].fillna(value)
     for column in BOOL_COLUMNS:  # a row without the flag (an error row, an older row) has it False
         table[column] = table[column].astype(object).where(table[column].notna(), False).astype(bool)
     for column in NULLABLE_BOOL_COLUMNS:

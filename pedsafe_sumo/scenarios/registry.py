@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from pedsafe_sumo.sampling.draws import Draws, as_draws
 from pedsafe_sumo.scenarios.geometry import Approach, Turn
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
@@ -472,7 +473,7 @@ def draw_episode(
     seed: int,
     pedestrian_traits: dict,
     ego_speed_mps: float,
-    rng: np.random.Generator,
+    rng: np.random.Generator | Draws,
     turn: Turn | None = None,
 ) -> EpisodeSetup:
     """Place one episode of `spec` on the approach (for a turning scenario, on `turn`).
@@ -480,11 +481,15 @@ def draw_episode(
     `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
     demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
     (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
+    `rng` may be a Draws (sampling/draws.py): the named draws then go through it, recorded (and under
+    importance sampling drawn from its proposal); a bare Generator draws them all nominally.
     """
+    draws = as_draws(rng)
+    rng = draws.rng
     if spec.placement == "turn":
         if turn is None:
             raise ScenarioError(f"scenario '{spec.name}' needs the geometry of its {spec.turn} turn")
-        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, rng)
+        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, draws)
     ego_size = VEHICLE_CLASSES["car"]
     # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
     # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
@@ -500,25 +505,28 @@ def draw_episode(
     # Across the road: from the middle of the sidewalk to 1 m beyond the ego lane's far edge.
     kerb_offset_m = -(lane_w / 2 + approach.sidewalk_width_m / 2)
     far_offset_m = (len(approach.lane_ids) - 1) * lane_w + lane_w / 2 + 1.0
-    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
+    conflict_offset_s = draws.uniform(
+        "conflict_offset_s", spec.conflict_offset_min_s, spec.conflict_offset_max_s
+    )
     stop_line_pos = approach.lane_lengths_m[kerb_lane]
     parked: list[VehicleSetup] = []
-    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    clothing = CLOTHING_COLOURS_RGB[draws.index("clothing", len(CLOTHING_COLOURS_RGB))]
     class_names = list(QUEUE_CLASS_WEIGHTS)
     class_p = np.array([QUEUE_CLASS_WEIGHTS[c] for c in class_names])
 
     def random_vehicle(vehicle_id: str, front_pos: float, colour=None) -> VehicleSetup:
-        size = VEHICLE_CLASSES[class_names[int(rng.choice(len(class_names), p=class_p / class_p.sum()))]]
+        size = VEHICLE_CLASSES[class_names[draws.choice(f"{vehicle_id}.class", class_p)]]
         if colour is None:
-            colour = CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
+            colour = CAR_COLOURS_RGB[draws.index(f"{vehicle_id}.colour", len(CAR_COLOURS_RGB))]
         return VehicleSetup(vehicle_id, kerb_lane_id, front_pos, 0.0, colour, size)
 
     def queue_behind(first: VehicleSetup, start_index: int) -> None:
         """`queue_vehicles` vehicles queued upstream of `first`, bumper to bumper with small gaps."""
         rear = first.front_pos_m - first.size.length_m
         for k in range(int(spec.queue_vehicles)):
-            front = rear - float(rng.uniform(spec.queue_gap_min_m, spec.queue_gap_max_m))
-            vehicle = random_vehicle(f"queued_{start_index + k}", front)
+            vehicle_id = f"queued_{start_index + k}"
+            front = rear - draws.uniform(f"{vehicle_id}.gap_m", spec.queue_gap_min_m, spec.queue_gap_max_m)
+            vehicle = random_vehicle(vehicle_id, front)
             parked.append(vehicle)
             rear = front - vehicle.size.length_m
 
@@ -539,8 +547,10 @@ def draw_episode(
         parked.append(occluder)
         queue_behind(occluder, 1)
     elif spec.placement == "midblock":
-        distance_m = float(rng.uniform(spec.midblock_distance_min_m, spec.midblock_distance_max_m))
-        gap_m = float(rng.uniform(spec.parked_gap_min_m, spec.parked_gap_max_m))
+        distance_m = draws.uniform(
+            "midblock_distance_m", spec.midblock_distance_min_m, spec.midblock_distance_max_m
+        )
+        gap_m = draws.uniform("parked_gap_m", spec.parked_gap_min_m, spec.parked_gap_max_m)
         cross_pos = stop_line_pos - distance_m
         path = approach.across(kerb_lane, cross_pos, kerb_offset_m, far_offset_m)
         # Downstream vehicle: its rear gap/2 past the line; upstream: the queue, its head gap/2 before it.
@@ -552,7 +562,7 @@ def draw_episode(
         parked += [downstream, upstream]
         queue_behind(upstream, 2)
     else:  # behind_waiting_vehicle
-        gap_m = float(rng.uniform(spec.blend_gap_min_m, spec.blend_gap_max_m))
+        gap_m = draws.uniform("blend_gap_m", spec.blend_gap_min_m, spec.blend_gap_max_m)
         waiting = random_vehicle("waiting_0", stop_line_pos - 0.5)
         if spec.waiting_vehicle_class:
             waiting = dataclasses.replace(waiting, size=VEHICLE_CLASSES[spec.waiting_vehicle_class])
@@ -639,17 +649,21 @@ def _draw_turn_episode(
     seed: int,
     traits: dict,
     ego_speed_mps: float,
-    rng: np.random.Generator,
+    rng: np.random.Generator | Draws,
 ) -> EpisodeSetup:
     """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
     left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
     gives it), the ego turns on its green and must yield to them."""
     import sumolib
 
+    draws = as_draws(rng)
+    rng = draws.rng
     ego_size = VEHICLE_CLASSES["car"]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
-    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
-    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    conflict_offset_s = draws.uniform(
+        "conflict_offset_s", spec.conflict_offset_min_s, spec.conflict_offset_max_s
+    )
+    clothing = CLOTHING_COLOURS_RGB[draws.index("clothing", len(CLOTHING_COLOURS_RGB))]
     near, far = turn.crosswalk_path
     start, end = (near, far) if spec.ped_start_corner == "near" else (far, near)
     # From 1 m back on the sidewalk to 1 m beyond the crosswalk's other end.
@@ -735,7 +749,10 @@ def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[floa
 
 
 def stage_signals(
-    spec: ScenarioSpec, setup: EpisodeSetup, junction: JunctionSignals | None, rng: np.random.Generator
+    spec: ScenarioSpec,
+    setup: EpisodeSetup,
+    junction: JunctionSignals | None,
+    rng: np.random.Generator | Draws,
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
     (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
@@ -761,7 +778,9 @@ def stage_signals(
         step_off_s = min(setup.pedestrian.start_delay_s, until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
         required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
-    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, rng)
+    # The point in the cycle is one uniform draw on [0, 1), recorded (never proposed) as signal_cycle_u.
+    source = as_draws(rng).uniform_source("signal_cycle_u")
+    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, source)  # type: ignore[arg-type]
     staging = SignalStaging(
         tls_id=junction.program.tls_id,
         program_id=junction.program.program_id,

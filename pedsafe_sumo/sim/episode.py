@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -43,7 +43,7 @@ from pedsafe_sumo.control.agent import (
     check_sensor_names,
 )
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
-from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
+from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
 from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids, speed_limit_scale
 from pedsafe_sumo.network.sites import Site
@@ -62,6 +62,8 @@ from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
+from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
+from pedsafe_sumo.sampling.importance import Family
 from pedsafe_sumo.scenarios.geometry import approach_unit_ids, default_arm, load_approach, load_turn
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
@@ -328,30 +330,35 @@ class EpisodeRunner:
         The seed is split into three streams: the scenario's world, the perception noise (see run) and
         the background traffic, so that changing one never shifts the draws of another.
         """
+        return self.draw_setup_sampled(spec, seed)[0]
+
+    def draw_setup_sampled(
+        self,
+        spec: ScenarioSpec,
+        seed: int,
+        proposal: Mapping[str, Family] | None = None,
+        defensive_share: float = 0.0,
+    ) -> tuple[EpisodeSetup, Draws]:
+        """draw_setup, with the world's random inputs drawn through a Draws (sampling/draws.py): under
+        no proposal the same world, under an importance-sampling proposal the world and its weight."""
         self._use_approach(spec.approach)
         world_seq, _, traffic_seq = np.random.SeedSequence(seed).spawn(3)
-        world_rng = np.random.default_rng(world_seq)
-        person = sample_pedestrians(world_rng, self.params["pedestrians"], 1)[0]
+        draws = Draws(np.random.default_rng(world_seq), proposal, defensive_share)
+        traits = draw_pedestrian_traits(draws, self.params["pedestrians"])
         _, speed_nonintersection, speed_intersection = traffic_distributions(self.params["traffic"])
         fit = speed_intersection if spec.ego_speed_fit == "intersection" else speed_nonintersection
         # Drawn at the fits' speed limit, scaled to the approach's (speed_limit_scale, params/defaults.toml).
-        ego_speed_mps = float(fit.sample(world_rng, 1)[0]) * speed_limit_scale(
+        ego_speed_mps = draw_lognormal(draws, "ego_speed_log", fit.log_mu, fit.log_sigma) * speed_limit_scale(
             self.approach.speed_limit_mps, self.params["traffic"]
         )
-        traits = {
-            "age_years": person.age_years,
-            "gender": person.gender,
-            "risk": person.risk,
-            "walking_speed_mps": person.speed_mps,
-        }
         turn = load_turn(self.site, spec.turn, spec.approach or None) if spec.placement == "turn" else None
-        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng, turn)
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn)
         if spec.approach:
             setup = dataclasses.replace(setup, approach=spec.approach)
-        setup = stage_signals(spec, setup, self.signals, world_rng)
+        setup = stage_signals(spec, setup, self.signals, draws)
         if spec.background_traffic:
             setup = dataclasses.replace(setup, background=self._background(spec, traffic_seq))
-        return setup
+        return setup, draws
 
     def _background(
         self, spec: ScenarioSpec, seed_seq: np.random.SeedSequence
