@@ -75,7 +75,14 @@ def setup_from_dict(data: dict[str, Any]) -> EpisodeSetup:
     """Rebuild the frozen EpisodeSetup written by write_case (for replay)."""
 
     def vehicle(d: dict) -> VehicleSetup:
-        return VehicleSetup(**{**d, "colour_rgb": tuple(d["colour_rgb"]), "size": VehicleSize(**d["size"])})
+        return VehicleSetup(
+            **{
+                **d,
+                "colour_rgb": tuple(d["colour_rgb"]),
+                "size": VehicleSize(**d["size"]),
+                "route": tuple(d.get("route", ())),
+            }
+        )
 
     return EpisodeSetup(
         scenario=data["scenario"],

@@ -207,6 +207,10 @@ class Turn:
     #: line ("near": the corner the ego turns around on a right turn) to the other.
     crosswalk_id: str
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
+    #: The lane of the road turned into that the path ends on, and the distance along `path_xy` at which
+    #: it begins (where the junction ends) [m].
+    exit_lane_id: str = ""
+    exit_start_m: float = 0.0
 
 
 #: SUMO's connection directions of the turns (https://sumo.dlr.de/docs/Networks/PlainXML.html).
@@ -242,12 +246,17 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
     while internal.getEdge().getFunction() == "internal":
         path += [tuple(p) for p in internal.getShape()]
         internal = internal.getOutgoing()[0].getToLane()
+    exit_lane = internal
+    exit_first = len(path)
     path += [tuple(p) for p in internal.getShape()]
     # Drop repeated points where one lane's shape ends at the next one's start.
     path_xy = [path[0]]
     for point in path[1:]:
         if math.dist(point, path_xy[-1]) > 1e-6:
             path_xy.append(point)
+    # Along path_xy, as every distance on the path: up to the exit lane's first point, the step from the
+    # last internal lane to it included (on Xueqing's right turn a 4 m gap over the crosswalk).
+    exit_start_m = sumolib.geomhelper.polyLength(path[: exit_first + 1])
     target = connection.getTo()
     crossing = next(
         (
@@ -275,4 +284,6 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
         approach_length_m=approach.lane_lengths_m[lane_index],
         crosswalk_id=crossing.getID(),
         crosswalk_path=(a, b),
+        exit_lane_id=exit_lane.getID(),
+        exit_start_m=exit_start_m,
     )

@@ -117,6 +117,8 @@ SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
     # The signal must hold its state this long after the staged conflict: a fixed-time cycle is rarely
     # longer than 180 s, so no start point in the cycle could satisfy a longer hold.
     "signal_hold_after_s": (180.0, "longer than a signal cycle: no start point in the cycle satisfies it"),
+    # Beyond a car length onto the road turned into, the leader is no longer across the crosswalk.
+    "turn_leader_front_max_m": (5.0, "a car length: the leader would have left the crosswalk"),
 }
 
 
@@ -201,6 +203,14 @@ class ScenarioSpec:
     ped_signal_hold: str = "conflict"
     #: Class of the vehicle the blending pedestrian stands behind ("" draws it like a queued vehicle).
     waiting_vehicle_class: str = ""
+    #: Turning scenarios: a vehicle of class `occluder_class` turning ahead of the ego on the same path
+    #: and at the same speed (1), or none (0). At the start it is leaving the junction, its front this far
+    #: onto the road turned into (uniform draw) [m] and its body across the crosswalk, between the
+    #: pedestrian at its far end and the ego; the pedestrian steps off `ped_start_delay_s` after its rear
+    #: has passed them (docs/engine.md, "Turning scenarios").
+    turn_leader: float = 0
+    turn_leader_front_min_m: float = 0.1
+    turn_leader_front_max_m: float = 1.0
     #: The arm the ego comes in on (N, E, S or W; batch --approach): staging, poles and signals follow
     #: it. "" is the site's own approach, the one its first roadside pole watches.
     approach: str = ""
@@ -249,6 +259,12 @@ class ScenarioSpec:
             (self.ego_signal in SIGNAL_STATES, f"ego_signal in {SIGNAL_STATES}"),
             (self.ped_signal in SIGNAL_STATES, f"ped_signal in {SIGNAL_STATES}"),
             (self.signal_hold_after_s >= 0, "signal_hold_after_s >= 0"),
+            (self.turn_leader in (0, 1), "turn_leader is 0 or 1"),
+            (self.turn_leader == 0 or self.placement == "turn", "turn_leader only in a turning scenario"),
+            (
+                0 < self.turn_leader_front_min_m <= self.turn_leader_front_max_m,
+                "0 < turn_leader_front_min_m <= turn_leader_front_max_m",
+            ),
         ]
         for ok, rule in checks:
             if not ok:
@@ -319,12 +335,17 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         ),
         ScenarioSpec(
             "right_turn",
-            "the ego turns right on green from the kerb lane; a pedestrian steps onto the crosswalk of the "
-            "road it turns into with the walk signal, from the corner the ego turns around",
+            "the ego turns right on green from the kerb lane behind a vehicle turning ahead of it; a "
+            "pedestrian waiting at the far end of the crosswalk of the road they turn into (the refuge "
+            "between its carriageways) is hidden by that vehicle as it crosses in front of them, and steps "
+            "off with the walk signal once it has passed",
             placement="turn",
             ego_speed_fit="intersection",
             turn="right",
-            ped_start_corner="near",
+            # From the far end: at the corner the ego turns around no vehicle the program lets move can
+            # stand between them and the ego (docs/engine.md, "Turning scenarios").
+            ped_start_corner="far",
+            turn_leader=1,
             ped_signal="green",
             ped_signal_hold="step_off",
             # China's Road Traffic Safety Law Implementation Regulations, art. 46: at most 30 km/h when
@@ -342,7 +363,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         ScenarioSpec(
             "left_turn",
             "the ego turns left on a permissive green from the median lane; a pedestrian crosses the road "
-            "it turns into with the walk signal, from the far corner",
+            "it turns into with the walk signal, from the far corner; unoccluded where the program gives "
+            "the approach its own phase (split phasing, as on Xueqing): no opposing vehicle moves, and none "
+            "waiting at its red stands between the ego and the pedestrian",
             placement="turn",
             ego_speed_fit="intersection",
             turn="left",
@@ -391,6 +414,9 @@ class VehicleSetup:
     speed_mps: float
     colour_rgb: tuple[int, int, int]
     size: VehicleSize
+    #: Edges it drives at `speed_mps` (the turning scenarios' leader, on the road it turns into); empty:
+    #: it stands on the approach (parked and queued vehicles), or it is the ego (EpisodeSetup.ego_route).
+    route: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -664,6 +690,9 @@ def _draw_turn_episode(
         "conflict_offset_s", spec.conflict_offset_min_s, spec.conflict_offset_max_s
     )
     clothing = CLOTHING_COLOURS_RGB[draws.index("clothing", len(CLOTHING_COLOURS_RGB))]
+    # Drawn after the draws above (and only when there is a leader), so the scenarios without one keep
+    # their worlds seed for seed.
+    leader_draws = _draw_turn_leader(spec, draws) if spec.turn_leader else None
     near, far = turn.crosswalk_path
     start, end = (near, far) if spec.ped_start_corner == "near" else (far, near)
     # From 1 m back on the sidewalk to 1 m beyond the crosswalk's other end.
@@ -674,6 +703,11 @@ def _draw_turn_episode(
     walk_to_conflict_s = math.dist(path[0], conflict_xy) / traits["walking_speed_mps"]
     start_delay_s = spec.ped_start_delay_s
     ego_conflict_pos = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(conflict_xy, turn.path_xy)
+    leader = None
+    if leader_draws is not None:
+        leader, clear_s = _turn_leader(spec, turn, ego_conflict_pos, ego_speed_mps, *leader_draws)
+        # They wait for it: they step off ped_start_delay_s after its rear has passed their body.
+        start_delay_s += clear_s
     arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
     front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
     # The ego starts on the approach lane with its whole body on it, TURN_START_BEFORE_STOP_LINE_M
@@ -696,13 +730,35 @@ def _draw_turn_episode(
         ego=ego,
         ego_route=turn.route,
         pedestrian=_pedestrian(traits, clothing, start_delay_s, path),
-        parked=(),
+        parked=(leader,) if leader is not None else (),
         conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
         time_limit_s=spec.time_limit_s,
         conflict_time_s=float((ego_conflict_pos - front_pos) / ego_speed_mps),
         ped_crossing_id=turn.crosswalk_id,
     )
+
+
+def _draw_turn_leader(spec: ScenarioSpec, draws: Draws) -> tuple[tuple, float]:
+    """The leader's colour and how far its front is onto the road turned into, in that order of draws
+    (recorded by name, as every draw of the world)."""
+    colour = CAR_COLOURS_RGB[draws.index("leader_0.colour", len(CAR_COLOURS_RGB))]
+    front_m = draws.uniform("leader_0.front_m", spec.turn_leader_front_min_m, spec.turn_leader_front_max_m)
+    return colour, front_m
+
+
+def _turn_leader(
+    spec: ScenarioSpec, turn: Turn, conflict_pos_m: float, speed_mps: float, colour, front_m: float
+) -> tuple[VehicleSetup, float]:
+    """The vehicle turning ahead of the ego, on the ego's path at the ego's speed with its front `front_m`
+    onto the road turned into, and the seconds until its rear has passed the pedestrian's body (0.3 m
+    radius; 0 when it already has)."""
+    size = VEHICLE_CLASSES[spec.occluder_class]
+    rear_before_m = conflict_pos_m - (turn.exit_start_m + front_m - size.length_m)
+    leader = VehicleSetup(
+        "leader_0", turn.exit_lane_id, front_m, speed_mps, colour, size, route=(turn.route[1],)
+    )
+    return leader, max(0.0, rear_before_m + 0.3) / speed_mps
 
 
 def _crossing_with_polyline(polyline, path) -> tuple[float, float]:

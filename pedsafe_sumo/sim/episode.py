@@ -477,7 +477,11 @@ class EpisodeRunner:
         api.route.add("kerb_route", [approach.edge_id])
         self._add_vehicle(api, setup.ego, "ego_route", parked=False)
         for vehicle in setup.parked:
-            self._add_vehicle(api, vehicle, "kerb_route", parked=True)
+            route_id = "kerb_route"
+            if vehicle.route:  # a vehicle that drives (the turning scenarios' leader)
+                route_id = "route_" + vehicle.vehicle_id
+                api.route.add(route_id, list(vehicle.route))
+            self._add_vehicle(api, vehicle, route_id, parked=True)
         if setup.background:
             api.vehicletype.copy("DEFAULT_VEHTYPE", "background")
             size = VEHICLE_CLASSES["car"]
