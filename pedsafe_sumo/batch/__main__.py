@@ -92,6 +92,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "protocol": None,
     "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
     "keep_logs": KEEP_EVENTS,
+    "approach": None,
     "sampler": SAMPLER_MC,
     "is_pilot_stages": DEFAULT_PILOT_STAGES,
     "is_pilot_episodes": DEFAULT_PILOT_EPISODES,
@@ -206,6 +207,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "repeat the recorded values",
     )
     parser.add_argument("--site", help=SITE_HELP)
+    parser.add_argument(
+        "--approach",
+        help="N, E, S, W or all: the arm the ego comes in on (staging, poles and signals follow it); all "
+        "runs every approach the site can host [the site's own approach]",
+    )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
@@ -423,7 +429,10 @@ def prepare(args: argparse.Namespace) -> Plan:
     load_agent_class(stack)
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
-    if scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
+    if arguments["approach"] is not None:
+        # scenario@ARM units: every combination the site hosts, or the one named (refused when it cannot).
+        scenarios, specs = approach_units(site, specs, params, conditions, scenario, arguments["approach"])
+    elif scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
         scenarios, skipped = split_hosted(site, specs, params, conditions)
         for name, why in skipped.items():
             print(f"skipping scenario '{name}' on site {site.name}: {why}")
@@ -469,6 +478,39 @@ def prepare(args: argparse.Namespace) -> Plan:
     return plan
 
 
+def approach_units(
+    site, specs: dict, params: dict[str, Any], conditions: list[str], scenario_arg: str, approach_arg: str
+) -> tuple[list[str], dict[str, Any]]:
+    """The run's units `<scenario>@<arm>` under --approach, with their specs (the field `approach` set).
+    With --scenario all or --approach all, every combination the site hosts (the others printed with why);
+    a combination named explicitly that the site cannot host is refused in one line (UsageError)."""
+    from pedsafe_sumo.network.hosting import hosting_matrix
+    from pedsafe_sumo.scenarios.geometry import ARMS, default_arm, site_approaches
+
+    if approach_arg not in (*ARMS, "all"):
+        raise UsageError(f"unknown approach '{approach_arg}' (known: {', '.join(ARMS)}, all)")
+    known = list(site_approaches(site))
+    own = default_arm(site)
+    if approach_arg == "all":
+        arms = [own] + [arm for arm in ARMS if arm in known and arm != own]
+    elif approach_arg not in known:
+        raise UsageError(
+            f"site {site.name} has no approach from the {approach_arg} (approaches: {', '.join(known)})"
+        )
+    else:
+        arms = [approach_arg]
+    hosted, skipped = hosting_matrix(site, specs, params, arms, conditions)
+    if scenario_arg != "all" and approach_arg != "all" and skipped:
+        (name, arm), why = next(iter(skipped.items()))
+        raise UsageError(f"site {site.name} cannot host scenario '{name}' on approach {arm}: {why}")
+    for (name, arm), why in skipped.items():
+        print(f"skipping scenario '{name}' on approach {arm} of site {site.name}: {why}")
+    if not hosted:
+        raise UsageError(f"site {site.name} hosts none of these combinations (see the lines above)")
+    units = [f"{name}@{arm}" for name, arm in hosted]
+    return units, {f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm) for name, arm in hosted}
+
+
 def _with_protocol(
     args: argparse.Namespace,
     arguments: dict[str, Any],
@@ -481,7 +523,7 @@ def _with_protocol(
 
     fixed = (
         "scenario", "condition", "seed", "site", "params", "set", "algorithm", "chunk_size", "cluster",
-        "agent_timeout",
+        "agent_timeout", "approach",
     )  # fmt: skip
     given = [name for name in fixed if getattr(args, name, None) not in (None, [])]
     if args.protocol is not None and given:
@@ -698,7 +740,10 @@ def print_table(table: pd.DataFrame) -> None:
     from pedsafe_sumo.report.tables import is_weighted, table_one_of_run
     from pedsafe_sumo.safety.stats import table_one
 
-    summary = table_one_of_run(table) if is_weighted(table) else table_one(table)
+    def summarise(rows: pd.DataFrame) -> pd.DataFrame:
+        return table_one_of_run(rows) if is_weighted(rows) else table_one(rows)
+
+    summary = summarise(table)
     if is_weighted(table):
         print(
             "Table I (importance sampling: weighted estimates of the final stage, 95% central-limit "
@@ -709,6 +754,15 @@ def print_table(table: pd.DataFrame) -> None:
             "Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the "
             "rates):"
         )
+    _print_rows(summary)
+    arms = [arm for arm in table["approach"].unique() if arm] if "approach" in table else []
+    if len(arms) > 1:  # --approach all: the same table per approach
+        for arm in arms:
+            print(f"Table I on approach {arm}:")
+            _print_rows(summarise(table[table["approach"] == arm]))
+
+
+def _print_rows(summary: pd.DataFrame) -> None:
     for _, row in summary.iterrows():
         print(
             f"  {row['scenario']:20s} {row['condition']:4s} n={int(row['n']):5d} "

@@ -220,8 +220,10 @@ def error_row(task: Task, condition: str, message: str, status: str = ERROR_STAT
     """The row of an episode that did not run to its end: its status ("error" or "timeout"), the
     message, the pair's keys."""
     row: dict[str, Any] = {c: np.nan for c in EPISODE_COLUMNS}
+    scenario, _, arm = task.scenario.partition("@")
     row.update(
-        scenario=task.scenario,
+        scenario=scenario,
+        approach=arm,
         condition=condition,
         episode=task.episode,
         seed=task.seed,
@@ -258,12 +260,15 @@ _PROPOSALS: dict[str, Any] = {}
 
 def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
-    `<scenario>:<field>` keys (a protocol's per-scenario values) for this one."""
+    `<scenario>:<field>` keys (a protocol's per-scenario values) for this one. `name` may be
+    `<scenario>@<arm>` (batch --approach): that scenario on the approach from that arm."""
     from pedsafe_sumo.scenarios.registry import get_scenario
 
+    name, _, arm = name.partition("@")
     common = {key: value for key, value in overrides.items() if ":" not in key}
     own = {key.split(":", 1)[1]: value for key, value in overrides.items() if key.startswith(f"{name}:")}
-    return get_scenario(name).with_overrides(common).with_overrides(own)
+    spec = get_scenario(name).with_overrides(common).with_overrides(own)
+    return spec.with_overrides({"approach": arm}) if arm else spec
 
 
 def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any], list[Any]]:

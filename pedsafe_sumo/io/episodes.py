@@ -22,6 +22,8 @@ EPISODE_COLUMNS = (
     "contact_stationary", "end_reason",
     # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
     "ego_signal", "ped_signal",
+    # The arm the ego came in on (N, E, S, W; batch --approach, issue 14).
+    "approach",
     # Importance sampling (issue 17; sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
     # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
     # 0 under mc) and its random inputs as JSON.
@@ -35,7 +37,7 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal", "sampler_inputs",
+    "ego_signal", "ped_signal", "approach", "sampler_inputs",
 )  # fmt: skip
 INT_COLUMNS = ("episode", "seed", "sampler_stage")
 #: Values of the sampling columns in rows written before they existed (plain Monte Carlo).
@@ -92,10 +94,12 @@ def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def sort_rows(table: pd.DataFrame) -> pd.DataFrame:
-    """Rows ordered by (scenario, episode, sv before v2i), index 0..n-1. The key is unique in a run, so
-    the order is the same whichever chunks, workers or sessions the rows came from."""
+    """Rows ordered by (scenario, approach, episode, sv before v2i), index 0..n-1. The key is unique in a
+    run, so the order is the same whichever chunks, workers or sessions the rows came from."""
     table = table.sort_values(
-        ["scenario", "episode", "condition"],
+        ["scenario", "approach", "episode", "condition"]
+        if "approach" in table
+        else ["scenario", "episode", "condition"],
         key=lambda s: s.map(CONDITION_ORDER) if s.name == "condition" else s,
         kind="stable",
     )

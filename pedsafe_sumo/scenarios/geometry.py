@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -114,6 +115,10 @@ class Approach:
     #: Per vehicle lane (as lane_ids): the lanes of the straight-through movement from it onto
     #: through_route[1] (the lane alone where it has no such movement).
     through_paths: tuple[LanePath, ...] = ()
+    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[1].
+    through_lanes: tuple[int, ...] = ()
+    #: The approach's speed limit (its fastest vehicle lane's) [m/s].
+    speed_limit_mps: float = math.nan
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -136,13 +141,50 @@ class Approach:
         )
 
 
-@lru_cache(maxsize=4)
-def load_approach(site: Site) -> Approach:
+#: The arms an approach can come from (compass sectors of the junction, network frame).
+ARMS = ("N", "E", "S", "W")
+
+
+def site_approaches(site: Site) -> dict[str, str]:
+    """Arm -> signal node of every approach the site's build found (the site file's `approaches`; a site
+    file from before them has only its watched arm, at the main junction)."""
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    found = info.get("approaches")
+    if found:
+        return {arm: entry["junction"] for arm, entry in found.items() if "skipped" not in entry}
+    return {info["roadside_unit"]["watched_arm"]: info["main_junction"]}
+
+
+def default_arm(site: Site) -> str:
+    """The site's own approach: the arm its first roadside pole watches (what runs without --approach)."""
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    return str(info["roadside_unit"]["watched_arm"])
+
+
+def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str) -> tuple[str, ...]:
+    """The poles a scenario's `roadside_units` name on approach `arm`: the site's own approach keeps the
+    ids (rsu_camera_0, rsu_camera_1); the build names another approach's poles after its arm
+    (rsu_camera_0_E, rsu_camera_1_E: tools/build_network.py)."""
+    if not arm or arm == site_arm:
+        return tuple(unit_ids)
+    # Only the build's own ids follow the approach; a pole named otherwise (--set roadside_units=...) is
+    # taken as named.
+    return tuple(f"{unit}_{arm}" if re.fullmatch(r"rsu_camera_\d+", unit) else unit for unit in unit_ids)
+
+
+@lru_cache(maxsize=16)
+def load_approach(site: Site, arm: str | None = None) -> Approach:
+    """The approach from `arm` (N, E, S or W; None or "": the site's own approach, default_arm)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     net = read_net(str(site.file("net.xml")), withInternal=True)
-    junction = net.getNode(info["main_junction"])
+    arm = arm or info["roadside_unit"]["watched_arm"]
+    approaches = site_approaches(site)
+    if arm not in approaches:
+        raise ValueError(
+            f"site {site.name}: no approach from the {arm} (approaches: {', '.join(approaches) or 'none'})"
+        )
+    junction = net.getNode(approaches[arm])
     jx, jy = junction.getCoord()
-    arm = info["roadside_unit"]["watched_arm"]
 
     def sector(x: float, y: float) -> str:
         return compass_sector((jx, jy), (x, y))
@@ -152,10 +194,10 @@ def load_approach(site: Site) -> Approach:
         for e in junction.getIncoming()
         if e.getFunction() == ""
         and sector(*e.getShape()[0]) == arm
-        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 2
+        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 1
     ]
     if not candidates:
-        raise ValueError(f"site {site.name}: the watched arm {arm} has no approach with two vehicle lanes")
+        raise ValueError(f"site {site.name}: the {arm} arm has no approach with a vehicle lane")
     edge = max(candidates, key=lambda e: e.getLaneNumber())
     vehicle_lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
     sidewalk = edge.getLane(0)
@@ -201,7 +243,34 @@ def load_approach(site: Site) -> Approach:
         crosswalk_width_m=crossing.getLane(0).getWidth(),
         junction_id=junction.getID(),
         through_paths=tuple(through_path(lane) for lane in vehicle_lanes),
+        speed_limit_mps=max(lane.getSpeed() for lane in vehicle_lanes),
+        through_lanes=tuple(
+            k
+            for k, lane in enumerate(vehicle_lanes)
+            if any(c.getDirection() == "s" and c.getTo() == straight[0] for c in lane.getOutgoing())
+        ),
     )
+
+
+def straight_staging_problem(approach: Approach, ego_lane: int = 1) -> str | None:
+    """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (the lane
+    next to the kerb lane, where crossing, jaywalking and background blending put it), or None. A lane
+    that only turns (on Xueqing's east approach the second lane turns left) would have the ego drive
+    straight from a turning lane, against the lane's marking. An approach with one vehicle lane has no lane
+    beside the kerb lane: the vehicle that hides the pedestrian (queued, parked or waiting at the kerb)
+    would stand in the ego's own lane, ahead of it, and the scene would be a car following, not a
+    pedestrian stepping out from behind a vehicle beside the ego."""
+    if ego_lane >= len(approach.lane_ids):
+        return (
+            f"approach {approach.edge_id} has {len(approach.lane_ids)} vehicle lane(s): no lane beside the "
+            "kerb lane for the ego to pass the vehicle that hides the pedestrian"
+        )
+    if ego_lane not in approach.through_lanes:
+        return (
+            f"lane {approach.lane_ids[ego_lane]}, where the ego drives, has no straight movement onto "
+            f"{approach.through_route[1]}"
+        )
+    return None
 
 
 @dataclass(frozen=True)
@@ -234,14 +303,14 @@ class Turn:
 _TURN_DIRECTIONS = {"right": "r", "left": "l"}
 
 
-@lru_cache(maxsize=8)
-def load_turn(site: Site, direction: str) -> Turn:
-    """The `direction` turn of the watched approach: from the kerb lane (right) or the median lane
-    (left), onto the arm whose heading differs by the nearest to 90 degrees; raises ValueError when
-    the approach has no such connection or the arm no crosswalk."""
+@lru_cache(maxsize=32)
+def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
+    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane (right)
+    or the median lane (left), onto the arm whose heading differs by the nearest to 90 degrees; raises
+    ValueError when the approach has no such connection or the arm no crosswalk."""
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
-    approach = load_approach(site)
+    approach = load_approach(site, arm)
     net = read_net(str(site.file("net.xml")), withInternal=True)
     lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
     lane = net.getLane(approach.lane_ids[lane_index])

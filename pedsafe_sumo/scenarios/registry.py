@@ -69,7 +69,7 @@ EGO_BLUE_RGB = (30, 110, 255)
 #: Scenario fields that hold text; every other field is a number.
 STRING_FIELDS = (
     "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
-    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class",
+    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class", "approach",
 )  # fmt: skip
 
 
@@ -211,6 +211,9 @@ class ScenarioSpec:
     turn_leader: float = 0
     turn_leader_front_min_m: float = 0.1
     turn_leader_front_max_m: float = 1.0
+    #: The arm the ego comes in on (N, E, S or W; batch --approach): staging, poles and signals follow
+    #: it. "" is the site's own approach, the one its first roadside pole watches.
+    approach: str = ""
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -226,6 +229,7 @@ class ScenarioSpec:
                 self.waiting_vehicle_class in ("", *VEHICLE_CLASSES),
                 f"waiting_vehicle_class in {sorted(VEHICLE_CLASSES)} or empty",
             ),
+            (self.approach in ("", "N", "E", "S", "W"), "approach is N, E, S, W or empty"),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
@@ -451,6 +455,8 @@ class EpisodeSetup:
     ped_crossing_id: str = ""
     #: Where the junction's signal program stands at the start (None: not staged, e.g. an old case).
     signals: SignalStaging | None = None
+    #: The arm the ego comes in on (N, E, S, W; "" in cases written before approaches were recorded).
+    approach: str = ""
 
 
 @dataclass(frozen=True)
