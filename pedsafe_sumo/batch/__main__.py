@@ -74,6 +74,8 @@ from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 if TYPE_CHECKING:
     import pandas as pd
 
+    from pedsafe_sumo.network.sites import Site
+
 Backend = DaskBackend | ProcessPoolBackend
 DEFAULT_EPISODES = 100
 #: The arguments that decide a run's results (and its chunk layout), with their defaults. run.json
@@ -479,7 +481,12 @@ def prepare(args: argparse.Namespace) -> Plan:
 
 
 def approach_units(
-    site, specs: dict, params: dict[str, Any], conditions: list[str], scenario_arg: str, approach_arg: str
+    site: Site,
+    specs: dict[str, Any],
+    params: dict[str, Any],
+    conditions: list[str],
+    scenario_arg: str,
+    approach_arg: str,
 ) -> tuple[list[str], dict[str, Any]]:
     """The run's units `<scenario>@<arm>` under --approach, with their specs (the field `approach` set).
     With --scenario all or --approach all, every combination the site hosts (the others printed with why);
