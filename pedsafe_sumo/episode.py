@@ -132,6 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--condition", default="both", help="sv, v2i or both (default: both, same seed)")
     parser.add_argument("--seed", type=int, default=1, help="episode seed (default 1)")
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
+    parser.add_argument(
+        "--approach", choices=list("NESW"), help="the arm the ego comes in on [the site's own approach]"
+    )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
@@ -157,10 +160,18 @@ def main(argv: list[str] | None = None) -> int:
         if any(c not in CONDITIONS for c in conditions):
             raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
         site = resolve_site(args.site)
-        specs, params = configure([args.scenario], args.params, args.set)
+        # --approach is the scenario field `approach` (as in batch).
+        set_pairs = [*(args.set or []), *([f"approach={args.approach}"] if args.approach else [])]
+        specs, params = configure([args.scenario], args.params, set_pairs)
         check_roadside_units(specs, site)
         check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
+        if args.approach:  # can it be staged there at all (also without V2I)?
+            from pedsafe_sumo.network.hosting import site_hosting
+
+            problem = site_hosting(site, specs, params)[args.scenario] or ""
+            if problem.startswith("cannot be staged"):
+                raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")
         args.algorithm = stack_spec(args.algorithm, args.perception)
         agent_class = load_agent_class(args.algorithm)
         if args.seed < 0:

@@ -13,6 +13,11 @@ OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against 
 OUT/findings.csv and findings.png say which of the paper's qualitative findings hold in each
 combination (pedsafe_sumo/report/findings.py).
 Every --set / --vary key is validated for every combination before anything runs.
+
+`--preset NAME` is one of the sensitivity sweeps of issue 13 item 5 (PRESETS: the parameters the paper
+does not report that move the indexes most, each over a range around its default), in place of --vary.
+`--combine DIR ... --out OUT` puts the findings of several one-key sweeps side by side:
+OUT/findings_across_sweeps.csv and .png (one panel per sweep).
 """
 
 from __future__ import annotations
@@ -30,6 +35,21 @@ from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
+
+#: The sensitivity sweeps of issue 13 item 5, one key each, over a range that holds its default (the
+#: values of defaults.toml and the scenario registry: reaction 0.4 s, deceleration 6 m/s2, blend gap 0,
+#: occluder SUV, queue of 3, V2I latency 0.1 s, gap acceptance t_s 3 s). Ranges are assumptions: a
+#: slower or gentler AD stack, the classes of the fleet, queues from one vehicle to twice the default,
+#: latencies to 1 s (a congested cellular link), the HCM pedestrian start-up time t_s from 1 to 5 s.
+PRESETS: dict[str, str] = {
+    "reaction": "algorithm.reaction_time_s=0.4,1.0,1.5",
+    "deceleration": "algorithm.max_decel_mps2=6,4.5,3",
+    "blend_gap": "blend_gap_max_m=0,0.1,0.2",
+    "occluder_class": "occluder_class=car,suv,van",
+    "queue_length": "queue_vehicles=1,3,6",
+    "v2i_latency": "perception.v2i.latency_s=0.1,0.5,1.0",
+    "gap_acceptance": "pedestrians.gap_startup_clearance_s=1,3,5",
+}
 
 
 def parse_vary(text: str) -> tuple[str, list[str]]:
@@ -54,7 +74,7 @@ def label(combination: dict[str, str]) -> str:
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.sweep", description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--scenario", required=True, help=f"{', '.join(SCENARIOS)}, a comma-separated list of them, or all"
+        "--scenario", help=f"{', '.join(SCENARIOS)}, a comma-separated list of them, or all (required)"
     )
     parser.add_argument("--condition", default="both", help="sv, v2i or both [both]")
     parser.add_argument(
@@ -64,7 +84,15 @@ def parse_args(argv):
     parser.add_argument("--workers", type=int, default=2, help="worker processes per batch [2]")
     parser.add_argument("--out", type=Path, required=True, help="sweep directory")
     parser.add_argument(
-        "--vary", action="append", required=True, metavar="KEY=V1,V2", help="a setting and its values"
+        "--vary", action="append", default=[], metavar="KEY=V1,V2", help="a setting and its values"
+    )
+    parser.add_argument("--preset", help=f"one of the sweeps of issue 13 item 5: {', '.join(PRESETS)}")
+    parser.add_argument(
+        "--combine",
+        nargs="+",
+        type=Path,
+        metavar="DIR",
+        help="sweep directories whose findings to put together",
     )
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="fixed for all")
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
@@ -73,6 +101,14 @@ def parse_args(argv):
 
 
 def validate(args) -> list[dict[str, str]]:
+    if args.preset:
+        if args.preset not in PRESETS:
+            raise UsageError(f"unknown preset '{args.preset}' (known: {', '.join(PRESETS)})")
+        args.vary = [*args.vary, PRESETS[args.preset]]
+    if not args.scenario:
+        raise UsageError("--scenario is required")
+    if not args.vary:
+        raise UsageError("give --vary KEY=V1,V2,... or --preset NAME")
     scenarios = list(SCENARIOS) if args.scenario == "all" else args.scenario.split(",")
     unknown = [name for name in scenarios if name not in SCENARIOS]
     if unknown:
@@ -153,8 +189,32 @@ def plot(table: pd.DataFrame, keys: list[str], path: Path) -> None:
     plt.close(fig)
 
 
+def combine(dirs: list[Path], out: Path) -> int:
+    """--combine: the findings of one-key sweeps side by side (OUT/findings_across_sweeps.csv, .png)."""
+    from pedsafe_sumo.report.findings import findings_across_sweeps, findings_across_sweeps_figure
+
+    missing = [str(d) for d in dirs if not (d / "findings.csv").is_file()]
+    if missing:
+        print(f"error: no findings.csv in {missing[0]} (run the sweep first)", file=sys.stderr)
+        return 2
+    try:
+        table = findings_across_sweeps(dirs)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out / "findings_across_sweeps.csv", index=False)
+    findings_across_sweeps_figure(table, out / "findings_across_sweeps.png",
+                                  title="the paper's qualitative findings across each sweep")  # fmt: skip
+    print(table.to_string(index=False))
+    print(f"written: {out / 'findings_across_sweeps.csv'}, findings_across_sweeps.png")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.combine:
+        return combine(args.combine, args.out)
     try:
         combos = validate(args)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:

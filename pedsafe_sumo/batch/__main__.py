@@ -37,6 +37,13 @@ from pedsafe_sumo.batch.executors import BatchError, DaskBackend, ProcessPoolBac
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
+from pedsafe_sumo.batch.sampled import (
+    SAMPLER_IS,
+    SAMPLER_MC,
+    plan_sampled_chunks,
+    run_sampled,
+    sampler_identity,
+)
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
@@ -53,12 +60,21 @@ from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.safety.stats import ERROR_STATUS
+from pedsafe_sumo.sampling.stages import (
+    DEFAULT_PILOT_EPISODES,
+    DEFAULT_PILOT_STAGES,
+    MAX_PILOT_EPISODES,
+    MAX_PILOT_STAGES,
+    MIN_PILOT_EPISODES,
+)
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
 if TYPE_CHECKING:
     import pandas as pd
+
+    from pedsafe_sumo.network.sites import Site
 
 Backend = DaskBackend | ProcessPoolBackend
 DEFAULT_EPISODES = 100
@@ -78,6 +94,10 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "protocol": None,
     "agent_timeout": DEFAULT_AGENT_TIMEOUT_S,
     "keep_logs": KEEP_EVENTS,
+    "approach": None,
+    "sampler": SAMPLER_MC,
+    "is_pilot_stages": DEFAULT_PILOT_STAGES,
+    "is_pilot_episodes": DEFAULT_PILOT_EPISODES,
 }
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
@@ -102,6 +122,7 @@ IDENTITY_KEYS = (
     "parameters",
     "site_files_sha256",
     "chunk_size_pairs",
+    "sampler",
 )
 #: Versions that must be the same on --resume (another SUMO or pedsafe_sumo may give other episodes).
 PINNED_VERSIONS = ("pedsafe_sumo", "sumo")
@@ -188,6 +209,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "repeat the recorded values",
     )
     parser.add_argument("--site", help=SITE_HELP)
+    parser.add_argument(
+        "--approach",
+        help="N, E, S, W or all: the arm the ego comes in on (staging, poles and signals follow it); all "
+        "runs every approach the site can host [the site's own approach]",
+    )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
@@ -211,6 +237,29 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="which per-step logs to keep: 'events' = both conditions of every pair with a collision or "
         "a conflict, in cases/; 'all' = those and every episode's log, one Parquet file per chunk in "
         f"steplogs/ [{KEEP_EVENTS}]",
+    )
+    parser.add_argument(
+        "--sampler",
+        choices=(SAMPLER_MC, SAMPLER_IS),
+        help="mc: plain Monte Carlo from the nominal distributions; is: importance sampling, the proposal "
+        "adapted by cross-entropy pilot stages, every row weighted (docs/sampling.md); may be given "
+        f"with --protocol [{SAMPLER_MC}]",
+    )
+    parser.add_argument(
+        "--is-pilot-stages",
+        type=int,
+        dest="is_pilot_stages",
+        metavar="N",
+        help=f"--sampler is: cross-entropy pilot stages per scenario, 1 to {MAX_PILOT_STAGES} "
+        f"[{DEFAULT_PILOT_STAGES}]",
+    )
+    parser.add_argument(
+        "--is-pilot-episodes",
+        type=int,
+        dest="is_pilot_episodes",
+        metavar="PAIRS",
+        help=f"--sampler is: episode pairs per pilot stage, {MIN_PILOT_EPISODES} to {MAX_PILOT_EPISODES:,}; "
+        f"they come on top of --episodes and count in the cost [{DEFAULT_PILOT_EPISODES}]",
     )
     parser.add_argument(
         "--protocol",
@@ -353,6 +402,21 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(
             f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
         )
+    if arguments["sampler"] == SAMPLER_MC and (
+        "is_pilot_stages" in explicit or "is_pilot_episodes" in explicit
+    ):
+        raise UsageError("--is-pilot-stages and --is-pilot-episodes need --sampler is")
+    if not 1 <= arguments["is_pilot_stages"] <= MAX_PILOT_STAGES:
+        raise UsageError(
+            f"--is-pilot-stages must lie in 1..{MAX_PILOT_STAGES}, got {arguments['is_pilot_stages']}"
+        )
+    if not MIN_PILOT_EPISODES <= arguments["is_pilot_episodes"] <= MAX_PILOT_EPISODES:
+        raise UsageError(
+            f"--is-pilot-episodes must lie in {MIN_PILOT_EPISODES}..{MAX_PILOT_EPISODES:,}, "
+            f"got {arguments['is_pilot_episodes']}"
+        )
+    if arguments["sampler"] == SAMPLER_IS and arguments["condition"] == "v2i":
+        raise UsageError("--sampler is adapts its proposal on the SV condition: --condition sv or both")
     try:
         agent_timeout_s = check_timeout_s(arguments["agent_timeout"])
     except (TypeError, ValueError) as exc:
@@ -367,7 +431,10 @@ def prepare(args: argparse.Namespace) -> Plan:
     load_agent_class(stack)
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml
-    if scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
+    if arguments["approach"] is not None:
+        # scenario@ARM units: every combination the site hosts, or the one named (refused when it cannot).
+        scenarios, specs = approach_units(site, specs, params, conditions, scenario, arguments["approach"])
+    elif scenario == "all" and protocol is None:  # every scenario the site hosts; the others named with why
         scenarios, skipped = split_hosted(site, specs, params, conditions)
         for name, why in skipped.items():
             print(f"skipping scenario '{name}' on site {site.name}: {why}")
@@ -388,6 +455,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "parameters": params,
         "site_files_sha256": digests,
         "chunk_size_pairs": arguments["chunk_size"],
+        "sampler": sampler_identity(arguments),
     }
     scenario_overrides, _ = parse_set(arguments["set"])
     if protocol is not None:
@@ -412,6 +480,44 @@ def prepare(args: argparse.Namespace) -> Plan:
     return plan
 
 
+def approach_units(
+    site: Site,
+    specs: dict[str, Any],
+    params: dict[str, Any],
+    conditions: list[str],
+    scenario_arg: str,
+    approach_arg: str,
+) -> tuple[list[str], dict[str, Any]]:
+    """The run's units `<scenario>@<arm>` under --approach, with their specs (the field `approach` set).
+    With --scenario all or --approach all, every combination the site hosts (the others printed with why);
+    a combination named explicitly that the site cannot host is refused in one line (UsageError)."""
+    from pedsafe_sumo.network.hosting import hosting_matrix
+    from pedsafe_sumo.scenarios.geometry import ARMS, default_arm, site_approaches
+
+    if approach_arg not in (*ARMS, "all"):
+        raise UsageError(f"unknown approach '{approach_arg}' (known: {', '.join(ARMS)}, all)")
+    known = list(site_approaches(site))
+    own = default_arm(site)
+    if approach_arg == "all":
+        arms = [own] + [arm for arm in ARMS if arm in known and arm != own]
+    elif approach_arg not in known:
+        raise UsageError(
+            f"site {site.name} has no approach from the {approach_arg} (approaches: {', '.join(known)})"
+        )
+    else:
+        arms = [approach_arg]
+    hosted, skipped = hosting_matrix(site, specs, params, arms, conditions)
+    if scenario_arg != "all" and approach_arg != "all" and skipped:
+        (name, arm), why = next(iter(skipped.items()))
+        raise UsageError(f"site {site.name} cannot host scenario '{name}' on approach {arm}: {why}")
+    for (name, arm), why in skipped.items():
+        print(f"skipping scenario '{name}' on approach {arm} of site {site.name}: {why}")
+    if not hosted:
+        raise UsageError(f"site {site.name} hosts none of these combinations (see the lines above)")
+    units = [f"{name}@{arm}" for name, arm in hosted]
+    return units, {f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm) for name, arm in hosted}
+
+
 def _with_protocol(
     args: argparse.Namespace,
     arguments: dict[str, Any],
@@ -424,7 +530,7 @@ def _with_protocol(
 
     fixed = (
         "scenario", "condition", "seed", "site", "params", "set", "algorithm", "chunk_size", "cluster",
-        "agent_timeout",
+        "agent_timeout", "approach",
     )  # fmt: skip
     given = [name for name in fixed if getattr(args, name, None) not in (None, [])]
     if args.protocol is not None and given:
@@ -471,6 +577,10 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
     chunks_total = len(plan.scenarios) * math.ceil(
         identity["episodes_per_scenario"] / identity["chunk_size_pairs"]
     )
+    per_scenario = identity["episodes_per_scenario"]
+    if identity["sampler"] is not None:  # importance sampling: the pilot stages come on top
+        chunks_total = len(plan_sampled_chunks(plan.scenarios, plan.conditions, identity, {}))
+        per_scenario += identity["sampler"]["pilot_stages"] * identity["sampler"]["pilot_episodes"]
     return {
         "state": STATE_RUNNING,
         "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
@@ -479,7 +589,7 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
         # Where the site's files were (the digests above say what they held): replay finds them here.
         "site_path": str(resolve_site(plan.arguments["site"], verify=False).directory.resolve()),
         "chunks_total": chunks_total,
-        "episodes_total": len(plan.scenarios) * identity["episodes_per_scenario"] * len(plan.conditions),
+        "episodes_total": len(plan.scenarios) * per_scenario * len(plan.conditions),
         "arguments": plan.arguments,
         "keep_logs": plan.arguments["keep_logs"],
         "workers": backend.n_workers,
@@ -547,13 +657,17 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
     for note in getattr(backend, "notes", []):
         print(f"note: {note}", file=sys.stderr)
 
-    chunks = plan_chunks(
-        plan.scenarios,
-        plan.conditions,
-        plan.identity["episodes_per_scenario"],
-        plan.identity["run_seed"],
-        plan.identity["chunk_size_pairs"],
-    )
+    if plan.identity.get("sampler") is not None:
+        # Importance sampling: the chunks' layout is known, their proposals only stage by stage.
+        chunks = plan_sampled_chunks(plan.scenarios, plan.conditions, plan.identity, {})
+    else:
+        chunks = plan_chunks(
+            plan.scenarios,
+            plan.conditions,
+            plan.identity["episodes_per_scenario"],
+            plan.identity["run_seed"],
+            plan.identity["chunk_size_pairs"],
+        )
     recorded = run_dir.manifest.chunks
     todo = [chunk for chunk in chunks if chunk.key not in recorded]
     total = sum(chunk.n_rows for chunk in chunks)
@@ -587,7 +701,10 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
             if run_dir.record(chunk, output, session_index, time.perf_counter() - started):
                 bar.update(chunk.n_rows)
 
-        backend.run(plan.config, todo, on_chunk_done)
+        if plan.identity.get("sampler") is not None:
+            chunks = run_sampled(plan, backend, run_dir, run_info, on_chunk_done)
+        else:
+            backend.run(plan.config, todo, on_chunk_done)
     session_wall_s = time.perf_counter() - started
 
     table = run_dir.finalize(chunks)
@@ -627,10 +744,32 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
 
 
 def print_table(table: pd.DataFrame) -> None:
+    from pedsafe_sumo.report.tables import is_weighted, table_one_of_run
     from pedsafe_sumo.safety.stats import table_one
 
-    summary = table_one(table)
-    print("Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the rates):")
+    def summarise(rows: pd.DataFrame) -> pd.DataFrame:
+        return table_one_of_run(rows) if is_weighted(rows) else table_one(rows)
+
+    summary = summarise(table)
+    if is_weighted(table):
+        print(
+            "Table I (importance sampling: weighted estimates of the final stage, 95% central-limit "
+            "intervals; see tables/table1.csv for ess and the episodes run, pilots included):"
+        )
+    else:
+        print(
+            "Table I (95% Wilson intervals; n counts the episodes that ran, errors are left out of the "
+            "rates):"
+        )
+    _print_rows(summary)
+    arms = [arm for arm in table["approach"].unique() if arm] if "approach" in table else []
+    if len(arms) > 1:  # --approach all: the same table per approach
+        for arm in arms:
+            print(f"Table I on approach {arm}:")
+            _print_rows(summarise(table[table["approach"] == arm]))
+
+
+def _print_rows(summary: pd.DataFrame) -> None:
     for _, row in summary.iterrows():
         print(
             f"  {row['scenario']:20s} {row['condition']:4s} n={int(row['n']):5d} "

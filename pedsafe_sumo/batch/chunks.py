@@ -44,6 +44,10 @@ class Task:
     episode: int
     seed: int
     conditions: tuple[str, ...]
+    #: Importance sampling (--sampler is): the proposal the episode's inputs come from, as canonical JSON
+    #: (sampling.draws.product_to_json; "" = the nominal, plain Monte Carlo), and its sampler stage.
+    proposal: str = ""
+    stage: int = 0
 
 
 @dataclass(frozen=True)

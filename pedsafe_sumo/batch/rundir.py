@@ -142,7 +142,8 @@ class BatchRunDirectory:
         table = to_table(output.rows)
         expected = sorted((task.episode, condition) for task in chunk.tasks for condition in task.conditions)
         got = sorted(zip(table["episode"].tolist(), table["condition"].tolist()))
-        if got != expected or (table["scenario"] != chunk.scenario).any():
+        # A chunk of scenario@ARM (--approach) holds that scenario's rows.
+        if got != expected or (table["scenario"] != chunk.scenario.partition("@")[0]).any():
             raise BatchError(f"chunk {chunk.key} came back with other episodes than it holds (a bug)")
         for result in output.cases:
             write_case(self.cases_dir, result)
@@ -186,7 +187,7 @@ class BatchRunDirectory:
             raise BatchError(f"{len(missing)} chunk(s) not recorded, first {missing[0]}")
         table = read_parts(self.path, [self.manifest.chunks[chunk.key] for chunk in chunks])
         expected_rows = sum(chunk.n_rows for chunk in chunks)
-        keys = table[["scenario", "episode", "condition"]]
+        keys = table[["scenario", "approach", "episode", "condition"]]
         if len(table) != expected_rows or keys.duplicated().any():
             raise BatchError(f"the parts hold {len(table)} rows, the plan {expected_rows} (a bug)")
         write_bytes_atomic(self.path / EPISODES_FILE, parquet_bytes(table))

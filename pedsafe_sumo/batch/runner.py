@@ -35,6 +35,7 @@ from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 ERROR_STATUS = "error"
 #: How often a pool worker checks that its driver is still alive [s].
@@ -219,8 +220,10 @@ def error_row(task: Task, condition: str, message: str, status: str = ERROR_STAT
     """The row of an episode that did not run to its end: its status ("error" or "timeout"), the
     message, the pair's keys."""
     row: dict[str, Any] = {c: np.nan for c in EPISODE_COLUMNS}
+    scenario, _, arm = task.scenario.partition("@")
     row.update(
-        scenario=task.scenario,
+        scenario=scenario,
+        approach=arm,
         condition=condition,
         episode=task.episode,
         seed=task.seed,
@@ -234,18 +237,38 @@ def error_row(task: Task, condition: str, message: str, status: str = ERROR_STAT
         ped_risk="",
         status=status,
         error=message,
+        weight=1.0,
+        sampler_stage=task.stage,
+        sampler_inputs="",
     )
     return row
 
 
+def sampler_proposal(text: str) -> Any:
+    """The families of a task's proposal (None under plain Monte Carlo), parsed once per process."""
+    if not text:
+        return None
+    if text not in _PROPOSALS:
+        from pedsafe_sumo.sampling.draws import product_from_json
+
+        _PROPOSALS[text] = product_from_json(text).families
+    return _PROPOSALS[text]
+
+
+_PROPOSALS: dict[str, Any] = {}
+
+
 def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
-    `<scenario>:<field>` keys (a protocol's per-scenario values) for this one."""
+    `<scenario>:<field>` keys (a protocol's per-scenario values) for this one. `name` may be
+    `<scenario>@<arm>` (batch --approach): that scenario on the approach from that arm."""
     from pedsafe_sumo.scenarios.registry import get_scenario
 
+    name, _, arm = name.partition("@")
     common = {key: value for key, value in overrides.items() if ":" not in key}
     own = {key.split(":", 1)[1]: value for key, value in overrides.items() if key.startswith(f"{name}:")}
-    return get_scenario(name).with_overrides(common).with_overrides(own)
+    spec = get_scenario(name).with_overrides(common).with_overrides(own)
+    return spec.with_overrides({"approach": arm}) if arm else spec
 
 
 def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any], list[Any]]:
@@ -255,21 +278,29 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
     rows, results = [], []
     try:
         spec = scenario_spec(task.scenario, config.scenario_overrides)
-        setup = runner.draw_setup(spec, task.seed)
+        setup, draws = runner.draw_setup_sampled(
+            spec, task.seed, sampler_proposal(task.proposal), DEFENSIVE_SHARE if task.proposal else 0.0
+        )
     except Exception as exc:  # the pair cannot even be set up: both rows are errors
         message = f"{type(exc).__name__}: {exc}"
         return [error_row(task, c, message) for c in task.conditions], [], []
+    # Both conditions share the pair's draw, hence its weight (sampling/draws.py).
+    sampled = {
+        "weight": draws.weight,
+        "sampler_stage": task.stage,
+        "sampler_inputs": json.dumps(draws.record(), sort_keys=True),
+    }
     for condition in task.conditions:
         try:
             result = runner.run(spec, condition, task.seed, setup=setup)
         except Exception as exc:
             status = TIMEOUT_STATUS if isinstance(exc, AgentTimeoutError) else ERROR_STATUS
-            rows.append(error_row(task, condition, f"{type(exc).__name__}: {exc}", status))
+            rows.append({**error_row(task, condition, f"{type(exc).__name__}: {exc}", status), **sampled})
             # After a failed episode SUMO may be in any state: a fresh instance for the next one.
             _close_runner()
             runner = _runner_for(config)
             continue
-        rows.append({**result.outcome, "episode": task.episode})
+        rows.append({**result.outcome, "episode": task.episode, **sampled})
         results.append(result)
     event = any(r.outcome["collision"] or r.outcome["conflict"] for r in results)
     return rows, (results if event else []), results

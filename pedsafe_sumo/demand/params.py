@@ -27,6 +27,7 @@ TRAFFIC_UPPER_BOUNDS: Bounds = {
     "speed_intersection_log_mu": (4.0, "a median speed of exp(4) = 55 m/s (197 km/h)"),
     "speed_nonintersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
     "speed_intersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
+    "fit_speed_limit_mps": (70.0, "252 km/h, above any posted speed limit"),
     "vehicle_length_m": (30.0, "longer than a truck with trailer (25 m)"),
     "vehicle_min_gap_m": (20.0, "four car lengths at standstill"),
 }
@@ -97,6 +98,7 @@ def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
     for fit in ("nonintersection", "intersection"):
         _number(section, f"speed_{fit}_log_mu", where)
         _positive(section, f"speed_{fit}_log_sigma", where)
+    _positive(section, "fit_speed_limit_mps", where)
     _shares_sum_to_one(section, [f"turn_share_{m}" for m in TURN_MOVEMENTS], where)
     sigma = _number(section, "driver_imperfection_sigma", where)
     if not 0.0 <= sigma <= 1.0:

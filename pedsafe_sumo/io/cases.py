@@ -27,8 +27,10 @@ from pedsafe_sumo.scenarios.registry import (
 )
 
 
-def case_stem(scenario: str, condition: str, seed: int) -> str:
-    return f"{scenario}_{condition}_{seed}"
+def case_stem(scenario: str, condition: str, seed: int, approach: str = "") -> str:
+    """File stem of a case; an approach named with --approach (batch --approach all runs the same seeds
+    on every approach) is its last part."""
+    return f"{scenario}_{condition}_{seed}" + (f"_{approach}" if approach else "")
 
 
 def _jsonable(value: Any) -> Any:
@@ -46,7 +48,7 @@ def _jsonable(value: Any) -> Any:
 def write_case(directory: Path, result) -> Path:
     """Write an EpisodeResult's log and setup; returns the path of the log."""
     directory.mkdir(parents=True, exist_ok=True)
-    stem = case_stem(result.setup.scenario, result.condition, result.setup.seed)
+    stem = case_stem(result.setup.scenario, result.condition, result.setup.seed, result.setup.approach)
     log_path = directory / f"{stem}.parquet"
     meta_path = directory / f"{stem}.json"
     tmp_log = log_path.with_suffix(".parquet.tmp")
@@ -73,7 +75,14 @@ def setup_from_dict(data: dict[str, Any]) -> EpisodeSetup:
     """Rebuild the frozen EpisodeSetup written by write_case (for replay)."""
 
     def vehicle(d: dict) -> VehicleSetup:
-        return VehicleSetup(**{**d, "colour_rgb": tuple(d["colour_rgb"]), "size": VehicleSize(**d["size"])})
+        return VehicleSetup(
+            **{
+                **d,
+                "colour_rgb": tuple(d["colour_rgb"]),
+                "size": VehicleSize(**d["size"]),
+                "route": tuple(d.get("route", ())),
+            }
+        )
 
     return EpisodeSetup(
         scenario=data["scenario"],
@@ -92,6 +101,7 @@ def setup_from_dict(data: dict[str, Any]) -> EpisodeSetup:
         conflict_time_s=data.get("conflict_time_s", math.nan),
         ped_crossing_id=data.get("ped_crossing_id", ""),
         signals=SignalStaging(**data["signals"]) if data.get("signals") else None,
+        approach=data.get("approach", ""),
     )
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 #: Columns, in DESIGN section 3 order.
@@ -21,27 +22,67 @@ EPISODE_COLUMNS = (
     "contact_stationary", "end_reason",
     # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
     "ego_signal", "ped_signal",
+    # The arm the ego came in on (N, E, S, W; batch --approach, issue 14).
+    "approach",
+    # Importance sampling (issue 17; sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
+    # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
+    # 0 under mc) and its random inputs as JSON.
+    "weight", "sampler_stage", "sampler_inputs",
 )  # fmt: skip
+#: Flags every row states (True or False; an errored episode's writer states False): the Table I rates
+#: count them, so a row without one is refused, never filled with a guess.
 BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
 #: check vehicle-person contact (a pedestrian off crossings and walking areas at the closest approach).
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal",
+    "ego_signal", "ped_signal", "approach", "sampler_inputs",
 )  # fmt: skip
-INT_COLUMNS = ("episode", "seed")
+INT_COLUMNS = ("episode", "seed", "sampler_stage")
+#: Values of the sampling columns in rows written before they existed (plain Monte Carlo).
+SAMPLER_DEFAULTS = {"weight": 1.0, "sampler_stage": 0}
 _NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
 FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in _NOT_FLOAT)
 CONDITION_ORDER = {"sv": 0, "v2i": 1}
 
 
+class EpisodeRowError(ValueError):
+    """A row that breaks the contract: a flag missing or not a boolean."""
+
+
+def _is_flag(value: Any) -> bool:
+    return isinstance(value, (bool, np.bool_))
+
+
 def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in."""
+    """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in.
+
+    EpisodeRowError when a row lacks one of BOOL_COLUMNS or holds something else than a boolean there
+    (pandas would turn a NaN or the text "False" into True); sumo_collision may be missing (unknown).
+    """
     table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
-    for column in BOOL_COLUMNS:  # a row without the flag (an error row, an older row) has it False
-        table[column] = table[column].astype(object).where(table[column].notna(), False).astype(bool)
+    for column, value in SAMPLER_DEFAULTS.items():
+        table[column] = table[column].fillna(value)
+    for column in BOOL_COLUMNS:
+        values = table[column].astype(object)
+        bad = ~values.map(_is_flag).astype(bool)
+        if bad.any():
+            first = table[bad].iloc[0]
+            raise EpisodeRowError(
+                f"episode row {first['scenario']}/{first['episode']}/{first['condition']}: {column} is "
+                f"{values[bad].iloc[0]!r}, not True or False ({int(bad.sum())} such row(s))"
+            )
+        table[column] = values.astype(bool)
     for column in NULLABLE_BOOL_COLUMNS:
+        values = table[column].astype(object)
+        bad = ~values.map(
+            lambda v: v is None or v is pd.NA or _is_flag(v) or (isinstance(v, float) and np.isnan(v))
+        )
+        if bad.astype(bool).any():
+            raise EpisodeRowError(
+                f"{column} is {values[bad.astype(bool)].iloc[0]!r}: True, False or missing (unknown) only"
+            )
         table[column] = table[column].astype("boolean")
     for column in INT_COLUMNS:
         table[column] = table[column].astype("int64")
@@ -53,10 +94,12 @@ def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def sort_rows(table: pd.DataFrame) -> pd.DataFrame:
-    """Rows ordered by (scenario, episode, sv before v2i), index 0..n-1. The key is unique in a run, so
-    the order is the same whichever chunks, workers or sessions the rows came from."""
+    """Rows ordered by (scenario, approach, episode, sv before v2i), index 0..n-1. The key is unique in a
+    run, so the order is the same whichever chunks, workers or sessions the rows came from."""
     table = table.sort_values(
-        ["scenario", "episode", "condition"],
+        ["scenario", "approach", "episode", "condition"]
+        if "approach" in table
+        else ["scenario", "episode", "condition"],
         key=lambda s: s.map(CONDITION_ORDER) if s.name == "condition" else s,
         kind="stable",
     )

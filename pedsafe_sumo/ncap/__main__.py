@@ -140,6 +140,8 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
                         "seed": seed,
                         "collision": False,
                         "conflict": False,
+                        "close_pass": False,
+                        "contact_stationary": False,
                         "sumo_collision": None,  # unknown: the run did not finish
                         "status": "error",
                         "error": row["error"],

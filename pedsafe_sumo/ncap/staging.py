@@ -35,7 +35,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, NcapError, Protocol
-from pedsafe_sumo.scenarios.geometry import Approach
+from pedsafe_sumo.scenarios.geometry import Approach, lane_path_in, offset_to_lane_pos_m, shape_length_m
 from pedsafe_sumo.scenarios.registry import (
     EGO_BLUE_RGB,
     VEHICLE_CLASSES,
@@ -76,21 +76,10 @@ def ego_path(net_file: str, lane_id: str, next_edge_id: str) -> tuple[tuple[tupl
     in lane-length metres and draws it on the lane's shape, whose drawn length netconvert may make
     differ (Xueqing's median lane: 181.16 m drawn, 181.63 m long)."""
     net = read_net(net_file, withInternal=True)
-    lane = net.getLane(lane_id)
-    connections = [c for c in lane.getOutgoing() if c.getTo().getID() == next_edge_id]
-    if not connections:
-        raise NcapError(f"lane {lane_id} has no connection to edge {next_edge_id}")
-    lanes = [lane]
-    via = connections[0].getViaLaneID()
-    current = net.getLane(via) if via else connections[0].getToLane()
-    for _ in range(8):  # internal lanes split at internal junctions, then the outgoing lane
-        lanes.append(current)
-        if current.getEdge().getFunction() != "internal":
-            break
-        following = current.getOutgoing()[0]
-        via = following.getViaLaneID()
-        current = net.getLane(via) if via else following.getToLane()
-    return tuple((tuple(tuple(p) for p in ln.getShape()), float(ln.getLength())) for ln in lanes)
+    try:
+        return lane_path_in(net, net.getLane(lane_id), next_edge_id)
+    except ValueError as exc:
+        raise NcapError(str(exc)) from None
 
 
 def _locate(path, line=None, before_end_m: float = 0.0):
@@ -108,7 +97,7 @@ def _locate(path, line=None, before_end_m: float = 0.0):
             except NcapError:
                 done_m += length
                 continue
-        return done_m + offset * length / drawn, length / drawn, _frame(shape, offset)
+        return done_m + offset_to_lane_pos_m(shape, length, offset), length / drawn, _frame(shape, offset)
     raise NcapError("the crosswalk does not cross the ego's path")
 
 
@@ -154,7 +143,7 @@ def _frame(shape, offset_m: float):
 
 
 def _shape_length(shape) -> float:
-    return sum(math.dist(p, q) for p, q in zip(shape[:-1], shape[1:]))
+    return shape_length_m(shape)
 
 
 def _line_offset(shape, line) -> float:
@@ -353,7 +342,7 @@ def _obstruction(protocol: Protocol, approach: Approach, crossing_xy) -> list[Ve
 
     kerb_shape = approach.lane_shapes[0]
     geo_m = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(crossing_xy, kerb_shape)
-    pos = geo_m * approach.lane_lengths_m[0] / _shape_length(kerb_shape)
+    pos = offset_to_lane_pos_m(kerb_shape, approach.lane_lengths_m[0], geo_m)
     downstream = VEHICLE_CLASSES[spec["downstream_class"]]
     upstream = VEHICLE_CLASSES[spec["upstream_class"]]
     gap_m = float(spec["gap_m"])

@@ -214,6 +214,19 @@ def choose_approach(net: sumolib.net.Net, group: list, preferred_arm: str | None
     return node, arm
 
 
+def approach_nodes(net: sumolib.net.Net, group: list, own_arm: str, own_node) -> dict:
+    """Arm -> signal node of every arm of the intersection a road with vehicle lanes enters from outside
+    (choose_approach with that arm preferred), the site's own arm first."""
+    found = {own_arm: own_node}
+    for arm in ("N", "E", "S", "W"):
+        if arm in found:
+            continue
+        node, chosen = choose_approach(net, group, arm)
+        if chosen == arm:
+            found[arm] = node
+    return found
+
+
 def _arm_axis(junction, arm: str) -> tuple[float, float]:
     """Unit vector from the junction centre along one arm (N/E/S/W sector of its roads' far ends)."""
     jx, jy = junction.getCoord()
@@ -658,9 +671,38 @@ def build_site(
             raise BuildError(f"the main junction has no arm towards {rsu_watch_arm}")
         rsu_watch_arm = chosen_arm
         rsu_corner = rsu_corner or KERB_CORNER[rsu_watch_arm]
-        # Two poles: the corner pole watches the approach and its crosswalk (crossing, jaywalking); the
-        # far-side pole looks across at the approach's stop-line queue (background blending).
+        # Two poles per approach: the corner pole watches the approach and its crosswalk (crossing,
+        # jaywalking); the far-side pole looks across at the approach's stop-line queue (background
+        # blending). The site's own approach (the watched arm) first, with the ids the scenarios name;
+        # every other approach's poles carry its arm in their ids (scenarios.geometry.approach_unit_ids).
+        approaches = approach_nodes(net, group, rsu_watch_arm, junction)
         rsu_units = _place_poles(stage, name, net, junction, rsu_corner, rsu_watch_arm, poly_file)
+        approach_info = {
+            rsu_watch_arm: {
+                "junction": junction.getID(),
+                "corner": rsu_corner,
+                "poles": [u["id"] for u in rsu_units],
+            }
+        }
+        for arm, node in approaches.items():
+            if arm == rsu_watch_arm:
+                continue
+            try:
+                poles = [
+                    {**pole, "id": f"{pole['id']}_{arm}"}
+                    for pole in _place_poles(stage, name, net, node, KERB_CORNER[arm], arm, poly_file)
+                ]
+            except BuildError as exc:
+                # An arm the poles cannot be placed on (no incoming carriageway of its own at that node):
+                # the approach is left out, and the site file says why.
+                approach_info[arm] = {"junction": node.getID(), "skipped": str(exc), "poles": []}
+                continue
+            approach_info[arm] = {
+                "junction": node.getID(),
+                "corner": poles[0]["corner"],
+                "poles": [u["id"] for u in poles],
+            }
+            rsu_units += poles
         _write_rsu(stage / f"{name}.rsu.add.xml", rsu_units)
         _write_view(stage / f"{name}.view.xml", junction.getCoord())
         _write_sumocfg(stage / f"{name}.sumocfg", name)
@@ -696,6 +738,8 @@ def build_site(
             "underground_polygons_dropped": dropped_underground,
             # "roadside_unit": the corner pole, whose watched arm is the scenarios' approach.
             "roadside_unit": rsu_units[0],
+            # Every approach (arm -> its signal node and poles), the site's own first: --approach ARM.
+            "approaches": approach_info,
             "roadside_units": rsu_units,
             "sumo_version": sumolib.version.gitDescribe(),
             "attribution": OSM_ATTRIBUTION,

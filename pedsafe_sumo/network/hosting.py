@@ -18,6 +18,7 @@ summary. A site that cannot host a scenario says why in one line.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -152,32 +153,72 @@ def hosting_problem(
     )
 
 
-def site_hosting(site, specs: dict, params: dict[str, Any]) -> dict[str, str | None]:
-    """Scenario name -> why the site cannot host it under V2I, or None."""
+#: Turns from an approach with one vehicle lane are refused: on the zhixin clip's one-lane north approach a
+#: right_turn episode crashed SUMO (libsumo 1.28, segmentation fault about 14 s in; the same scenario ran on
+#: Xueqing's one-lane west approach); the mechanism was not found (docs/sites.md).
+ONE_LANE_TURN_PROBLEM = (
+    "approach {edge} has 1 vehicle lane: turns from one-lane approaches are not staged (SUMO crashed in one, "
+    "docs/sites.md)"
+)
+
+
+def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = None) -> dict[str, str | None]:
+    """Scenario name -> why the site cannot host it under V2I, or None. On approach `arm` (None: each
+    spec's own `approach`, "" meaning the site's), with that approach's poles."""
     from pedsafe_sumo.perception.world import load_roadside_units, load_static_occluders
-    from pedsafe_sumo.scenarios.geometry import load_approach
+    from pedsafe_sumo.scenarios.geometry import (
+        approach_unit_ids,
+        default_arm,
+        load_approach,
+        load_turn,
+        straight_staging_problem,
+    )
 
     rsu = params["perception"]["roadside_camera"]
     units = load_roadside_units(
         site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
     )
     by_id = {u.id: u for u in units}
-    try:
-        approach = load_approach(site)
-    except ValueError as exc:
-        return {name: f"cannot be staged: {exc}" for name in specs}
     static = load_static_occluders(site.file("poly.xml"), params["perception"]["occluders"])
-    from pedsafe_sumo.scenarios.geometry import load_turn
-
+    site_arm = default_arm(site)
     problems: dict[str, str | None] = {}
     for name, spec in specs.items():
+        spec_arm = (arm if arm is not None else getattr(spec, "approach", "")) or site_arm
         try:
-            turn = load_turn(site, spec.turn) if spec.placement == "turn" else None
+            approach = load_approach(site, spec_arm)
+            turn = load_turn(site, spec.turn, spec_arm) if spec.placement == "turn" else None
         except ValueError as exc:
             problems[name] = f"cannot be staged: {exc}"
             continue
+        straight = straight_staging_problem(approach) if spec.placement != "turn" else None
+        if spec.placement == "turn" and len(approach.lane_ids) < 2:
+            straight = ONE_LANE_TURN_PROBLEM.format(edge=approach.edge_id)
+        if straight:
+            problems[name] = f"cannot be staged: site {site.name}: {straight}"
+            continue
+        ids = approach_unit_ids(spec.roadside_unit_ids, spec_arm, site_arm)
+        spec = dataclasses.replace(spec, roadside_units=",".join(ids))
         problems[name] = hosting_problem(spec, approach, by_id, params, static, turn)
     return problems
+
+
+def hosting_matrix(
+    site, specs: dict, params: dict[str, Any], arms, conditions
+) -> tuple[list[tuple[str, str]], dict[tuple[str, str], str]]:
+    """([(scenario, arm)] the site hosts, {(scenario, arm): why not} for the others), scenarios in the
+    order of `specs`, arms in the order given. Without V2I every combination that can be staged is
+    hosted (the poles do not matter)."""
+    hosted: list[tuple[str, str]] = []
+    skipped: dict[tuple[str, str], str] = {}
+    by_arm = {arm: site_hosting(site, specs, params, arm) for arm in arms}
+    for name in specs:
+        for arm in arms:
+            problem = by_arm[arm][name]
+            if problem is not None and ("v2i" in conditions or problem.startswith("cannot be staged")):
+                skipped[(name, arm)] = problem
+            else:
+                hosted.append((name, arm))
+    return hosted, skipped
 
 
 def split_hosted(site, specs: dict, params: dict[str, Any], conditions) -> tuple[list[str], dict[str, str]]:
@@ -201,15 +242,20 @@ def check_hosting(site, specs: dict, params: dict[str, Any], conditions) -> None
 
 
 def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
-    """One line per registered scenario: whether the site hosts it (the build's summary)."""
+    """One line per registered scenario and approach: whether the site hosts it (the build's summary); the
+    site's own approach (what runs without --approach) first, its lines without the arm."""
     from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.scenarios.geometry import default_arm, site_approaches
     from pedsafe_sumo.scenarios.registry import SCENARIOS
 
     params = params or load_params(None)
     lines = []
-    for name, problem in site_hosting(site, dict(SCENARIOS), params).items():
+    own = default_arm(site)
+    arms = [own] + [a for a in site_approaches(site) if a != own]
+    rows = [(arm, item) for arm in arms for item in site_hosting(site, dict(SCENARIOS), params, arm).items()]
+    for arm, (name, problem) in rows:
         lines.append(
-            f"  {name}: "
+            f"  {name}{'' if arm == own else f' on approach {arm}'}: "
             + (
                 "hosted (its roadside poles see its staging area)"
                 if problem is None

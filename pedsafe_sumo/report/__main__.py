@@ -220,6 +220,8 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say(text_table(*paired_rows(paired)))
     say("")
     out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path
+    if run.selected_approach:
+        out_dir = out_dir / f"approach_{run.selected_approach}"
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
     written += index_checks(run, out_dir / TABLES_DIR, say)
     written += write_figures(run, out_dir / FIGURES_DIR, say)
@@ -259,9 +261,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="report a batch that has not finished on the chunks done so far (written under DIR/partial/)",
     )
+    parser.add_argument(
+        "--approach",
+        choices=list("NESW"),
+        help="report the episodes on this approach only (a batch run with --approach all holds several)",
+    )
     args = parser.parse_args(argv)
     try:
-        report(load_run(args.run_dir, partial=args.partial), say=_StdoutLines())
+        report(load_run(args.run_dir, partial=args.partial, approach=args.approach), say=_StdoutLines())
     except ReportError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

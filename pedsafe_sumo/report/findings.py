@@ -116,3 +116,54 @@ def findings_figure(table: pd.DataFrame, path: Path, title: str = "") -> Path:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def findings_across_sweeps(sweep_dirs: list[Path]) -> pd.DataFrame:
+    """The findings.csv of several one-key sweeps in one table: sweep (the swept key), value, and the
+    findings, in the order of the directories and of each sweep's combinations."""
+    frames = []
+    for sweep_dir in sweep_dirs:
+        table = pd.read_csv(sweep_dir / "findings.csv")
+        keys = {str(run).split("=", 1)[0] for run in table["run"]}
+        if len(keys) != 1 or any("=" not in str(run) or "," in str(run) for run in table["run"]):
+            raise ValueError(
+                f"{sweep_dir}: not a sweep of one key (runs {', '.join(map(str, table['run']))})"
+            )
+        values = [str(run).split("=", 1)[1] for run in table["run"]]
+        frames.append(table.drop(columns="run").assign(sweep=keys.pop(), value=values))
+    combined = pd.concat(frames, ignore_index=True)
+    return combined[["sweep", "value", *FINDINGS]]
+
+
+def findings_across_sweeps_figure(table: pd.DataFrame, path: Path, title: str = "") -> Path:
+    """One panel per sweep, side by side: findings (rows) against the swept values (columns); green
+    holds, red fails, grey not evaluated (the layout of findings_figure)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+
+    sweeps = list(dict.fromkeys(table["sweep"]))
+    widths = [max(2, int((table["sweep"] == s).sum())) for s in sweeps]
+    fig, axes = plt.subplots(
+        1, len(sweeps), figsize=(2.6 + 0.75 * sum(widths), 3.2), squeeze=False, constrained_layout=True,
+        gridspec_kw={"width_ratios": widths},
+    )  # fmt: skip
+    cmap = ListedColormap(["#d0d0d0", "#d9534f", "#5cb85c"])
+    for col, (ax, sweep) in enumerate(zip(axes[0], sweeps)):
+        rows = table[table["sweep"] == sweep]
+        values = rows[list(FINDINGS)].to_numpy(dtype=float).T
+        coded = np.where(np.isnan(values), 0, np.where(values > 0.5, 2, 1))
+        ax.imshow(coded, cmap=cmap, vmin=0, vmax=2, aspect="auto")
+        ax.set_yticks(range(len(FINDINGS)), [f.replace("_", " ") for f in FINDINGS] if col == 0 else [],
+                      fontsize=8)  # fmt: skip
+        ax.set_xticks(range(len(rows)), list(rows["value"]), fontsize=7)
+        ax.set_xlabel(sweep, fontsize=7)
+        for (i, j), code in np.ndenumerate(coded):
+            ax.text(j, i, {0: "n/a", 1: "fails", 2: "holds"}[int(code)], ha="center", va="center", fontsize=6)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

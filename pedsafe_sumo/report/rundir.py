@@ -65,12 +65,21 @@ class RunDirectory:
     run_info_problem: str = ""
     #: for a batch that has not finished, read with partial=True: one line saying how much is there
     incomplete: str = ""
+    #: The approach reported (report --approach, or the only one of the run; "" for older runs).
+    approach: str = ""
+    #: report --approach: the tables and figures go to DIR/approach_<arm>/ (one report per approach).
+    selected_approach: str = ""
 
     @property
     def cases_dir(self) -> Path:
         return self.path / CASES_DIR
 
     def case_path(self, scenario: str, condition: str, seed: int) -> Path:
+        """The case log of an episode: a batch with --approach names it after the arm, one without not."""
+        if self.approach:
+            named = self.cases_dir / f"{case_stem(scenario, condition, int(seed), self.approach)}.parquet"
+            if named.is_file():
+                return named
         return self.cases_dir / f"{case_stem(scenario, condition, int(seed))}.parquet"
 
 
@@ -108,10 +117,11 @@ def _finished_parts(path: Path, run_info: dict[str, Any], partial: bool) -> tupl
     return read_parts(path, records), f"INCOMPLETE RUN: {done}; every number covers these episodes only"
 
 
-def load_run(path: Path, partial: bool = False) -> RunDirectory:
+def load_run(path: Path, partial: bool = False, approach: str | None = None) -> RunDirectory:
     """Read and check a run directory; raises ReportError with a one-line message on bad input.
 
     An unfinished batch is refused, or with `partial` read from its finished chunks (module docstring).
+    A run of several approaches (batch --approach all) is reported one approach at a time (`approach`).
     """
     path = Path(path)
     if not path.exists():
@@ -139,7 +149,21 @@ def load_run(path: Path, partial: bool = False) -> RunDirectory:
         raise ReportError(f"{source} lacks required column(s): {', '.join(missing)}")
     if episodes.empty:
         raise ReportError(f"{source} has no rows")
-    return RunDirectory(path, episodes, run_info, problem, incomplete)
+    arms = [str(a) for a in episodes["approach"].unique() if a] if "approach" in episodes.columns else []
+    if approach is not None:
+        if approach not in arms:
+            raise ReportError(
+                f"{source} has no episodes on approach {approach} (approaches: {', '.join(arms)})"
+            )
+        episodes = episodes[episodes["approach"] == approach].reset_index(drop=True)
+    elif len(arms) > 1:
+        raise ReportError(
+            f"{source} holds episodes on approaches {', '.join(arms)}: report one at a time with --approach "
+            f"{arms[0]} (the batch printed Table I per approach)"
+        )
+    return RunDirectory(
+        path, episodes, run_info, problem, incomplete, approach or (arms[0] if arms else ""), approach or ""
+    )
 
 
 def _find(info: dict[str, Any], *names: str) -> Any:

@@ -13,7 +13,8 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
-from pedsafe_sumo.safety.stats import paired_mcnemar, table_one
+from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
+from pedsafe_sumo.sampling.importance import is_estimate
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -26,9 +27,61 @@ def condition_label(condition: str) -> str:
     return CONDITION_LABELS.get(condition, str(condition))
 
 
+def is_weighted(episodes: pd.DataFrame) -> bool:
+    """Whether the run is an importance-sampling one (--sampler is): it has sampler stages beyond 0."""
+    return "sampler_stage" in episodes.columns and bool((episodes["sampler_stage"] > 0).any())
+
+
+def table_one_weighted(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
+    """Table I of an importance-sampling run (docs/sampling.md): per scenario and condition, the unbiased
+    weighted estimates (1/n) sum w_i f_i over the final stage's episodes (the highest sampler_stage of
+    the scenario) of the collision indicator, the injury probability and the conflict-without-collision
+    indicator, with central-limit 95% intervals (sampling.importance.is_estimate), the effective sample
+    size `ess` of the final stage's weights, and `n_run`, every episode run under that condition, pilot
+    stages and errors included (the cost). `n` and `n_error` count the final stage as in `table_one`.
+    """
+    rows = []
+    for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
+        final = group[group["sampler_stage"] == group["sampler_stage"].max()]
+        errors = final["status"].isin(FAILED_STATUSES).to_numpy()
+        ok = final[~errors]
+        weights = ok["weight"].to_numpy(dtype=float)
+        collisions = _flags(ok["collision"])
+        conflicts = conflict_without_collision(_flags(ok["conflict"]), collisions)
+        injury = np.nan_to_num(ok["injury_probability"].to_numpy(dtype=float), nan=0.0)
+        est = {
+            "collision": is_estimate(collisions.astype(float), weights, confidence),
+            "injury": is_estimate(injury, weights, confidence),
+            "conflict": is_estimate(conflicts.astype(float), weights, confidence),
+        }
+        rows.append(
+            {
+                "scenario": scenario,
+                "condition": condition,
+                "n": len(ok),
+                "n_error": int(errors.sum()),
+                "collision_rate": est["collision"].mean,
+                "collision_low": max(0.0, est["collision"].low),
+                "collision_high": est["collision"].high,
+                "injury_mean": est["injury"].mean,
+                "injury_low": max(0.0, est["injury"].low),
+                "injury_high": est["injury"].high,
+                "conflict_rate": est["conflict"].mean,
+                "conflict_low": max(0.0, est["conflict"].low),
+                "conflict_high": est["conflict"].high,
+                "ess": est["collision"].ess,
+                "n_run": len(group),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def table_one_of_run(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
-    """Table I (scenario x condition) of `table_one`, rows ordered by scenario then sv before v2i."""
-    table = table_one(episodes, confidence)
+    """Table I (scenario x condition) of `table_one`, rows ordered by scenario then sv before v2i; for an
+    importance-sampling run, `table_one_weighted` (with the columns ess and n_run)."""
+    table = (
+        table_one_weighted(episodes, confidence) if is_weighted(episodes) else table_one(episodes, confidence)
+    )
     order = {c: i for i, c in enumerate(CONDITION_LABELS)}
     scenario_order = {s: i for i, s in enumerate(pd.unique(episodes["scenario"]))}
     key = table["scenario"].map(scenario_order) * 100 + table["condition"].map(order).fillna(99)
@@ -103,6 +156,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
         ]
         for r in table.itertuples(index=False)
     ]
+    if "ess" in table.columns:  # importance sampling: the effective sample size and the episodes run
+        header += ["ESS", "episodes run (pilots included)"]
+        for cells, r in zip(rows, table.itertuples(index=False)):
+            cells += [f"{r.ess:.1f}", str(r.n_run)]
     return header, rows
 
 

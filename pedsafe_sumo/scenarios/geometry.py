@@ -6,13 +6,19 @@ right, a signalised crosswalk at the stop line). Everything is derived from the 
 never from hard-coded edge ids, so another site built by tools/build_network.py works the same way.
 
 Frames: SUMO network coordinates (x east, y north, metres); headings in radians counter-clockwise
-from +x. Lane positions are metres from the start of the lane, as in SUMO.
+from +x. Lane positions are metres from the start of the lane, as in SUMO: SUMO moves a vehicle in
+lane-length metres and draws lane position p at p x (drawn length / lane length) along the lane's shape
+(MSLane::interpolateLanePosToGeometryPos), and netconvert may set a lane's length apart from its drawn
+shape (Xueqing's median lane: 181.63 m long, 181.16 m drawn; the junction's straight internal lanes are
+all 42.36 m long, drawn 41.88-42.83 m). Every conversion between the two goes through
+lane_pos_to_offset_m / offset_to_lane_pos_m below (the scenarios and the Euro NCAP staging alike).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -20,6 +26,73 @@ import sumolib
 
 from pedsafe_sumo.network.sites import Site, compass_sector
 from pedsafe_sumo.sumo_net import read_net
+
+#: A vehicle's way through the network as SUMO drives it: each lane's drawn shape (network frame, metres)
+#: and SUMO length [m], in driving order (a lane, the junction's internal lane(s), the lane beyond).
+LanePath = tuple[tuple[tuple[tuple[float, float], ...], float], ...]
+
+
+def shape_length_m(shape) -> float:
+    """Drawn length of a polyline [m]."""
+    return sum(math.dist(p, q) for p, q in zip(shape[:-1], shape[1:]))
+
+
+def lane_pos_to_offset_m(shape, length_m: float, pos_m: float) -> float:
+    """Where SUMO draws lane position `pos_m` (lane-length metres): the offset along the drawn `shape`."""
+    return pos_m * shape_length_m(shape) / length_m
+
+
+def offset_to_lane_pos_m(shape, length_m: float, offset_m: float) -> float:
+    """The lane position (lane-length metres) SUMO draws at `offset_m` along the drawn `shape`."""
+    return offset_m * length_m / shape_length_m(shape)
+
+
+def lane_path_in(net, lane, next_edge_id: str) -> LanePath:
+    """The lanes a vehicle drives from sumolib `lane` onto the edge `next_edge_id`: the lane, the
+    junction's internal lane(s) of the connection, and the lane it reaches there (a sumolib net read
+    withInternal=True). ValueError when the lane has no connection to that edge."""
+    connections = [c for c in lane.getOutgoing() if c.getTo().getID() == next_edge_id]
+    if not connections:
+        raise ValueError(f"lane {lane.getID()} has no connection to edge {next_edge_id}")
+    return _as_lane_path(_lanes_of(net, connections[0]))
+
+
+def _lanes_of(net, connection) -> list:
+    """The sumolib lanes a vehicle drives through a connection: its from-lane, the junction's internal
+    lane(s) (an internal junction, e.g. before a crosswalk, splits one in two: followed by its via lane,
+    not its to-lane, which skips the second part), and its to-lane."""
+    lanes = [connection.getFromLane()]
+    via = connection.getViaLaneID()
+    current = net.getLane(via) if via else connection.getToLane()
+    for _ in range(8):  # internal lanes split at internal junctions, then the outgoing lane
+        lanes.append(current)
+        if current.getEdge().getFunction() != "internal":
+            break
+        following = current.getOutgoing()[0]
+        via = following.getViaLaneID()
+        current = net.getLane(via) if via else following.getToLane()
+    return lanes
+
+
+def _as_lane_path(lanes) -> LanePath:
+    return tuple((tuple(tuple(p) for p in ln.getShape()), float(ln.getLength())) for ln in lanes)
+
+
+def path_pos_m(path: LanePath, xy: tuple[float, float]) -> float:
+    """SUMO distance (lane-length metres) from the start of `path` to its point nearest `xy`: what a
+    vehicle's front at the path's start drives until it is drawn there."""
+    best: tuple[float, float] | None = None
+    done_m = 0.0
+    for shape, length_m in path:
+        offset_m = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(xy, shape, perpendicular=False)
+        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, offset_m)
+        gap_m = math.dist((x, y), xy)
+        if best is None or gap_m < best[0] - 1e-9:
+            best = (gap_m, done_m + offset_to_lane_pos_m(shape, length_m, offset_m))
+        done_m += length_m
+    if best is None:
+        raise ValueError("empty lane path")
+    return best[1]
 
 
 @dataclass(frozen=True)
@@ -39,14 +112,23 @@ class Approach:
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
     crosswalk_width_m: float
     junction_id: str
+    #: Per vehicle lane (as lane_ids): the lanes of the straight-through movement from it onto
+    #: through_route[1] (the lane alone where it has no such movement).
+    through_paths: tuple[LanePath, ...] = ()
+    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[1].
+    through_lanes: tuple[int, ...] = ()
+    #: The approach's speed limit (its fastest vehicle lane's) [m/s].
+    speed_limit_mps: float = math.nan
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
-        """(x, y, heading) of the centre of vehicle lane `lane_index` at lane position `pos_m`."""
+        """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
+        SUMO draws a vehicle's front at that lane position."""
         shape = self.lane_shapes[lane_index]
-        pos_m = min(max(pos_m, 0.0), self.lane_lengths_m[lane_index])
-        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, pos_m)
+        length_m = self.lane_lengths_m[lane_index]
+        offset_m = lane_pos_to_offset_m(shape, length_m, min(max(pos_m, 0.0), length_m))
+        x, y = sumolib.geomhelper.positionAtShapeOffset(shape, offset_m)
         # sumolib returns atan2(dy, dx) in radians: counter-clockwise from +x, as used here.
-        return x, y, sumolib.geomhelper.rotationAtShapeOffset(shape, pos_m)
+        return x, y, sumolib.geomhelper.rotationAtShapeOffset(shape, offset_m)
 
     def across(self, lane_index: int, pos_m: float, from_offset_m: float, to_offset_m: float):
         """Two points on the line across the road at a lane position, offsets measured to the left
@@ -59,13 +141,50 @@ class Approach:
         )
 
 
-@lru_cache(maxsize=4)
-def load_approach(site: Site) -> Approach:
+#: The arms an approach can come from (compass sectors of the junction, network frame).
+ARMS = ("N", "E", "S", "W")
+
+
+def site_approaches(site: Site) -> dict[str, str]:
+    """Arm -> signal node of every approach the site's build found (the site file's `approaches`; a site
+    file from before them has only its watched arm, at the main junction)."""
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    found = info.get("approaches")
+    if found:
+        return {arm: entry["junction"] for arm, entry in found.items() if "skipped" not in entry}
+    return {info["roadside_unit"]["watched_arm"]: info["main_junction"]}
+
+
+def default_arm(site: Site) -> str:
+    """The site's own approach: the arm its first roadside pole watches (what runs without --approach)."""
+    info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
+    return str(info["roadside_unit"]["watched_arm"])
+
+
+def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str) -> tuple[str, ...]:
+    """The poles a scenario's `roadside_units` name on approach `arm`: the site's own approach keeps the
+    ids (rsu_camera_0, rsu_camera_1); the build names another approach's poles after its arm
+    (rsu_camera_0_E, rsu_camera_1_E: tools/build_network.py)."""
+    if not arm or arm == site_arm:
+        return tuple(unit_ids)
+    # Only the build's own ids follow the approach; a pole named otherwise (--set roadside_units=...) is
+    # taken as named.
+    return tuple(f"{unit}_{arm}" if re.fullmatch(r"rsu_camera_\d+", unit) else unit for unit in unit_ids)
+
+
+@lru_cache(maxsize=16)
+def load_approach(site: Site, arm: str | None = None) -> Approach:
+    """The approach from `arm` (N, E, S or W; None or "": the site's own approach, default_arm)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     net = read_net(str(site.file("net.xml")), withInternal=True)
-    junction = net.getNode(info["main_junction"])
+    arm = arm or info["roadside_unit"]["watched_arm"]
+    approaches = site_approaches(site)
+    if arm not in approaches:
+        raise ValueError(
+            f"site {site.name}: no approach from the {arm} (approaches: {', '.join(approaches) or 'none'})"
+        )
+    junction = net.getNode(approaches[arm])
     jx, jy = junction.getCoord()
-    arm = info["roadside_unit"]["watched_arm"]
 
     def sector(x: float, y: float) -> str:
         return compass_sector((jx, jy), (x, y))
@@ -75,10 +194,10 @@ def load_approach(site: Site) -> Approach:
         for e in junction.getIncoming()
         if e.getFunction() == ""
         and sector(*e.getShape()[0]) == arm
-        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 2
+        and sum(lane.allows("passenger") for lane in e.getLanes()) >= 1
     ]
     if not candidates:
-        raise ValueError(f"site {site.name}: the watched arm {arm} has no approach with two vehicle lanes")
+        raise ValueError(f"site {site.name}: the {arm} arm has no approach with a vehicle lane")
     edge = max(candidates, key=lambda e: e.getLaneNumber())
     vehicle_lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
     sidewalk = edge.getLane(0)
@@ -88,6 +207,12 @@ def load_approach(site: Site) -> Approach:
     straight = [c.getTo() for lane in vehicle_lanes for c in lane.getOutgoing() if c.getDirection() == "s"]
     if not straight:
         raise ValueError(f"site {site.name}: no straight movement from {edge.getID()}")
+    through_edge_id = straight[0].getID()
+
+    def through_path(lane) -> LanePath:
+        if any(c.getTo().getID() == through_edge_id for c in lane.getOutgoing()):
+            return lane_path_in(net, lane, through_edge_id)
+        return ((tuple(tuple(p) for p in lane.getShape()), float(lane.getLength())),)
 
     crossing = next(
         (
@@ -117,7 +242,35 @@ def load_approach(site: Site) -> Approach:
         crosswalk_path=(tuple(a), tuple(b)),
         crosswalk_width_m=crossing.getLane(0).getWidth(),
         junction_id=junction.getID(),
+        through_paths=tuple(through_path(lane) for lane in vehicle_lanes),
+        speed_limit_mps=max(lane.getSpeed() for lane in vehicle_lanes),
+        through_lanes=tuple(
+            k
+            for k, lane in enumerate(vehicle_lanes)
+            if any(c.getDirection() == "s" and c.getTo() == straight[0] for c in lane.getOutgoing())
+        ),
     )
+
+
+def straight_staging_problem(approach: Approach, ego_lane: int = 1) -> str | None:
+    """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (the lane
+    next to the kerb lane, where crossing, jaywalking and background blending put it), or None. A lane
+    that only turns (on Xueqing's east approach the second lane turns left) would have the ego drive
+    straight from a turning lane, against the lane's marking. An approach with one vehicle lane has no lane
+    beside the kerb lane: the vehicle that hides the pedestrian (queued, parked or waiting at the kerb)
+    would stand in the ego's own lane, ahead of it, and the scene would be a car following, not a
+    pedestrian stepping out from behind a vehicle beside the ego."""
+    if ego_lane >= len(approach.lane_ids):
+        return (
+            f"approach {approach.edge_id} has {len(approach.lane_ids)} vehicle lane(s): no lane beside the "
+            "kerb lane for the ego to pass the vehicle that hides the pedestrian"
+        )
+    if ego_lane not in approach.through_lanes:
+        return (
+            f"lane {approach.lane_ids[ego_lane]}, where the ego drives, has no straight movement onto "
+            f"{approach.through_route[1]}"
+        )
+    return None
 
 
 @dataclass(frozen=True)
@@ -138,20 +291,26 @@ class Turn:
     #: line ("near": the corner the ego turns around on a right turn) to the other.
     crosswalk_id: str
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
+    #: The lane of the road turned into that the path ends on, and the SUMO distance along the path (lane
+    #: lengths, as path_pos_m) at which it begins (where the junction ends) [m].
+    exit_lane_id: str = ""
+    exit_start_m: float = 0.0
+    #: The lanes of path_xy with their SUMO lengths: SUMO distances along the path (path_pos_m).
+    lanes: LanePath = ()
 
 
 #: SUMO's connection directions of the turns (https://sumo.dlr.de/docs/Networks/PlainXML.html).
 _TURN_DIRECTIONS = {"right": "r", "left": "l"}
 
 
-@lru_cache(maxsize=8)
-def load_turn(site: Site, direction: str) -> Turn:
-    """The `direction` turn of the watched approach: from the kerb lane (right) or the median lane
-    (left), onto the arm whose heading differs by the nearest to 90 degrees; raises ValueError when
-    the approach has no such connection or the arm no crosswalk."""
+@lru_cache(maxsize=32)
+def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
+    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane (right)
+    or the median lane (left), onto the arm whose heading differs by the nearest to 90 degrees; raises
+    ValueError when the approach has no such connection or the arm no crosswalk."""
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
-    approach = load_approach(site)
+    approach = load_approach(site, arm)
     net = read_net(str(site.file("net.xml")), withInternal=True)
     lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
     lane = net.getLane(approach.lane_ids[lane_index])
@@ -168,17 +327,17 @@ def load_turn(site: Site, direction: str) -> Turn:
         return abs(change - wanted)
 
     connection = min(connections, key=turn_error)
-    path = [tuple(p) for p in lane.getShape()]
-    internal = net.getLane(connection.getViaLaneID())
-    while internal.getEdge().getFunction() == "internal":
-        path += [tuple(p) for p in internal.getShape()]
-        internal = internal.getOutgoing()[0].getToLane()
-    path += [tuple(p) for p in internal.getShape()]
+    driven = _lanes_of(net, connection)
+    path = [tuple(p) for ln in driven for p in ln.getShape()]
+    exit_lane = driven[-1]
     # Drop repeated points where one lane's shape ends at the next one's start.
     path_xy = [path[0]]
     for point in path[1:]:
         if math.dist(point, path_xy[-1]) > 1e-6:
             path_xy.append(point)
+    # In SUMO's lane-length metres along the driven lanes, as every distance on the path (path_pos_m):
+    # where the exit lane begins, the junction's internal lanes behind.
+    exit_start_m = float(sum(ln.getLength() for ln in driven[:-1]))
     target = connection.getTo()
     crossing = next(
         (
@@ -206,4 +365,7 @@ def load_turn(site: Site, direction: str) -> Turn:
         approach_length_m=approach.lane_lengths_m[lane_index],
         crosswalk_id=crossing.getID(),
         crosswalk_path=(a, b),
+        exit_lane_id=exit_lane.getID(),
+        exit_start_m=exit_start_m,
+        lanes=_as_lane_path(driven),
     )

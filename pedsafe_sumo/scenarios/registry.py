@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.scenarios.geometry import Approach, Turn
+from pedsafe_sumo.sampling.draws import Draws, as_draws
+from pedsafe_sumo.scenarios.geometry import Approach, Turn, path_pos_m
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     SIGNAL_STATES,
@@ -68,7 +69,7 @@ EGO_BLUE_RGB = (30, 110, 255)
 #: Scenario fields that hold text; every other field is a number.
 STRING_FIELDS = (
     "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
-    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class",
+    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class", "approach",
 )  # fmt: skip
 
 
@@ -116,6 +117,8 @@ SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
     # The signal must hold its state this long after the staged conflict: a fixed-time cycle is rarely
     # longer than 180 s, so no start point in the cycle could satisfy a longer hold.
     "signal_hold_after_s": (180.0, "longer than a signal cycle: no start point in the cycle satisfies it"),
+    # Beyond a car length onto the road turned into, the leader is no longer across the crosswalk.
+    "turn_leader_front_max_m": (5.0, "a car length: the leader would have left the crosswalk"),
 }
 
 
@@ -200,6 +203,17 @@ class ScenarioSpec:
     ped_signal_hold: str = "conflict"
     #: Class of the vehicle the blending pedestrian stands behind ("" draws it like a queued vehicle).
     waiting_vehicle_class: str = ""
+    #: Turning scenarios: a vehicle of class `occluder_class` turning ahead of the ego on the same path
+    #: and at the same speed (1), or none (0). At the start it is leaving the junction, its front this far
+    #: onto the road turned into (uniform draw) [m] and its body across the crosswalk, between the
+    #: pedestrian at its far end and the ego; the pedestrian steps off `ped_start_delay_s` after its rear
+    #: has passed them (docs/engine.md, "Turning scenarios").
+    turn_leader: float = 0
+    turn_leader_front_min_m: float = 0.1
+    turn_leader_front_max_m: float = 1.0
+    #: The arm the ego comes in on (N, E, S or W; batch --approach): staging, poles and signals follow
+    #: it. "" is the site's own approach, the one its first roadside pole watches.
+    approach: str = ""
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -215,6 +229,7 @@ class ScenarioSpec:
                 self.waiting_vehicle_class in ("", *VEHICLE_CLASSES),
                 f"waiting_vehicle_class in {sorted(VEHICLE_CLASSES)} or empty",
             ),
+            (self.approach in ("", "N", "E", "S", "W"), "approach is N, E, S, W or empty"),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
@@ -244,6 +259,12 @@ class ScenarioSpec:
             (self.ego_signal in SIGNAL_STATES, f"ego_signal in {SIGNAL_STATES}"),
             (self.ped_signal in SIGNAL_STATES, f"ped_signal in {SIGNAL_STATES}"),
             (self.signal_hold_after_s >= 0, "signal_hold_after_s >= 0"),
+            (self.turn_leader in (0, 1), "turn_leader is 0 or 1"),
+            (self.turn_leader == 0 or self.placement == "turn", "turn_leader only in a turning scenario"),
+            (
+                0 < self.turn_leader_front_min_m <= self.turn_leader_front_max_m,
+                "0 < turn_leader_front_min_m <= turn_leader_front_max_m",
+            ),
         ]
         for ok, rule in checks:
             if not ok:
@@ -314,12 +335,17 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         ),
         ScenarioSpec(
             "right_turn",
-            "the ego turns right on green from the kerb lane; a pedestrian steps onto the crosswalk of the "
-            "road it turns into with the walk signal, from the corner the ego turns around",
+            "the ego turns right on green from the kerb lane behind a vehicle turning ahead of it; a "
+            "pedestrian waiting at the far end of the crosswalk of the road they turn into (the refuge "
+            "between its carriageways) is hidden by that vehicle as it crosses in front of them, and steps "
+            "off with the walk signal once it has passed",
             placement="turn",
             ego_speed_fit="intersection",
             turn="right",
-            ped_start_corner="near",
+            # From the far end: at the corner the ego turns around no vehicle the program lets move can
+            # stand between them and the ego (docs/engine.md, "Turning scenarios").
+            ped_start_corner="far",
+            turn_leader=1,
             ped_signal="green",
             ped_signal_hold="step_off",
             # China's Road Traffic Safety Law Implementation Regulations, art. 46: at most 30 km/h when
@@ -337,7 +363,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         ScenarioSpec(
             "left_turn",
             "the ego turns left on a permissive green from the median lane; a pedestrian crosses the road "
-            "it turns into with the walk signal, from the far corner",
+            "it turns into with the walk signal, from the far corner; unoccluded where the program gives "
+            "the approach its own phase (split phasing, as on Xueqing): no opposing vehicle moves, and none "
+            "waiting at its red stands between the ego and the pedestrian",
             placement="turn",
             ego_speed_fit="intersection",
             turn="left",
@@ -386,6 +414,9 @@ class VehicleSetup:
     speed_mps: float
     colour_rgb: tuple[int, int, int]
     size: VehicleSize
+    #: Edges it drives at `speed_mps` (the turning scenarios' leader, on the road it turns into); empty:
+    #: it stands on the approach (parked and queued vehicles), or it is the ego (EpisodeSetup.ego_route).
+    route: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -424,6 +455,8 @@ class EpisodeSetup:
     ped_crossing_id: str = ""
     #: Where the junction's signal program stands at the start (None: not staged, e.g. an old case).
     signals: SignalStaging | None = None
+    #: The arm the ego comes in on (N, E, S, W; "" in cases written before approaches were recorded).
+    approach: str = ""
 
 
 @dataclass(frozen=True)
@@ -443,7 +476,13 @@ class SignalStaging:
 
 
 def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0):
-    """The lane's centreline continued straight past its end (over the crosswalk into the junction)."""
+    """The centreline the ego drives from the lane over the crosswalk into the junction: its straight-
+    through path as SUMO draws it (the junction's internal lane need not continue the lane straight:
+    0.12-0.15 m aside at Xueqing's crosswalk), or the lane continued straight where it has none."""
+    lanes = approach.through_paths[lane_index] if approach.through_paths else ()
+    if len(lanes) > 1:
+        drawn = [tuple(p) for shape, _ in lanes for p in shape]
+        return [p for k, p in enumerate(drawn) if k == 0 or math.dist(p, drawn[k - 1]) > 1e-6]
     shape = list(approach.lane_shapes[lane_index])
     (px, py), (qx, qy) = shape[-2], shape[-1]
     norm = math.hypot(qx - px, qy - py)
@@ -452,12 +491,10 @@ def _extended_shape(approach: Approach, lane_index: int, beyond_m: float = 20.0)
 
 
 def _lane_pos_of(approach: Approach, lane_index: int, xy: tuple[float, float]) -> float:
-    """Distance along the (extended) lane centreline to the point nearest `xy` [m]."""
-    import sumolib
-
-    return sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(
-        xy, _extended_shape(approach, lane_index)
-    )
+    """SUMO distance (lane-length metres) from the start of the lane to the point of its straight-through
+    path (the lane, the junction, the road beyond) nearest `xy`: where a front placed by it is drawn
+    (see scenarios/geometry.py on lane positions)."""
+    return path_pos_m(approach.through_paths[lane_index], xy)
 
 
 def draw_episode(
@@ -466,7 +503,7 @@ def draw_episode(
     seed: int,
     pedestrian_traits: dict,
     ego_speed_mps: float,
-    rng: np.random.Generator,
+    rng: np.random.Generator | Draws,
     turn: Turn | None = None,
 ) -> EpisodeSetup:
     """Place one episode of `spec` on the approach (for a turning scenario, on `turn`).
@@ -474,11 +511,15 @@ def draw_episode(
     `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
     demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
     (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone.
+    `rng` may be a Draws (sampling/draws.py): the named draws then go through it, recorded (and under
+    importance sampling drawn from its proposal); a bare Generator draws them all nominally.
     """
+    draws = as_draws(rng)
+    rng = draws.rng
     if spec.placement == "turn":
         if turn is None:
             raise ScenarioError(f"scenario '{spec.name}' needs the geometry of its {spec.turn} turn")
-        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, rng)
+        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, draws)
     ego_size = VEHICLE_CLASSES["car"]
     # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
     # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
@@ -494,25 +535,28 @@ def draw_episode(
     # Across the road: from the middle of the sidewalk to 1 m beyond the ego lane's far edge.
     kerb_offset_m = -(lane_w / 2 + approach.sidewalk_width_m / 2)
     far_offset_m = (len(approach.lane_ids) - 1) * lane_w + lane_w / 2 + 1.0
-    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
+    conflict_offset_s = draws.uniform(
+        "conflict_offset_s", spec.conflict_offset_min_s, spec.conflict_offset_max_s
+    )
     stop_line_pos = approach.lane_lengths_m[kerb_lane]
     parked: list[VehicleSetup] = []
-    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    clothing = CLOTHING_COLOURS_RGB[draws.index("clothing", len(CLOTHING_COLOURS_RGB))]
     class_names = list(QUEUE_CLASS_WEIGHTS)
     class_p = np.array([QUEUE_CLASS_WEIGHTS[c] for c in class_names])
 
     def random_vehicle(vehicle_id: str, front_pos: float, colour=None) -> VehicleSetup:
-        size = VEHICLE_CLASSES[class_names[int(rng.choice(len(class_names), p=class_p / class_p.sum()))]]
+        size = VEHICLE_CLASSES[class_names[draws.choice(f"{vehicle_id}.class", class_p)]]
         if colour is None:
-            colour = CAR_COLOURS_RGB[int(rng.integers(len(CAR_COLOURS_RGB)))]
+            colour = CAR_COLOURS_RGB[draws.index(f"{vehicle_id}.colour", len(CAR_COLOURS_RGB))]
         return VehicleSetup(vehicle_id, kerb_lane_id, front_pos, 0.0, colour, size)
 
     def queue_behind(first: VehicleSetup, start_index: int) -> None:
         """`queue_vehicles` vehicles queued upstream of `first`, bumper to bumper with small gaps."""
         rear = first.front_pos_m - first.size.length_m
         for k in range(int(spec.queue_vehicles)):
-            front = rear - float(rng.uniform(spec.queue_gap_min_m, spec.queue_gap_max_m))
-            vehicle = random_vehicle(f"queued_{start_index + k}", front)
+            vehicle_id = f"queued_{start_index + k}"
+            front = rear - draws.uniform(f"{vehicle_id}.gap_m", spec.queue_gap_min_m, spec.queue_gap_max_m)
+            vehicle = random_vehicle(vehicle_id, front)
             parked.append(vehicle)
             rear = front - vehicle.size.length_m
 
@@ -533,8 +577,10 @@ def draw_episode(
         parked.append(occluder)
         queue_behind(occluder, 1)
     elif spec.placement == "midblock":
-        distance_m = float(rng.uniform(spec.midblock_distance_min_m, spec.midblock_distance_max_m))
-        gap_m = float(rng.uniform(spec.parked_gap_min_m, spec.parked_gap_max_m))
+        distance_m = draws.uniform(
+            "midblock_distance_m", spec.midblock_distance_min_m, spec.midblock_distance_max_m
+        )
+        gap_m = draws.uniform("parked_gap_m", spec.parked_gap_min_m, spec.parked_gap_max_m)
         cross_pos = stop_line_pos - distance_m
         path = approach.across(kerb_lane, cross_pos, kerb_offset_m, far_offset_m)
         # Downstream vehicle: its rear gap/2 past the line; upstream: the queue, its head gap/2 before it.
@@ -546,7 +592,7 @@ def draw_episode(
         parked += [downstream, upstream]
         queue_behind(upstream, 2)
     else:  # behind_waiting_vehicle
-        gap_m = float(rng.uniform(spec.blend_gap_min_m, spec.blend_gap_max_m))
+        gap_m = draws.uniform("blend_gap_m", spec.blend_gap_min_m, spec.blend_gap_max_m)
         waiting = random_vehicle("waiting_0", stop_line_pos - 0.5)
         if spec.waiting_vehicle_class:
             waiting = dataclasses.replace(waiting, size=VEHICLE_CLASSES[spec.waiting_vehicle_class])
@@ -633,17 +679,22 @@ def _draw_turn_episode(
     seed: int,
     traits: dict,
     ego_speed_mps: float,
-    rng: np.random.Generator,
+    rng: np.random.Generator | Draws,
 ) -> EpisodeSetup:
     """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
     left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
     gives it), the ego turns on its green and must yield to them."""
-    import sumolib
-
+    draws = as_draws(rng)
+    rng = draws.rng
     ego_size = VEHICLE_CLASSES["car"]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
-    conflict_offset_s = float(rng.uniform(spec.conflict_offset_min_s, spec.conflict_offset_max_s))
-    clothing = CLOTHING_COLOURS_RGB[int(rng.integers(len(CLOTHING_COLOURS_RGB)))]
+    conflict_offset_s = draws.uniform(
+        "conflict_offset_s", spec.conflict_offset_min_s, spec.conflict_offset_max_s
+    )
+    clothing = CLOTHING_COLOURS_RGB[draws.index("clothing", len(CLOTHING_COLOURS_RGB))]
+    # Drawn after the draws above (and only when there is a leader), so the scenarios without one keep
+    # their worlds seed for seed.
+    leader_draws = _draw_turn_leader(spec, draws) if spec.turn_leader else None
     near, far = turn.crosswalk_path
     start, end = (near, far) if spec.ped_start_corner == "near" else (far, near)
     # From 1 m back on the sidewalk to 1 m beyond the crosswalk's other end.
@@ -653,7 +704,13 @@ def _draw_turn_episode(
     conflict_xy = _crossing_with_polyline(turn.path_xy, path)
     walk_to_conflict_s = math.dist(path[0], conflict_xy) / traits["walking_speed_mps"]
     start_delay_s = spec.ped_start_delay_s
-    ego_conflict_pos = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(conflict_xy, turn.path_xy)
+    # In SUMO's lane-length metres along the turn, which the ego's speed covers.
+    ego_conflict_pos = path_pos_m(turn.lanes, conflict_xy)
+    leader = None
+    if leader_draws is not None:
+        leader, clear_s = _turn_leader(spec, turn, ego_conflict_pos, ego_speed_mps, *leader_draws)
+        # They wait for it: they step off ped_start_delay_s after its rear has passed their body.
+        start_delay_s += clear_s
     arrival_s = start_delay_s + walk_to_conflict_s + conflict_offset_s
     front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
     # The ego starts on the approach lane with its whole body on it, TURN_START_BEFORE_STOP_LINE_M
@@ -676,13 +733,35 @@ def _draw_turn_episode(
         ego=ego,
         ego_route=turn.route,
         pedestrian=_pedestrian(traits, clothing, start_delay_s, path),
-        parked=(),
+        parked=(leader,) if leader is not None else (),
         conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
         time_limit_s=spec.time_limit_s,
         conflict_time_s=float((ego_conflict_pos - front_pos) / ego_speed_mps),
         ped_crossing_id=turn.crosswalk_id,
     )
+
+
+def _draw_turn_leader(spec: ScenarioSpec, draws: Draws) -> tuple[tuple, float]:
+    """The leader's colour and how far its front is onto the road turned into, in that order of draws
+    (recorded by name, as every draw of the world)."""
+    colour = CAR_COLOURS_RGB[draws.index("leader_0.colour", len(CAR_COLOURS_RGB))]
+    front_m = draws.uniform("leader_0.front_m", spec.turn_leader_front_min_m, spec.turn_leader_front_max_m)
+    return colour, front_m
+
+
+def _turn_leader(
+    spec: ScenarioSpec, turn: Turn, conflict_pos_m: float, speed_mps: float, colour, front_m: float
+) -> tuple[VehicleSetup, float]:
+    """The vehicle turning ahead of the ego, on the ego's path at the ego's speed with its front `front_m`
+    onto the road turned into, and the seconds until its rear has passed the pedestrian's body (0.3 m
+    radius; 0 when it already has)."""
+    size = VEHICLE_CLASSES[spec.occluder_class]
+    rear_before_m = conflict_pos_m - (turn.exit_start_m + front_m - size.length_m)
+    leader = VehicleSetup(
+        "leader_0", turn.exit_lane_id, front_m, speed_mps, colour, size, route=(turn.route[1],)
+    )
+    return leader, max(0.0, rear_before_m + 0.3) / speed_mps
 
 
 def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
@@ -729,7 +808,10 @@ def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[floa
 
 
 def stage_signals(
-    spec: ScenarioSpec, setup: EpisodeSetup, junction: JunctionSignals | None, rng: np.random.Generator
+    spec: ScenarioSpec,
+    setup: EpisodeSetup,
+    junction: JunctionSignals | None,
+    rng: np.random.Generator | Draws,
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
     (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
@@ -755,7 +837,9 @@ def stage_signals(
         step_off_s = min(setup.pedestrian.start_delay_s, until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
         required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
-    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, rng)
+    # The point in the cycle is one uniform draw on [0, 1), recorded (never proposed) as signal_cycle_u.
+    source = as_draws(rng).uniform_source("signal_cycle_u")
+    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, source)  # type: ignore[arg-type]
     staging = SignalStaging(
         tls_id=junction.program.tls_id,
         program_id=junction.program.program_id,

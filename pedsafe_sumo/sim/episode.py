@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -43,9 +43,9 @@ from pedsafe_sumo.control.agent import (
     check_sensor_names,
 )
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
-from pedsafe_sumo.demand.sampling import sample_pedestrians, traffic_distributions
+from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
-from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
+from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids, speed_limit_scale
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -62,7 +62,9 @@ from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
-from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
+from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
+from pedsafe_sumo.sampling.importance import Family
+from pedsafe_sumo.scenarios.geometry import approach_unit_ids, default_arm, load_approach, load_turn
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
     VEHICLE_CLASSES,
@@ -164,11 +166,14 @@ class SiteData:
     route_edges: dict[str, tuple[str, ...]]
     #: The main junction's traffic-light program and link indices (None when it has no traffic light).
     signals: Any = None
+    #: The arm the approach comes from (N, E, S or W).
+    arm: str = ""
 
 
-def load_site_data(site: Site, params: dict[str, Any]) -> SiteData:
-    """Read the site's files (SITE_FILES_READ) into the loop's static world; raises on a bad file."""
-    approach = load_approach(site)
+def load_site_data(site: Site, params: dict[str, Any], arm: str = "") -> SiteData:
+    """Read the site's files (SITE_FILES_READ) into the loop's static world, staged on the approach from
+    `arm` ("": the site's own); raises on a bad file."""
+    approach = load_approach(site, arm or None)
     perception = params["perception"]
     static = load_static_occluders(site.file("poly.xml"), perception["occluders"])
     rsu = perception["roadside_camera"]
@@ -185,6 +190,7 @@ def load_site_data(site: Site, params: dict[str, Any]) -> SiteData:
         edge_lengths={lane.edge_id: lane.length_m for lane in demand_site.entering_lanes},
         route_edges={rid: edges for edges, rid in route_ids(background_lanes).items()},
         signals=_junction_signals(site, approach.junction_id),
+        arm=arm or default_arm(site),
     )
 
 
@@ -307,22 +313,33 @@ class EpisodeRunner:
         self.injury_model = injury_model
         self.proximity_model = ProximityModel.from_params(params)
         data = load_site_data(site, params)
-        self.approach = data.approach
         self.static = data.static
         self.roadside_units = data.roadside_units
         self._suites: dict[tuple[str, ...], SensorSuite] = {}
+        #: The site's files staged on each approach a spec asked for ("": the site's own), read once.
+        self._by_approach: dict[str, SiteData] = {"": data}
+        self._site_arm = data.arm
+        self._use_approach("")
+        self.session = SumoSession(gui=gui)
+
+    def _use_approach(self, arm: str) -> None:
+        """Stage what follows on the approach from `arm` (a spec's `approach`; "": the site's own)."""
+        if arm not in self._by_approach:
+            self._by_approach[arm] = load_site_data(self.site, self.params, arm)
+        data = self._by_approach[arm]
+        self.approach = data.approach
+        self.arm = data.arm
         self.background_lanes = data.background_lanes
         self._edge_lengths = data.edge_lengths
         self._route_edges = data.route_edges
         self.signals = data.signals
-        self.session = SumoSession(gui=gui)
 
     def close(self) -> None:
         self.session.close()
 
     def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
         """The onboard sensors and the roadside poles the scenario names (built once per set of poles)."""
-        ids = spec.roadside_unit_ids
+        ids = approach_unit_ids(spec.roadside_unit_ids, spec.approach, self._site_arm)
         if ids not in self._suites:
             unknown = [i for i in ids if i not in self.roadside_units]
             if unknown:
@@ -341,24 +358,35 @@ class EpisodeRunner:
         The seed is split into three streams: the scenario's world, the perception noise (see run) and
         the background traffic, so that changing one never shifts the draws of another.
         """
+        return self.draw_setup_sampled(spec, seed)[0]
+
+    def draw_setup_sampled(
+        self,
+        spec: ScenarioSpec,
+        seed: int,
+        proposal: Mapping[str, Family] | None = None,
+        defensive_share: float = 0.0,
+    ) -> tuple[EpisodeSetup, Draws]:
+        """draw_setup, with the world's random inputs drawn through a Draws (sampling/draws.py): under
+        no proposal the same world, under an importance-sampling proposal the world and its weight."""
+        self._use_approach(spec.approach)
         world_seq, _, traffic_seq = np.random.SeedSequence(seed).spawn(3)
-        world_rng = np.random.default_rng(world_seq)
-        person = sample_pedestrians(world_rng, self.params["pedestrians"], 1)[0]
+        draws = Draws(np.random.default_rng(world_seq), proposal, defensive_share)
+        traits = draw_pedestrian_traits(draws, self.params["pedestrians"])
         _, speed_nonintersection, speed_intersection = traffic_distributions(self.params["traffic"])
         fit = speed_intersection if spec.ego_speed_fit == "intersection" else speed_nonintersection
-        ego_speed_mps = float(fit.sample(world_rng, 1)[0])
-        traits = {
-            "age_years": person.age_years,
-            "gender": person.gender,
-            "risk": person.risk,
-            "walking_speed_mps": person.speed_mps,
-        }
-        turn = load_turn(self.site, spec.turn) if spec.placement == "turn" else None
-        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, world_rng, turn)
-        setup = stage_signals(spec, setup, self.signals, world_rng)
+        # Drawn at the fits' speed limit, scaled to the approach's (speed_limit_scale, params/defaults.toml).
+        ego_speed_mps = draw_lognormal(draws, "ego_speed_log", fit.log_mu, fit.log_sigma) * speed_limit_scale(
+            self.approach.speed_limit_mps, self.params["traffic"]
+        )
+        turn = load_turn(self.site, spec.turn, spec.approach or None) if spec.placement == "turn" else None
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn)
+        if spec.approach:
+            setup = dataclasses.replace(setup, approach=spec.approach)
+        setup = stage_signals(spec, setup, self.signals, draws)
         if spec.background_traffic:
             setup = dataclasses.replace(setup, background=self._background(spec, traffic_seq))
-        return setup
+        return setup, draws
 
     def _background(
         self, spec: ScenarioSpec, seed_seq: np.random.SeedSequence
@@ -477,7 +505,11 @@ class EpisodeRunner:
         api.route.add("kerb_route", [approach.edge_id])
         self._add_vehicle(api, setup.ego, "ego_route", parked=False)
         for vehicle in setup.parked:
-            self._add_vehicle(api, vehicle, "kerb_route", parked=True)
+            route_id = "kerb_route"
+            if vehicle.route:  # a vehicle that drives (the turning scenarios' leader)
+                route_id = "route_" + vehicle.vehicle_id
+                api.route.add(route_id, list(vehicle.route))
+            self._add_vehicle(api, vehicle, route_id, parked=True)
         if setup.background:
             api.vehicletype.copy("DEFAULT_VEHTYPE", "background")
             size = VEHICLE_CLASSES["car"]
@@ -530,6 +562,7 @@ class EpisodeRunner:
         if condition not in CONDITIONS:
             raise ValueError(f"unknown condition '{condition}' (known: {', '.join(CONDITIONS)})")
         setup = setup or self.draw_setup(spec, seed)
+        self._use_approach(setup.approach)
         # Streams of the episode seed: 0 world, 1 onboard/roadside misses, 2 background traffic, 3 the
         # V2I link (loss, noise): the link draws only under V2I, so it must not share the sensors' stream
         # or SV and V2I would see different onboard misses for the same seed.
@@ -820,6 +853,7 @@ class EpisodeRunner:
             "end_reason": end_reason,
             "ego_signal": ego_signal,
             "ped_signal": ped_signal,
+            "approach": self.arm,
             "status": "ok",
             "error": "",
         }

@@ -195,3 +195,62 @@ def test_scenario_all_runs_what_the_site_hosts_and_names_what_it_skips(built, tm
         "jaywalking",
         "background_blending",
     ]
+
+
+def _hosting_by_approach(stdout: str, own: str) -> dict[tuple[str, str], str]:
+    """(scenario, arm) -> the build summary's verdict, for every approach it lists."""
+    found = {}
+    for line in stdout.splitlines():
+        if not line.startswith("  ") or ": " not in line:
+            continue
+        head, verdict = line.strip().split(": ", 1)
+        name, _, arm = head.partition(" on approach ")
+        if name in ("crossing", "jaywalking", "background_blending", "right_turn", "left_turn"):
+            found[(name, arm or own)] = verdict
+    return found
+
+
+@pytest.mark.slow
+def test_every_hosted_scenario_runs_on_every_approach_with_roadside_detections(built, tmp_path):
+    """Issue 14 item 7 on the zhixin clip (two-lane Qinghua East Rd, one-lane tertiary side roads): what
+    the build says it hosts on each approach is what `--scenario all --approach all` runs, under SV and
+    V2I, each on the approach it names, with detections by the roadside camera under V2I."""
+    folder, stdout = built["zhixin"]
+    info = json.loads((folder / "zhixin.site.json").read_text())
+    own = info["rsu_watch_arm"]
+    verdicts = _hosting_by_approach(stdout, own)
+    hosted = {combo for combo, verdict in verdicts.items() if verdict.startswith("hosted")}
+    # N and S have one vehicle lane each: every scenario is refused there, saying why.
+    for arm in ("N", "S"):
+        for name in ("crossing", "jaywalking", "background_blending"):
+            assert "has 1 vehicle lane(s): no lane beside the kerb lane" in verdicts[(name, arm)]
+        for name in ("right_turn", "left_turn"):
+            assert "turns from one-lane approaches are not staged" in verdicts[(name, arm)]
+    assert {arm for _, arm in hosted} == {"E", "W"}
+    out = tmp_path / "run"
+    proc = _run(
+        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "1",
+        "--workers", "1", "--site", str(folder), "--out", str(out), timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    for name, arm in set(verdicts) - hosted:
+        assert f"skipping scenario '{name}' on approach {arm} of site zhixin: " in proc.stdout
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    assert set(zip(episodes["scenario"], episodes["approach"], strict=True)) == hosted
+    assert (episodes["status"] == "ok").all(), episodes["error"].tolist()
+    for _, conditions in episodes.groupby(["scenario", "approach"])["condition"]:
+        assert sorted(conditions) == ["sv", "v2i"]
+    v2i = episodes[episodes["condition"] == "v2i"]
+    assert (v2i["detected_by"] == "roadside").any(), v2i["detected_by"].tolist()
+    # Each episode was staged on its approach: the ego's lane (from the kept case logs, where there are
+    # any) is a lane of an edge entering the junction from that arm.
+    net = ET.parse(folder / "zhixin.net.xml").getroot()
+    edge_of_lane = {lane.get("id"): edge.get("id") for edge in net.iter("edge") for lane in edge.iter("lane")}
+    for meta_path in (out / "cases").glob("*.json"):
+        meta = json.loads(meta_path.read_text())
+        arm = meta["setup"]["approach"]
+        assert meta_path.stem.endswith(f"_{arm}")
+        edge = edge_of_lane[meta["setup"]["ego"]["lane_id"]]
+        assert info["approaches"][arm]["junction"] in {
+            e.get("to") for e in net.iter("edge") if e.get("id") == edge
+        }

@@ -115,7 +115,12 @@ def test_xueqing_site_occluders_and_roadside_unit(params):
     assert np.all(st.z_top_m > 0)
     units = load_roadside_units(site / "xueqing.rsu.add.xml", 6.0, 20.0)
     all_facts = json.loads((site / "xueqing.site.json").read_text())["roadside_units"]
-    assert [u.id for u in units] == [f["id"] for f in all_facts] == ["rsu_camera_0", "rsu_camera_1"]
+    # The site's own approach keeps rsu_camera_0/1; every other approach has its pair named after its arm.
+    other_arms = ("E", "S", "W")
+    expected = ["rsu_camera_0", "rsu_camera_1"] + [
+        f"rsu_camera_{k}_{arm}" for arm in other_arms for k in (0, 1)
+    ]
+    assert [u.id for u in units] == [f["id"] for f in all_facts] == expected
     for unit, facts in zip(units, all_facts):
         assert unit.height_m == facts["height_m"]
         assert (unit.x_m, unit.y_m) == (facts["x"], facts["y"])

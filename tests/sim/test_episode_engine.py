@@ -184,7 +184,8 @@ def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_both_pole
     on its rear since issue 13). Frames with a raw roadside detection, per pole, over 12 seeds: each
     pole sees frames the other misses, and the scenario's default (both poles) sees whenever either
     does. (With the pedestrian on the vehicle's kerb-side half the far pole saw them in more than
-    three times as many frames as the corner pole; centred, the two see about as many.)"""
+    three times as many frames as the corner pole; centred with the body touching the bumper, the far
+    pole sees almost all of them: corner 4, far 281, both 292 of 480 in November 2026.)"""
     spec = get_scenario("background_blending").with_overrides({"time_limit_s": "3.0"})
 
     def frames_seen(units: str, seed: int) -> int:

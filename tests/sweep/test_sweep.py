@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 
@@ -66,3 +67,75 @@ def test_bad_sweep_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, m
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and message in proc.stderr
     assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ([], "give --vary KEY=V1,V2,... or --preset NAME"),
+        (["--preset", "no_such_sweep"], "unknown preset 'no_such_sweep' (known: reaction, deceleration"),
+    ],
+)
+def test_a_sweep_needs_a_vary_or_a_known_preset(tmp_path, args, message):
+    proc = sweep("--scenario", "crossing", "--out", str(tmp_path / "s"), *args)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and message in proc.stderr
+    assert not (tmp_path / "s").exists()
+
+
+def test_each_preset_is_one_key_over_a_range_that_holds_its_default():
+    """The sweeps of issue 13 item 5: every preset varies one key, validated like --vary, and its values
+    include the default of that key (defaults.toml or the scenario registry)."""
+    from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.sweep import PRESETS, parse_args, validate
+
+    params = load_params()
+    assert set(PRESETS) >= {"reaction", "deceleration", "blend_gap", "occluder_class", "queue_length",
+                            "v2i_latency", "gap_acceptance"}  # fmt: skip
+    for name, vary in PRESETS.items():
+        args = parse_args(["--scenario", "crossing", "--out", "unused", "--preset", name])
+        combos = validate(args)
+        key, values = vary.split("=")
+        assert [list(c) for c in combos] == [[key]] * len(values.split(","))
+        if "." in key:
+            section, *path = key.split(".")
+            default = params[section]
+            for part in path:
+                default = default[part]
+        else:
+            default = getattr(get_scenario("crossing"), key)
+        as_typed = [type(default)(v) if not isinstance(default, str) else v for v in values.split(",")]
+        assert default in as_typed, f"{name}: {values} lacks the default {default}"
+
+
+def _findings_csv(directory, key, values, holds):
+    directory.mkdir(parents=True)
+    rows = ["run,v2i_safer_everywhere,jaywalking_most_dangerous,blending_safest,v2i_beyond_13m_in_90pct"]
+    rows += [f'"{key}={v}",{",".join(h)}' for v, h in zip(values, holds)]
+    (directory / "findings.csv").write_text("\n".join(rows) + "\n")
+
+
+def test_combine_puts_the_findings_of_one_key_sweeps_side_by_side(tmp_path):
+    _findings_csv(
+        tmp_path / "a",
+        "queue_vehicles",
+        ["1", "3"],
+        [("1.0", "0.0", "1.0", ""), ("1.0", "0.0", "0.0", "1.0")],
+    )
+    _findings_csv(tmp_path / "b", "algorithm.max_decel_mps2", ["6", "3"], [("1.0",) * 4, ("0.0",) * 4])
+    proc = sweep("--combine", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    table = pd.read_csv(tmp_path / "out" / "findings_across_sweeps.csv")
+    assert table["sweep"].tolist() == ["queue_vehicles"] * 2 + ["algorithm.max_decel_mps2"] * 2
+    assert table["value"].astype(str).tolist() == ["1", "3", "6", "3"]
+    assert table["blending_safest"].tolist() == [1.0, 0.0, 1.0, 0.0]
+    assert math.isnan(table["v2i_beyond_13m_in_90pct"].iloc[0])
+    assert (tmp_path / "out" / "findings_across_sweeps.png").stat().st_size > 5_000
+    # A directory without findings, or a sweep of two keys: one line, exit 2.
+    (tmp_path / "c").mkdir()
+    bad = sweep("--combine", str(tmp_path / "c"), "--out", str(tmp_path / "out2"))
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "no findings.csv" in bad.stderr
+    _findings_csv(tmp_path / "d", "queue_vehicles", ["1,occluder_class=van"], [("1.0",) * 4])
+    bad = sweep("--combine", str(tmp_path / "d"), "--out", str(tmp_path / "out3"))
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "not a sweep of one key" in bad.stderr

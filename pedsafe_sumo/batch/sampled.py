@@ -1,0 +1,124 @@
+"""The batch under `--sampler is`: stage by stage, each stage's proposal refitted on the one before.
+
+The stages, the score and the cross-entropy update are in sampling/stages.py (docs/sampling.md). This
+module plans the chunks of every stage (their layout is known from the start; their proposals are known
+once the stage before has finished), stores each stage's proposal in run.json under
+`sampler_proposals` (scenario -> one JSON proposal per stage, "" for the nominal of stage 0) the moment
+it is computed, and runs the stages in order. A resumed run takes the stored proposals, so its rows are
+the rows an uninterrupted run would have written, on any number of workers or on Dask.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
+from pedsafe_sumo.io.run_store import read_parts
+from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
+from pedsafe_sumo.sampling.stages import (
+    ADAPT_CONDITION,
+    COLLISION_SCORE,
+    DEFENSIVE_SHARE,
+    ELITE_FRACTION,
+    cross_entropy_update,
+    stage_layout,
+)
+
+SAMPLER_MC = "mc"
+SAMPLER_IS = "is"
+PROPOSALS_KEY = "sampler_proposals"
+LEVELS_KEY = "sampler_levels"
+
+
+def sampler_identity(arguments: dict[str, Any]) -> dict[str, Any] | None:
+    """What run.json records of the sampler (None under plain Monte Carlo, as in runs before it)."""
+    if arguments["sampler"] != SAMPLER_IS:
+        return None
+    return {
+        "kind": SAMPLER_IS,
+        "pilot_stages": int(arguments["is_pilot_stages"]),
+        "pilot_episodes": int(arguments["is_pilot_episodes"]),
+        "adapt_condition": ADAPT_CONDITION,
+        "elite_fraction": ELITE_FRACTION,
+        "defensive_share": DEFENSIVE_SHARE,
+        "score": "collision: 1 + impact_speed_mps; otherwise -min_clearance_m",
+        "threshold": COLLISION_SCORE,
+    }
+
+
+def plan_sampled_chunks(
+    scenarios: list[str], conditions: list[str], identity: dict[str, Any], proposals: dict[str, list[str]]
+) -> list[Chunk]:
+    """Every chunk of every stage, scenario by scenario; a stage whose proposal `proposals` lacks gets
+    "" (enough for the layout and the chunk keys, which do not depend on it)."""
+    sampler = identity["sampler"]
+    layout = stage_layout(
+        sampler["pilot_stages"], sampler["pilot_episodes"], identity["episodes_per_scenario"]
+    )
+    pairs = identity["chunk_size_pairs"] or 1
+    chunks = []
+    for scenario in scenarios:
+        for stage in layout:
+            known = proposals.get(scenario, [])
+            proposal = known[stage.stage] if stage.stage < len(known) else ""
+            end = stage.first_episode + stage.n_episodes
+            for first in range(stage.first_episode, end, pairs):
+                last = min(first + pairs, end) - 1
+                tasks = tuple(
+                    Task(
+                        scenario,
+                        i,
+                        episode_seed(identity["run_seed"], i),
+                        tuple(conditions),
+                        proposal,
+                        stage.stage,
+                    )
+                    for i in range(first, last + 1)
+                )
+                chunks.append(Chunk(scenario, first, last, tasks))
+    return chunks
+
+
+def _stage_of(chunk: Chunk) -> int:
+    return chunk.tasks[0].stage
+
+
+def run_sampled(
+    plan: Any, backend: Any, run_dir: Any, run_info: dict[str, Any], on_chunk_done: Any
+) -> list[Chunk]:
+    """Run the stages in order (module docstring); returns every chunk of the run."""
+    identity = plan.identity
+    n_stages = identity["sampler"]["pilot_stages"] + 1
+    proposals: dict[str, list[str]] = run_info.setdefault(PROPOSALS_KEY, {})
+    levels: dict[str, list[dict[str, Any]]] = run_info.setdefault(LEVELS_KEY, {})
+    for stage in range(n_stages):
+        for scenario in plan.scenarios:
+            known = proposals.setdefault(scenario, [])
+            if len(known) > stage:
+                continue
+            if stage == 0:
+                known.append("")
+                continue
+            previous = [
+                c
+                for c in plan_sampled_chunks([scenario], plan.conditions, identity, proposals)
+                if _stage_of(c) == stage - 1
+            ]
+            rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in previous])
+            current = product_from_json(known[stage - 1]).families
+            update = cross_entropy_update(rows, current)
+            known.append(product_to_json(update.proposal))
+            levels.setdefault(scenario, []).append(
+                {
+                    "after_stage": stage - 1,
+                    "level": update.level,
+                    "n_elite": update.n_elite,
+                    "n_collisions_sv": update.n_collisions,
+                }
+            )
+        run_dir.save_run_info(run_info)
+        chunks = plan_sampled_chunks(plan.scenarios, plan.conditions, identity, proposals)
+        todo = [c for c in chunks if _stage_of(c) == stage and c.key not in run_dir.manifest.chunks]
+        if todo:
+            backend.run(plan.config, todo, on_chunk_done)
+    return plan_sampled_chunks(plan.scenarios, plan.conditions, identity, proposals)

@@ -1,0 +1,119 @@
+"""`batch --sampler is` (issue 17): flags checked in one line, the protocol accepted beside it, and a real
+run whose stages, stored proposals and weights are checked against an independent recomputation."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from batch_cli import batch
+
+from pedsafe_sumo.batch.__main__ import main, parse_args, prepare
+from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.protocol import main as protocol_main
+from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
+from pedsafe_sumo.sampling.importance import Product, likelihood_ratio
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+
+CROSSING = ["--scenario", "crossing", "--episodes", "2"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--sampler", "is", "--is-pilot-stages", "0"], "--is-pilot-stages must lie in 1..10"),
+        (["--sampler", "is", "--is-pilot-stages", "1000000000000"], "--is-pilot-stages must lie in 1..10"),
+        (["--sampler", "is", "--is-pilot-episodes", "5"], "--is-pilot-episodes must lie in 20..100,000"),
+        (["--sampler", "is", "--is-pilot-episodes", "1000000000000"], "--is-pilot-episodes must lie in"),
+        (["--is-pilot-stages", "2"], "need --sampler is"),
+        (["--sampler", "is", "--condition", "v2i"], "adapts its proposal on the SV condition"),
+        (["--sampler", "xyz"], "invalid choice"),
+    ],
+)
+def test_bad_sampler_flags_are_refused_in_one_line(capsys, tmp_path, extra, message):
+    out = tmp_path / "run"
+    try:
+        code = main([*CROSSING, "--out", str(out), *extra])
+    except SystemExit as exc:  # argparse's own errors
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_the_sampler_may_be_given_beside_a_protocol(tmp_path):
+    """A protocol fixes what is estimated; the sampler only how: --sampler is is accepted with it and
+    recorded in the run's identity (compared on --resume). The protocol is written from today's values
+    (python -m pedsafe_sumo.protocol write), so that the test does not wait for the newest dated one."""
+    protocol = tmp_path / "today.toml"
+    assert (
+        protocol_main(["write", "today", "--out", str(protocol), "--scenarios", "crossing,jaywalking"]) == 0
+    )
+    plan = prepare(parse_args(["--protocol", str(protocol), "--sampler", "is", "--out", str(tmp_path / "r")]))
+    assert plan.identity["sampler"]["kind"] == "is"
+    assert plan.identity["sampler"]["pilot_stages"] == 3 and plan.identity["sampler"]["pilot_episodes"] == 200
+    plain = prepare(parse_args(["--protocol", str(protocol), "--out", str(tmp_path / "m")]))
+    assert plain.identity["sampler"] is None
+
+
+IS_RUN = (
+    "--scenario", "right_turn", "--episodes", "3", "--seed", "4", "--sampler", "is",
+    "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--chunk-size", "5",
+)  # fmt: skip
+
+
+def _expected_weight(record: dict, proposal: Product) -> float:
+    """p / (lambda p + (1 - lambda) q) over the proposed inputs, from the densities of
+    sampling.importance (not the Draws' running sum)."""
+    nominal = Product({name: family_from_json(f) for name, f in record["nominal"].items()})
+    inputs = {name: np.array([record["inputs"][name]]) for name in nominal.families}
+    ratio = float(likelihood_ratio(nominal, proposal, inputs)[0])  # p / q
+    return 1.0 / (DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) / ratio)
+
+
+@pytest.mark.slow
+def test_importance_sampled_run_stages_weights_and_workers(tmp_path):
+    """Stage 0 (20 pairs) is plain Monte Carlo; stage 1 (3 pairs) draws from the proposal stored in
+    run.json, each weight equal to its recomputation, shared by SV and V2I; 1 and 2 workers give the
+    same table."""
+    out2, out1 = tmp_path / "w2", tmp_path / "w1"
+    proc = batch(*IS_RUN, "--workers", "2", "--out", str(out2))
+    assert proc.returncode == 0, proc.stderr
+    assert "importance sampling" in proc.stdout
+    table = pd.read_parquet(out2 / "episodes.parquet")
+    assert len(table) == 2 * 23 and (table["status"] == "ok").all()
+    assert table["sampler_stage"].tolist() == [0] * 40 + [1] * 6
+    assert table["episode"].tolist() == [i for i in range(23) for _ in range(2)]
+    assert table["seed"].tolist() == [episode_seed(4, i) for i in range(23) for _ in range(2)]
+    pilot, final = table[table.sampler_stage == 0], table[table.sampler_stage == 1]
+    assert (pilot["weight"] == 1.0).all()
+    run = json.loads((out2 / "run.json").read_text())
+    proposals = run["sampler_proposals"]["right_turn"]
+    assert proposals[0] == "" and len(proposals) == 2
+    proposal = product_from_json(proposals[1])
+    assert "ego_speed_log" in proposal.families
+    for _, row in final.iterrows():
+        record = json.loads(row["sampler_inputs"])
+        assert row["weight"] == pytest.approx(_expected_weight(record, proposal), rel=1e-9)
+        assert 0 < row["weight"] <= 1 / DEFENSIVE_SHARE + 1e-12
+    pairs = table.pivot(index="episode", columns="condition", values="weight")
+    assert (pairs["sv"] == pairs["v2i"]).all()
+    # Same rows on 1 worker.
+    proc = batch(*IS_RUN, "--workers", "1", "--out", str(out1))
+    assert proc.returncode == 0, proc.stderr
+    pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))
+    # Same rows after a stop in the final stage: its parts lost, the run resumed from run.json's proposals.
+    run1 = json.loads((out1 / "run.json").read_text())
+    assert run1["sampler_proposals"] == run["sampler_proposals"]
+    run1["state"] = "running"
+    (out1 / "run.json").write_text(json.dumps(run1))
+    (out1 / "episodes.parquet").unlink()
+    for part in (out1 / "parts").glob("right_turn-0000[2-9]*.parquet"):
+        part.unlink()
+    proc = batch("--resume", "--out", str(out1))
+    assert proc.returncode == 0, proc.stderr
+    assert "runs again" in proc.stderr
+    pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))

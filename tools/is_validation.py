@@ -1,0 +1,96 @@
+"""Importance sampling against plain Monte Carlo (issue 17, item 3): per scenario and condition, the IS
+estimate of a run made with --sampler is and the MC estimate of a reference run, their 95% intervals,
+whether they agree, and the efficiency (episodes MC needs for the IS interval's half-width h,
+p(1 - p)(1.96 / h)^2 with p the IS estimate, over the episodes IS ran, pilots included).
+
+    .venv/bin/python tools/is_validation.py IS_RUN MC_RUN [--markdown]
+
+Either run may be unfinished: the rows of its recorded chunks are read (parts/ and manifest.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from pedsafe_sumo.io.run_store import EPISODES_FILE, Manifest, read_parts
+from pedsafe_sumo.report.tables import table_one_weighted
+from pedsafe_sumo.safety.stats import table_one
+
+Z = 1.959964
+
+
+def rows_of(run: Path) -> pd.DataFrame:
+    if (run / EPISODES_FILE).exists():
+        return pd.read_parquet(run / EPISODES_FILE, partitioning=None)
+    manifest = Manifest.load(run / "manifest.json")
+    return read_parts(run, list(manifest.chunks.values()))
+
+
+def compare(is_rows: pd.DataFrame, mc_rows: pd.DataFrame) -> pd.DataFrame:
+    is_table = table_one_weighted(is_rows)
+    mc_table = table_one(mc_rows)
+    out = []
+    for _, r in is_table.iterrows():
+        m = mc_table[(mc_table.scenario == r.scenario) & (mc_table.condition == r.condition)]
+        if m.empty:
+            continue
+        m = m.iloc[0]
+        for index, (est, lo, hi, mest, mlo, mhi) in {
+            "collision": ("collision_rate", "collision_low", "collision_high") * 2,
+            "injury": ("injury_mean", "injury_low", "injury_high") * 2,
+            "conflict": ("conflict_rate", "conflict_low", "conflict_high") * 2,
+        }.items():
+            p, low, high = float(r[est]), float(r[lo]), float(r[hi])
+            half = high - p  # the central-limit interval is symmetric before its cut at 0
+            mc_needed = p * (1 - p) * (Z / half) ** 2 if half > 0 and 0 < p < 1 else math.nan
+            out.append(
+                {
+                    "scenario": r.scenario,
+                    "condition": r.condition,
+                    "index": index,
+                    "is_estimate": p,
+                    "is_low": low,
+                    "is_high": high,
+                    "ess": float(r.ess),
+                    "is_episodes_run": int(r.n_run),
+                    "mc_estimate": float(m[mest]),
+                    "mc_low": float(m[mlo]),
+                    "mc_high": float(m[mhi]),
+                    "mc_n": int(m.n),
+                    "intervals_overlap": bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
+                    "mc_in_is_interval": bool(low <= float(m[mest]) <= high),
+                    "efficiency": mc_needed / int(r.n_run) if math.isfinite(mc_needed) else math.nan,
+                }
+            )
+    return pd.DataFrame(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("is_run", type=Path)
+    parser.add_argument("mc_run", type=Path)
+    parser.add_argument("--markdown", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        table = compare(rows_of(args.is_run), rows_of(args.mc_run))
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.markdown:
+        print(table.to_markdown(index=False, floatfmt=".4f"))
+    else:
+        with pd.option_context("display.width", 250, "display.max_columns", 30):
+            print(table.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    levels = json.loads((args.is_run / "run.json").read_text()).get("sampler_levels", {})
+    print(json.dumps(levels))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
