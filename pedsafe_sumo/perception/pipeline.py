@@ -238,6 +238,12 @@ def _miss(detected: np.ndarray, probability: float, rng: np.random.Generator) ->
 
 
 def _union(first: SensorDetections, second: SensorDetections) -> SensorDetections:
+    # Fast paths (the usual frames: nobody seen, or both sides the same selection): the same values
+    # as the general case below, without building arrays.
+    if first is second or not second.ids:
+        return first
+    if not first.ids:
+        return second
     extra = [i for i, pid in enumerate(second.ids) if pid not in first.ids]
     if not extra:
         return first

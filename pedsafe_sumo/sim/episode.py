@@ -97,6 +97,34 @@ EGO_ID = "ego"
 #: gave identical logs with 100 m and 10 m.
 PED_MATCH_RADIUS_M = 10.0
 
+#: The per-step log's columns, in order (pedsafe_sumo.safety.log's contract plus the command and
+#: diagnostics): the loop appends one tuple of these per step.
+LOG_COLUMNS = (
+    "time_s",
+    "ego_x_m",
+    "ego_y_m",
+    "ego_yaw_rad",
+    "ego_speed_mps",
+    "ego_length_m",
+    "ego_width_m",
+    "ped_x_m",
+    "ped_y_m",
+    "ped_vx_mps",
+    "ped_vy_mps",
+    "ped_radius_m",
+    "detected_onboard_camera",
+    "detected_onboard_lidar",
+    "detected_roadside",
+    "perceived",
+    "roadside_raw",
+    "clearance_m",
+    "command_speed_mps",
+    "braking",
+    "ped_state",
+    "sumo_collision",
+    "command_refused",
+)
+
 #: A per-step observer for replay: `on_step(api, row)` gets SUMO's API handle, in the state of the step
 #: just logged, and that step's log row (a dict of the log columns).
 StepHook = Callable[[Any, dict[str, Any]], None]
@@ -618,7 +646,7 @@ class EpisodeRunner:
         colours = np.zeros((0, 3))
         ego_index = -1
 
-        rows: list[dict[str, Any]] = []
+        rows: list[tuple] = []
         # SUMO's link states of the junction at every logged step (for the signals at the conflict).
         signal_states: list[str] = []
         tls_state = (
@@ -650,7 +678,11 @@ class EpisodeRunner:
                     end_reason = "ego_left_network"
                     break
                 # Vectorised: SUMO's front-bumper positions and angles to footprint centres and yaw.
-                ids = tuple(vid for vid in results if vid in dims)
+                # Every subscribed vehicle has its body in `dims`, so the subscription's ids are the
+                # snapshot's; the filter runs only when the set changes.
+                ids = tuple(results)
+                if ids != body_ids:
+                    ids = tuple(vid for vid in results if vid in dims)
                 if ids != body_ids:
                     body_ids = ids
                     sizes = np.array([dims[vid][:3] for vid in ids], dtype=float).reshape(-1, 3)
@@ -724,38 +756,39 @@ class EpisodeRunner:
                 if clearance_m < closest_clearance_m:
                     closest_clearance_m = clearance_m
                     closest_edge = api.person.getRoadID(PED_ID)
+                # One tuple per step in LOG_COLUMNS' order (a dict per step cost more than the values).
                 rows.append(
-                    {
-                        "time_s": time_s,
-                        "ego_x_m": ego_x,
-                        "ego_y_m": ego_y,
-                        "ego_yaw_rad": ego_yaw,
-                        "ego_speed_mps": ego_speed,
-                        "ego_length_m": ego_length,
-                        "ego_width_m": ego_width,
-                        "ped_x_m": pose.x_m,
-                        "ped_y_m": pose.y_m,
+                    (
+                        time_s,
+                        ego_x,
+                        ego_y,
+                        ego_yaw,
+                        ego_speed,
+                        ego_length,
+                        ego_width,
+                        pose.x_m,
+                        pose.y_m,
                         # The pose's heading is the direction of motion (flipped when stepping back).
-                        "ped_vx_mps": abs(pose.speed_mps) * math.cos(pose.heading_rad),
-                        "ped_vy_mps": abs(pose.speed_mps) * math.sin(pose.heading_rad),
-                        "ped_radius_m": ped.radius_m,
-                        "detected_onboard_camera": PED_ID in detections.camera,
-                        "detected_onboard_lidar": PED_ID in detections.lidar,
-                        "detected_roadside": condition == "v2i" and PED_ID in detections.v2i_received,
-                        "perceived": any(p.ped_id == PED_ID for p in reported),
-                        "roadside_raw": PED_ID in detections.roadside,
-                        "clearance_m": clearance_m,
-                        "command_speed_mps": target_mps,
-                        "braking": bool(command.info.get("braking", False)),
-                        "ped_state": pose.state,
-                        "sumo_collision": sumo_collision,
-                        "command_refused": refused,
-                    }
+                        abs(pose.speed_mps) * math.cos(pose.heading_rad),
+                        abs(pose.speed_mps) * math.sin(pose.heading_rad),
+                        ped.radius_m,
+                        PED_ID in detections.camera,
+                        PED_ID in detections.lidar,
+                        condition == "v2i" and PED_ID in detections.v2i_received,
+                        any(p.ped_id == PED_ID for p in reported),
+                        PED_ID in detections.roadside,
+                        clearance_m,
+                        target_mps,
+                        bool(command.info.get("braking", False)),
+                        pose.state,
+                        sumo_collision,
+                        refused,
+                    )
                 )
                 signal_states.append(tls_state())
                 timings["logging_s"] += clock() - t3
                 if on_step is not None:
-                    on_step(api, rows[-1])
+                    on_step(api, dict(zip(LOG_COLUMNS, rows[-1], strict=True)))
 
                 # End conditions, on the state at time_s. A contact with a standing ego is no
                 # collision (safety.collision): the step is logged and the episode goes on.
@@ -797,7 +830,7 @@ class EpisodeRunner:
             if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
                 agent.close()
 
-        log = pd.DataFrame(rows)
+        log = pd.DataFrame(rows, columns=list(LOG_COLUMNS)) if rows else pd.DataFrame()
         # SUMO's verdict counts where it looks: a pedestrian on a crossing or walking area at the
         # closest approach. Elsewhere (mid-block: a person moved across the road stays logically on
         # its sidewalk lane, where SUMO never checks against vehicles) it is unknown, not False.
