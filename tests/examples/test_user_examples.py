@@ -39,7 +39,8 @@ def test_a_stack_clustering_raw_lidar_points_avoids_most_collisions_of_a_never_b
     assert len(collided) >= 4  # the crossing scenario puts the pedestrian in the ego's path
 
     stack = load_agent_class(CLUSTERING)
-    assert stack().sensors() == ["onboard_lidar_points"]  # raw points only: no labels, no detections
+    # Raw points only (no labels, no detections), and the route the reference stack's corridor follows.
+    assert stack().sensors() == ["onboard_lidar_points", "route"]
     runner = EpisodeRunner(SITE, params, stack)
     results = [runner.run(spec, "sv", s) for s in collided[:4]]
     runner.close()
