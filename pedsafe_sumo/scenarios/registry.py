@@ -764,8 +764,8 @@ def _turn_leader(
     return leader, max(0.0, rear_before_m + 0.3) / speed_mps
 
 
-def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
-    """First intersection of the pedestrian's straight path with a polyline (the ego's turn path)."""
+def _first_crossing(polyline, path) -> tuple[float, float] | None:
+    """First intersection of the pedestrian's straight path (two points) with a polyline, or None."""
     (ax, ay), (bx, by) = path
     for (px, py), (qx, qy) in zip(polyline[:-1], polyline[1:]):
         d1x, d1y, d2x, d2y = bx - ax, by - ay, qx - px, qy - py
@@ -776,7 +776,15 @@ def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
         u = ((px - ax) * d1y - (py - ay) * d1x) / denom
         if 0 <= t <= 1 and 0 <= u <= 1:
             return ax + t * d1x, ay + t * d1y
-    raise ScenarioError("the pedestrian's path does not cross the ego's turn")
+    return None
+
+
+def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
+    """First intersection of the pedestrian's straight path with a polyline (the ego's turn path)."""
+    crossing = _first_crossing(polyline, path)
+    if crossing is None:
+        raise ScenarioError("the pedestrian's path does not cross the ego's turn")
+    return crossing
 
 
 def adjacent_lane(occluder_lane: int, towards: int, n_lanes: int) -> int:
@@ -793,18 +801,10 @@ def adjacent_lane(occluder_lane: int, towards: int, n_lanes: int) -> int:
 
 def _crossing_with_lane(approach: Approach, lane_index: int, path) -> tuple[float, float]:
     """Intersection of the pedestrian's straight path with the centreline of a lane."""
-    (ax, ay), (bx, by) = path
-    shape = _extended_shape(approach, lane_index)
-    for (px, py), (qx, qy) in zip(shape[:-1], shape[1:]):
-        d1x, d1y, d2x, d2y = bx - ax, by - ay, qx - px, qy - py
-        denom = d1x * d2y - d1y * d2x
-        if abs(denom) < 1e-12:
-            continue
-        t = ((px - ax) * d2y - (py - ay) * d2x) / denom
-        u = ((px - ax) * d1y - (py - ay) * d1x) / denom
-        if 0 <= t <= 1 and 0 <= u <= 1:
-            return ax + t * d1x, ay + t * d1y
-    raise ValueError("the pedestrian's path does not cross the ego's lane")
+    crossing = _first_crossing(_extended_shape(approach, lane_index), path)
+    if crossing is None:
+        raise ValueError("the pedestrian's path does not cross the ego's lane")
+    return crossing
 
 
 def stage_signals(
