@@ -329,12 +329,14 @@ class DaskBackend:
         pending = as_completed([submit(chunk, None) for chunk in chunks])
         for future in pending:
             chunk, pair = owners.pop(future)
-            if future.status == "finished":
-                output = future.result()
-            elif future.status == "cancelled":
+            if future.status == "cancelled":
                 raise BatchError(f"the Dask scheduler cancelled chunk {chunk.key} (restarted or lost?)")
+            # exception() waits for the task: one yielded as "lost" with a killed worker is recomputed by
+            # Dask meanwhile, and then has no exception (it was taken for a failure "NoneType: None").
+            exc = None if future.status == "finished" else future.exception()
+            if exc is None:
+                output = future.result()
             else:
-                exc = future.exception()
                 if not isinstance(exc, KilledWorker):
                     raise _failure(chunk, exc)
                 self.worker_deaths += 1
