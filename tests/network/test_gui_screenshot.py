@@ -38,6 +38,8 @@ def test_sumo_gui_screenshot_shows_the_junction(tmp_path):
     assert proc.returncode == 0, proc.stderr
     image = cv2.imread(str(out))[:, :, ::-1].astype(int)  # RGB
     height, width, _ = image.shape
+    # The tool refuses a snapshot taken before the window had its size (a 1x1 picture, once in CI).
+    assert width >= 500 and height >= 400, image.shape
     centre = image[height // 4 : 3 * height // 4, width // 4 : 3 * width // 4]
 
     def share(pixels, rgb, tol=12):
@@ -48,3 +50,45 @@ def test_sumo_gui_screenshot_shows_the_junction(tmp_path):
     # Sidewalks (grey) and the roadside camera POI (its colour in xueqing.rsu.add.xml: 0,90,255).
     assert share(image, (128, 128, 128), tol=20) > 0.01
     assert share(image, (0, 90, 255), tol=40) > 0.00005
+
+
+def _load_tool():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "screenshot_site", REPO_ROOT / "tools" / "screenshot_site.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_png_size_is_read_from_the_header(tmp_path):
+    tool = _load_tool()
+    picture = tmp_path / "p.png"
+    cv2.imwrite(str(picture), np.zeros((37, 211, 3), dtype=np.uint8))  # height 37, width 211
+    assert tool.png_size_px(picture) == (211, 37)
+    not_png = tmp_path / "n.png"
+    not_png.write_bytes(b"GIF89a" + bytes(40))
+    assert tool.png_size_px(not_png) is None
+    assert tool.png_size_px(tmp_path / "missing.png") is None
+
+
+def test_a_bad_window_size_is_one_line_and_exit_2(tmp_path):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(REPO_ROOT / "tools" / "screenshot_site.py"),
+            "--out",
+            str(tmp_path / "x.png"),
+            "--size",
+            "wide",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == (
+        "screenshot_site: error: argument --size: give WIDTH,HEIGHT in pixels, got 'wide'"
+    )
+    assert not (tmp_path / "x.png").exists()
