@@ -4,10 +4,12 @@ walker's body test (:meth:`PedestrianWalker._walks_into`), which ran a dozen num
 on arrays of a few elements every step.
 
 Bit-identical to the numpy functions: the same operations in the same order (``to_rectangle_frame``,
-``box_signed_distance_m``, then minus the radius), numba's ``np.cos``, ``np.sin`` and ``np.hypot`` on
-float64 give the same bits as numpy's on this platform (checked by ``tests/safety/
-test_geometry_kernels.py`` on random inputs, and by whole batches with ``tools/compare_runs_exact.py``),
-and NaN propagates as in ``np.maximum``/``np.minimum``. Compiled on first use and cached on disk, as the
+``box_signed_distance_m``, then minus the radius), and NaN propagates as in ``np.maximum``/``np.minimum``.
+numba's ``np.cos``, ``np.sin`` and ``np.hypot`` call the C library, as numpy does on the CPUs this project
+runs on (checked by ``tests/safety/test_geometry_kernels.py`` on random inputs, and by whole batches with
+``tools/compare_runs_exact.py``); on a CPU with AVX512_SKX numpy has its own SIMD sin and cos, which may
+differ in the last bit (as the perception kernels may, see :mod:`pedsafe_sumo.perception.kernels`).
+Compiled on first use and cached on disk, as the
 perception kernels (:func:`pedsafe_sumo.perception.kernels._jit`).
 """
 
