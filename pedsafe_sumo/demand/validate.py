@@ -13,11 +13,13 @@
    collision checks), and reads the loops' output: each vehicle's speed as its front crosses a loop, and
    the gaps between successive fronts over the same mid-block loop (same-lane headways).
 4. Compares with the fits by the Kolmogorov-Smirnov distance, plots ECDFs (docs/figures/*.png), and writes the
-   measured part of docs/demand_validation.md. Each loop's speeds are compared with the fit scaled to the
-   speed limit of its lane (the lane the vehicles enter on, for a junction loop: the lane feeding it) as the
-   background's desired speeds are (traffic.background_speed_limit_scaled, docs/sites.md): the pooled speeds
-   of a kind of loop against the mixture of those scaled fits, each weighted by its loop's share of the
-   records (`scaled_mixture`). On a site whose entering lanes all have the fits' limit it is the fit itself.
+   measured part of docs/demand_validation.md. With traffic.background_speed_limit_scaled (docs/sites.md),
+   every vehicle's SUMO speed factor is its draw / traffic.fit_speed_limit_mps whatever its entry, so the
+   rule predicts at each loop the fit scaled by the posted limit of the road the loop is on (an entering
+   lane's; for a junction loop, the limit of the lane the connection comes from) / fit_speed_limit_mps.
+   The pooled speeds of a kind of loop are compared with the mixture of those scaled fits, each weighted by
+   its loop's share of the records (`scaled_mixture`); where every limit is the fits' it is the fit itself.
+   Without the scaling each loop is compared with the fit itself, as before the rule.
 
 When the site cannot carry the demand (more than BACKLOG_MAX_SHARE of the vehicles still waiting to be
 inserted at the end: queues back up to where vehicles enter), speeds measured on the approaches are queue
@@ -69,8 +71,8 @@ class Detector:
     lane_id: str
     pos_m: float
     kind: str  # "midblock", "midlane" or "junction"
-    #: The speed limit the background's desired speeds are scaled to at this loop: its entering lane's
-    #: (for a junction loop, the limit of the lane the connection comes from) [m/s].
+    #: The posted limit of the road the loop is on [m/s]: its entering lane's, for a junction loop the
+    #: limit of the lane the connection comes from.
     speed_limit_mps: float = math.nan
 
 
@@ -109,8 +111,10 @@ def place_detectors(site: Site) -> list[Detector]:
                     continue
                 seen.add(via)
                 internal = site.net.getLane(via)
-                half_m = internal.getLength() / 2.0
-                detectors.append(Detector(f"jct_{via}", via, half_m, "junction", float(lane.getSpeed())))
+                # The posted limit of the road the connection comes from (netconvert gives the internal
+                # lane that speed, less where it limits the turn's speed by its curvature).
+                half_m, limit_mps = internal.getLength() / 2.0, float(lane.getSpeed())
+                detectors.append(Detector(f"jct_{via}", via, half_m, "junction", limit_mps))
     return detectors
 
 

@@ -79,3 +79,29 @@ def test_the_switch_is_true_or_false_and_nothing_else():
 
     with pytest.raises(ParameterError, match="background_speed_limit_scaled' must be true or false"):
         with_overrides(load_params(), {"traffic.background_speed_limit_scaled": 1})
+
+
+def test_the_loops_carry_the_limit_of_their_entering_lane():
+    """On Xueqing: six 60 km/h entering lanes and the two 40 km/h side roads (docs/sites.md)."""
+    from pedsafe_sumo import NETWORKS_DIR
+    from pedsafe_sumo.demand.site import load_site
+    from pedsafe_sumo.demand.validate import place_detectors
+
+    site = load_site("xueqing", NETWORKS_DIR)
+    limits = {d.lane_id: round(d.speed_limit_mps, 2) for d in place_detectors(site) if d.kind == "midblock"}
+    assert sorted(limits.values()) == [11.11, 11.11] + [16.67] * 6
+    assert {lane.rsplit("_", 1)[0] for lane, limit in limits.items() if limit == 11.11} == {
+        "-121510223",
+        "121510226#0",
+    }
+    # A junction loop: the limit of the lane its connection comes from.
+    net = site.net
+    for d in (d for d in place_detectors(site) if d.kind == "junction"):
+        feeding = [
+            c.getFromLane().getSpeed()
+            for edge in net.getNode(net.getLane(d.lane_id).getEdge().getFromNode().getID()).getIncoming()
+            for lane in edge.getLanes()
+            for c in lane.getOutgoing()
+            if c.getViaLaneID() == d.lane_id
+        ]
+        assert feeding and d.speed_limit_mps == feeding[0]
