@@ -113,3 +113,26 @@ def test_a_run_of_several_approaches_needs_approach_and_refuses_one_it_did_not_r
     )  # fmt: skip
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
     assert "did not run crossing on approach W (it has: N, S)" in proc.stderr
+
+
+def test_which_settings_and_rows_an_approach_picks():
+    """The logic alone (no SUMO): a unit `crossing@S` of run.json for --approach S, the only approach of a
+    one-approach run without --approach, the plain `crossing` of a run made without --approach."""
+    from pedsafe_sumo.replay.rundir import ReplayError, _approach_unit
+
+    rows = pd.DataFrame({"approach": ["N", "S", "N", "S"], "episode": [0, 0, 1, 1]})
+    several = {"scenarios": {"crossing@N": {}, "crossing@S": {}}}
+    unit, picked = _approach_unit(Path("run"), several, "crossing", rows, "S")
+    assert unit == "crossing@S" and list(picked["approach"]) == ["S", "S"]
+    with pytest.raises(ReplayError, match="ran crossing on approaches N, S: say which with --approach"):
+        _approach_unit(Path("run"), several, "crossing", rows, None)
+    one = {"scenarios": {"crossing@S": {}}}
+    unit, picked = _approach_unit(Path("run"), one, "crossing", rows[rows["approach"] == "S"], None)
+    assert unit == "crossing@S" and len(picked) == 2
+    plain = {"scenarios": {"crossing": {}}}
+    unit, picked = _approach_unit(Path("run"), plain, "crossing", rows[rows["approach"] == "N"], None)
+    assert unit == "crossing" and len(picked) == 2
+    unit, _ = _approach_unit(Path("run"), plain, "crossing", rows[rows["approach"] == "N"], "N")
+    assert unit == "crossing"
+    with pytest.raises(ReplayError, match="ran crossing on approach N, not on approach E"):
+        _approach_unit(Path("run"), plain, "crossing", rows[rows["approach"] == "N"], "E")
