@@ -191,7 +191,8 @@ def _approach_unit(
 ) -> tuple[str, pd.DataFrame]:
     """The key of the scenario's settings in run.json["scenarios"] (`<scenario>@<arm>` for a unit of a
     batch run with --approach, else `<scenario>`) and the scenario's rows on that approach."""
-    recorded = run_info.get("scenarios") if isinstance(run_info.get("scenarios"), dict) else {}
+    scenarios = run_info.get("scenarios")
+    recorded: dict[str, Any] = scenarios if isinstance(scenarios, dict) else {}
     arms = sorted(key.partition("@")[2] for key in recorded if key.partition("@")[0] == scenario)
     in_rows = sorted({str(a) for a in rows["approach"]}) if "approach" in rows.columns else []
     if "" in arms or not arms:

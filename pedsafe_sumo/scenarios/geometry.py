@@ -265,10 +265,11 @@ def refuge_walkingareas(site: Site) -> tuple[str, ...]:
     The episode avoids it by giving the person a route whose end is a sidewalk (docs/sites.md)."""
     import xml.etree.ElementTree as ET
 
-    walking, with_sidewalk = set(), set()
+    walking: set[str] = set()
+    with_sidewalk: set[str] = set()
     for _, element in ET.iterparse(site.file("net.xml")):
         if element.tag == "edge" and element.get("function") == "walkingarea":
-            walking.add(element.get("id"))
+            walking.add(element.get("id", ""))
         elif element.tag == "connection":
             ends = (element.get("from", ""), element.get("to", ""))
             if not all(end.startswith(":") for end in ends):  # a normal edge (a sidewalk) on one side
