@@ -886,6 +886,8 @@ class EpisodeRunner:
             body_clearance_m=p["body_clearance_m"],
             body_graze_angle_deg=p["body_graze_angle_deg"],
             gap_startup_clearance_s=p["gap_startup_clearance_s"],
+            detour_wait_s=p["detour_wait_s"],
+            detour_max_offset_m=p["detour_max_offset_m"],
             stopped_speed_mps=STATIONARY_SPEED_MPS,
             radius_m=ped.radius_m,
             avoids_bodies=ped.avoids_vehicle_bodies,
