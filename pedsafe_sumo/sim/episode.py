@@ -65,6 +65,7 @@ from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Family
 from pedsafe_sumo.scenarios.geometry import approach_unit_ids, default_arm, load_approach, load_turn
+from pedsafe_sumo.scenarios.oncoming import load_oncoming
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
     VEHICLE_CLASSES,
@@ -380,7 +381,8 @@ class EpisodeRunner:
             self.approach.speed_limit_mps, self.params["traffic"]
         )
         turn = load_turn(self.site, spec.turn, spec.approach or None) if spec.placement == "turn" else None
-        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn)
+        oncoming = load_oncoming(self.site, spec.approach or None) if spec.oncoming_vehicle else None
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn, oncoming)
         if spec.approach:
             setup = dataclasses.replace(setup, approach=spec.approach)
         setup = stage_signals(spec, setup, self.signals, draws)
@@ -584,6 +586,8 @@ class EpisodeRunner:
         for vehicle in (setup.ego, *setup.parked):
             if vehicle.vehicle_id not in api.vehicle.getIDList():
                 raise RuntimeError(f"SUMO did not insert vehicle '{vehicle.vehicle_id}'")
+            if vehicle.internal_lane_id:  # it stands on the junction at the start (left_turn's oncoming)
+                api.vehicle.moveTo(vehicle.vehicle_id, vehicle.internal_lane_id, vehicle.internal_pos_m)
             dims[vehicle.vehicle_id] = (
                 vehicle.size.length_m,
                 vehicle.size.width_m,
