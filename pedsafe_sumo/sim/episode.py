@@ -580,14 +580,13 @@ class EpisodeRunner:
         self._populate(api, setup)
         start_signals(api, setup.signals, self.signals.program if self.signals else None)
         api.simulation.step()  # inserts everything at t = 0
+        self._place_on_junction(api, setup)
         timings["sumo_s"] += clock() - started
 
         dims: dict[str, tuple[float, float, float, tuple[int, int, int]]] = {}
         for vehicle in (setup.ego, *setup.parked):
             if vehicle.vehicle_id not in api.vehicle.getIDList():
                 raise RuntimeError(f"SUMO did not insert vehicle '{vehicle.vehicle_id}'")
-            if vehicle.internal_lane_id:  # it stands on the junction at the start (left_turn's oncoming)
-                api.vehicle.moveTo(vehicle.vehicle_id, vehicle.internal_lane_id, vehicle.internal_pos_m)
             dims[vehicle.vehicle_id] = (
                 vehicle.size.length_m,
                 vehicle.size.width_m,
@@ -862,6 +861,14 @@ class EpisodeRunner:
             "error": "",
         }
         return EpisodeResult(setup, condition, log, outcome, end_reason, timings, sumo_record, signal_states)
+
+    @staticmethod
+    def _place_on_junction(api, setup: EpisodeSetup) -> None:
+        """Move the vehicles that stand on a junction's internal lane at the start (left_turn's oncoming
+        vehicle) there from where SUMO inserted them (it inserts on edges only)."""
+        for vehicle in setup.parked:
+            if vehicle.internal_lane_id and vehicle.vehicle_id in api.vehicle.getIDList():
+                api.vehicle.moveTo(vehicle.vehicle_id, vehicle.internal_lane_id, vehicle.internal_pos_m)
 
     @staticmethod
     def _sumo_collision(api, time_s: float) -> dict[str, Any]:
