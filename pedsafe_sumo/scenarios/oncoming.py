@@ -60,13 +60,13 @@ def load_oncoming(site: Site, arm: str | None = None) -> OncomingPath:
     try:
         approach = load_approach(site, opposite)
     except ValueError as exc:
-        raise OncomingError(f"site {site.name}: no oncoming traffic for the {arm} approach: {exc}") from None
+        raise OncomingError(f"no oncoming traffic for the {arm} approach: {exc}") from None
     net = read_net(str(site.file("net.xml")), withInternal=True)
     lane = net.getLane(approach.lane_ids[-1])  # the median lane: the through lane nearest the ego's turn
     straight = [c for c in lane.getOutgoing() if c.getDirection() == "s"]
     if not straight:
         raise OncomingError(
-            f"site {site.name}: lane {lane.getID()} of the {opposite} approach has no straight movement"
+            f"lane {lane.getID()} of the {opposite} approach (the oncoming lane) has no straight movement"
         )
     connection = straight[0]
     lanes = [connection.getFromLane()]
