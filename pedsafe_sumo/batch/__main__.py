@@ -71,6 +71,8 @@ from pedsafe_sumo.sampling.stages import (
     MAX_PILOT_STAGES,
     MIN_PILOT_EPISODES,
     MIN_SPREAD_FLAG,
+    SCORE_CLEARANCE,
+    SCORES,
 )
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
@@ -106,6 +108,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "is_inputs": INPUTS_SCREENED,
     "is_min_spread": SQRT_HALF,
     "is_proposal": None,
+    "is_score": SCORE_CLEARANCE,
 }
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
@@ -287,6 +290,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "variance]",
     )
     parser.add_argument(
+        "--is-score",
+        choices=SCORES,
+        dest="is_score",
+        help="--sampler is: how the pilot stages rank an episode without a collision: 'clearance' = "
+        "closest clearance [m], 'ttc' = smallest time to collision [s] (docs/sampling.md) "
+        f"[{SCORE_CLEARANCE}]",
+    )
+    parser.add_argument(
         "--is-proposal",
         dest="is_proposal",
         metavar="RUN",
@@ -437,12 +448,20 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(
             f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
         )
-    is_flags = ("is_pilot_stages", "is_pilot_episodes", "is_inputs", "is_min_spread", "is_proposal")
+    is_flags = (
+        "is_pilot_stages",
+        "is_pilot_episodes",
+        "is_inputs",
+        "is_min_spread",
+        "is_score",
+        "is_proposal",
+    )
     if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
         given = ", ".join(f"--{name.replace('_', '-')}" for name in is_flags if name in explicit)
         raise UsageError(f"{given}: need --sampler is")
     if arguments.get("is_proposal") and any(
-        name in explicit for name in ("is_pilot_stages", "is_pilot_episodes", "is_inputs", "is_min_spread")
+        name in explicit
+        for name in ("is_pilot_stages", "is_pilot_episodes", "is_inputs", "is_min_spread", "is_score")
     ):
         raise UsageError(
             "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"

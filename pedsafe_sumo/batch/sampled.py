@@ -26,6 +26,7 @@ from pedsafe_sumo.sampling.stages import (
     ELITE_FRACTION,
     INPUTS_ALL,
     INPUTS_SCREENED,
+    SCORE_CLEARANCE,
     SCREEN_P_VALUE,
     cross_entropy_update,
     stage_layout,
@@ -62,7 +63,12 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
         "adapt_condition": ADAPT_CONDITION,
         "elite_fraction": ELITE_FRACTION,
         "defensive_share": DEFENSIVE_SHARE,
-        "score": "collision: 1 + impact_speed_mps; otherwise -min_clearance_m",
+        "score": (
+            "collision: 1 + impact_speed_mps; otherwise -min_clearance_m"
+            if arguments.get("is_score", SCORE_CLEARANCE) == SCORE_CLEARANCE
+            else "collision: 1 + impact_speed_mps; otherwise -min_ttc_s"
+        ),
+        "score_kind": arguments.get("is_score", SCORE_CLEARANCE),
         "threshold": COLLISION_SCORE,
         "inputs": arguments.get("is_inputs", INPUTS_SCREENED),
         "screen_p_value": SCREEN_P_VALUE,
@@ -168,6 +174,7 @@ def run_sampled(
                 current,
                 identity["sampler"].get("inputs", INPUTS_ALL),
                 identity["sampler"].get("min_spread_of_nominal", MIN_SPREAD_OF_NOMINAL),
+                identity["sampler"].get("score_kind", SCORE_CLEARANCE),
             )
             known.append(product_to_json(update.proposal))
             levels.setdefault(scenario, []).append(

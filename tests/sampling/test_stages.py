@@ -64,6 +64,24 @@ def test_score_orders_misses_below_collisions():
     assert episode_scores(rows).tolist() == [5.0, -2.5, NO_APPROACH_SCORE, COLLISION_SCORE]
 
 
+def test_ttc_score_ranks_misses_by_their_time_to_collision():
+    """--is-score ttc: a miss scores minus its smallest TTC [s], whatever its clearance: the pedestrian who
+    stopped 0.5 m from a crawling car (TTC 4 s) ranks below the one the car passed 2 m away at speed
+    (TTC 0.3 s); a collision still scores 1 + impact speed, no TTC at all the no-approach score."""
+    rows = pd.DataFrame(
+        {
+            "collision": [False, False, True, False],
+            "impact_speed_mps": [np.nan, np.nan, 3.0, np.nan],
+            "min_clearance_m": [0.5, 2.0, 0.0, 4.0],
+            "min_ttc_s": [4.0, 0.3, 0.0, np.nan],
+        }
+    )
+    assert episode_scores(rows, "ttc").tolist() == [-4.0, -0.3, 4.0, NO_APPROACH_SCORE]
+    assert episode_scores(rows).tolist() == [-0.5, -2.0, 4.0, -4.0]
+    with pytest.raises(ValueError, match="score must be one of"):
+        episode_scores(rows, "speed")
+
+
 def _toy_rows(rng: np.random.Generator, proposal: dict, n: int) -> pd.DataFrame:
     """n SV rows drawn like draw_setup's first draws; collision iff the ego speed exceeds TOY_SPEED_MPS,
     the clearance the speed short of it (a continuous score that climbs towards the event)."""
