@@ -27,6 +27,7 @@ from pedsafe_sumo.sampling.stages import (
     INPUTS_ALL,
     INPUTS_SCREENED,
     SCORE_CLEARANCE,
+    SCORE_TTC,
     SCREEN_P_VALUE,
     cross_entropy_update,
     stage_layout,
@@ -56,24 +57,23 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
         return None
     if arguments.get("is_proposal"):
         return shared_proposal_of(Path(arguments["is_proposal"]), scenarios or [])
-    return {
+    identity = {
         "kind": SAMPLER_IS,
         "pilot_stages": int(arguments["is_pilot_stages"]),
         "pilot_episodes": int(arguments["is_pilot_episodes"]),
         "adapt_condition": ADAPT_CONDITION,
         "elite_fraction": ELITE_FRACTION,
         "defensive_share": DEFENSIVE_SHARE,
-        "score": (
-            "collision: 1 + impact_speed_mps; otherwise -min_clearance_m"
-            if arguments.get("is_score", SCORE_CLEARANCE) == SCORE_CLEARANCE
-            else "collision: 1 + impact_speed_mps; otherwise -min_ttc_s"
-        ),
-        "score_kind": arguments.get("is_score", SCORE_CLEARANCE),
+        "score": "collision: 1 + impact_speed_mps; otherwise -min_clearance_m",
         "threshold": COLLISION_SCORE,
         "inputs": arguments.get("is_inputs", INPUTS_SCREENED),
         "screen_p_value": SCREEN_P_VALUE,
         "min_spread_of_nominal": float(arguments["is_min_spread"]),
     }
+    if arguments.get("is_score", SCORE_CLEARANCE) != SCORE_CLEARANCE:
+        # Only when not the first score, so that runs made before --is-score keep their identity.
+        identity.update(score="collision: 1 + impact_speed_mps; otherwise -min_ttc_s", score_kind=SCORE_TTC)
+    return identity
 
 
 def shared_proposal_of(source: Path, scenarios: list[str]) -> dict[str, Any]:
