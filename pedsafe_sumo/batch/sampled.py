@@ -88,7 +88,7 @@ def shared_proposal_of(source: Path, scenarios: list[str]) -> dict[str, Any]:
     sampler = info.get("sampler") if isinstance(info, dict) else None
     if not isinstance(sampler, dict) or sampler.get("kind") != SAMPLER_IS:
         raise SamplerError(f"--is-proposal: {path} is not a run made with --sampler is")
-    stored = info.get(SHARED_KEY) or info.get(PROPOSALS_KEY) or {}
+    stored = info.get(PROPOSALS_KEY) or {}
     shared = {}
     n_stages = int(sampler["pilot_stages"]) + 1
     for scenario in scenarios:
