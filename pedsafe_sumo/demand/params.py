@@ -99,6 +99,11 @@ def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
         _number(section, f"speed_{fit}_log_mu", where)
         _positive(section, f"speed_{fit}_log_sigma", where)
     _positive(section, "fit_speed_limit_mps", where)
+    if not isinstance(section.get("background_speed_limit_scaled"), bool):
+        raise ParameterError(
+            f"parameter '{where}.background_speed_limit_scaled' must be true or false, "
+            f"got {section.get('background_speed_limit_scaled')!r}"
+        )
     _shares_sum_to_one(section, [f"turn_share_{m}" for m in TURN_MOVEMENTS], where)
     sigma = _number(section, "driver_imperfection_sigma", where)
     if not 0.0 <= sigma <= 1.0:

@@ -13,7 +13,13 @@
    collision checks), and reads the loops' output: each vehicle's speed as its front crosses a loop, and
    the gaps between successive fronts over the same mid-block loop (same-lane headways).
 4. Compares with the fits by the Kolmogorov-Smirnov distance, plots ECDFs (docs/figures/*.png), and writes the
-   measured part of docs/demand_validation.md.
+   measured part of docs/demand_validation.md. With traffic.background_speed_limit_scaled (docs/sites.md),
+   every vehicle's SUMO speed factor is its draw / traffic.fit_speed_limit_mps whatever its entry, so the
+   rule predicts at each loop the fit scaled by the posted limit of the road the loop is on (an entering
+   lane's; for a junction loop, the limit of the lane the connection comes from) / fit_speed_limit_mps.
+   The pooled speeds of a kind of loop are compared with the mixture of those scaled fits, each weighted by
+   its loop's share of the records (`scaled_mixture`); where every limit is the fits' it is the fit itself.
+   Without the scaling each loop is compared with the fit itself, as before the rule.
 
 When the site cannot carry the demand (more than BACKLOG_MAX_SHARE of the vehicles still waiting to be
 inserted at the end: queues back up to where vehicles enter), speeds measured on the approaches are queue
@@ -35,13 +41,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.demand.generate import generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
-from pedsafe_sumo.demand.sampling import traffic_distributions
+from pedsafe_sumo.demand.sampling import Lognormal, traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
+from pedsafe_sumo.demand.vehicles import background_speed_scale
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
 from pedsafe_sumo.sumo_binaries import sumo_binary
@@ -64,6 +71,9 @@ class Detector:
     lane_id: str
     pos_m: float
     kind: str  # "midblock", "midlane" or "junction"
+    #: The posted limit of the road the loop is on [m/s]: its entering lane's, for a junction loop the
+    #: limit of the lane the connection comes from.
+    speed_limit_mps: float = math.nan
 
 
 def main_junction(site: Site):
@@ -84,8 +94,11 @@ def place_detectors(site: Site) -> list[Detector]:
     detectors = []
     for lane in site.entering_lanes:
         midblock_m = min(MIDBLOCK_OFFSET_M, lane.length_m / 2.0)
-        detectors.append(Detector(f"mid_{lane.lane_id}", lane.lane_id, midblock_m, "midblock"))
-        detectors.append(Detector(f"half_{lane.lane_id}", lane.lane_id, lane.length_m / 2.0, "midlane"))
+        limit_mps = lane.speed_limit_mps
+        detectors.append(Detector(f"mid_{lane.lane_id}", lane.lane_id, midblock_m, "midblock", limit_mps))
+        detectors.append(
+            Detector(f"half_{lane.lane_id}", lane.lane_id, lane.length_m / 2.0, "midlane", limit_mps)
+        )
     junction = main_junction(site)
     seen = set()
     for edge in sorted(junction.getIncoming() if junction else [], key=lambda e: e.getID()):
@@ -98,7 +111,10 @@ def place_detectors(site: Site) -> list[Detector]:
                     continue
                 seen.add(via)
                 internal = site.net.getLane(via)
-                detectors.append(Detector(f"jct_{via}", via, internal.getLength() / 2.0, "junction"))
+                # The posted limit of the road the connection comes from (netconvert gives the internal
+                # lane that speed, less where it limits the turn's speed by its curvature).
+                half_m, limit_mps = internal.getLength() / 2.0, float(lane.getSpeed())
+                detectors.append(Detector(f"jct_{via}", via, half_m, "junction", limit_mps))
     return detectors
 
 
@@ -193,33 +209,77 @@ def compare(
     return Comparison(name, reference, samples.size, ks, median, fitted_median, samples, cdf, slug)
 
 
+@dataclass(frozen=True)
+class ScaledMixture:
+    """The distribution a pooled sample of several loops is compared with: the fit scaled by each loop's
+    factor, weighted by that loop's number of records. F(x) = sum_i w_i * F_fit(x / scale_i)."""
+
+    fit: Lognormal
+    scales: tuple[float, ...]
+    weights: tuple[float, ...]
+
+    def cdf(self, x):
+        x = np.asarray(x, dtype=float)
+        return sum(w * self.fit.cdf(x / c) for c, w in zip(self.scales, self.weights, strict=True))
+
+    @property
+    def median(self) -> float:
+        """Where the mixture's CDF is 1/2 (each component's median is the fit's times its scale)."""
+        low, high = self.fit.median * min(self.scales), self.fit.median * max(self.scales)
+        if high - low <= 1e-12 * high:
+            return low
+        return float(optimize.brentq(lambda x: float(self.cdf(x)) - 0.5, low, high, xtol=1e-9))
+
+
+def scaled_mixture(fit: Lognormal, parts: list[tuple[float, int]]) -> ScaledMixture:
+    """`fit` scaled per loop: `parts` is [(scale, number of records)]; loops without records drop out."""
+    kept = [(scale, n) for scale, n in parts if n > 0]
+    if not kept:
+        return ScaledMixture(fit, (1.0,), (1.0,))
+    total = sum(n for _, n in kept)
+    return ScaledMixture(fit, tuple(c for c, _ in kept), tuple(n / total for _, n in kept))
+
+
 def measure(
     records: dict[str, list[tuple[float, float]]], detectors: list[Detector], traffic: dict, warmup_s: float
 ) -> list[Comparison]:
-    """KS comparisons of the loop records (after `warmup_s`) with the fitted distributions."""
+    """KS comparisons of the loop records (after `warmup_s`) with the fitted distributions, each loop's
+    speeds with the fit scaled as the background's desired speeds are at that loop (module docstring)."""
     headway, nonint, inter = traffic_distributions(traffic)
-    kind = {d.detector_id: d.kind for d in detectors}
+    by_id = {d.detector_id: d for d in detectors}
     speeds_by_kind: dict[str, list[np.ndarray]] = {"midblock": [], "midlane": [], "junction": []}
+    scales_by_kind: dict[str, list[tuple[float, int]]] = {"midblock": [], "midlane": [], "junction": []}
     mid_headways = []
     for det_id, events in records.items():
         times = np.array([t for t, _ in events])
         speeds = np.array([v for _, v in events])
         keep = times >= warmup_s
-        speeds_by_kind[kind[det_id]].append(speeds[keep])
-        if kind[det_id] == "midblock":
+        kind = by_id[det_id].kind
+        speeds_by_kind[kind].append(speeds[keep])
+        scale = background_speed_scale(by_id[det_id].speed_limit_mps, traffic)
+        scales_by_kind[kind].append((scale, int(keep.sum())))
+        if kind == "midblock":
             # Headway: gap between successive fronts over the same loop, both after the warm-up.
             mid_headways.append(np.diff(times[keep]))
 
     def cat(parts):
         return np.concatenate(parts) if parts else np.array([])
 
+    mid, half, junction = (
+        scaled_mixture(fit, scales_by_kind[kind])
+        for fit, kind in ((nonint, "midblock"), (nonint, "midlane"), (inter, "junction"))
+    )
+
+    def reference(name: str, mixture: ScaledMixture) -> str:
+        return name if set(mixture.scales) == {1.0} else f"{name}, scaled to each loop's limit"
+
     return [
-        compare(cat(speeds_by_kind["midblock"]), nonint.cdf, "speed, mid-block approach (m/s)",
-                "non-intersection lognormal", nonint.median, "speed_midblock"),
-        compare(cat(speeds_by_kind["midlane"]), nonint.cdf, "speed, middle of entering edge (m/s)",
-                "non-intersection lognormal", nonint.median, "speed_midlane"),
-        compare(cat(speeds_by_kind["junction"]), inter.cdf, "speed, within the junction (m/s)",
-                "intersection lognormal", inter.median, "speed_junction"),
+        compare(cat(speeds_by_kind["midblock"]), mid.cdf, "speed, mid-block approach (m/s)",
+                reference("non-intersection lognormal", mid), mid.median, "speed_midblock"),
+        compare(cat(speeds_by_kind["midlane"]), half.cdf, "speed, middle of entering edge (m/s)",
+                reference("non-intersection lognormal", half), half.median, "speed_midlane"),
+        compare(cat(speeds_by_kind["junction"]), junction.cdf, "speed, within the junction (m/s)",
+                reference("intersection lognormal", junction), junction.median, "speed_junction"),
         compare(cat(mid_headways), headway.cdf, "same-lane headway, mid-block (s)", "exponential",
                 math.log(2) / headway.rate_per_s, "headway_midblock"),
     ]  # fmt: skip

@@ -153,15 +153,6 @@ def hosting_problem(
     )
 
 
-#: Turns from an approach with one vehicle lane are refused: on the zhixin clip's one-lane north approach a
-#: right_turn episode crashed SUMO (libsumo 1.28, segmentation fault about 14 s in; the same scenario ran on
-#: Xueqing's one-lane west approach); the mechanism was not found (docs/sites.md).
-ONE_LANE_TURN_PROBLEM = (
-    "approach {edge} has 1 vehicle lane: turns from one-lane approaches are not staged (SUMO crashed in one, "
-    "docs/sites.md)"
-)
-
-
 def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = None) -> dict[str, str | None]:
     """Scenario name -> why the site cannot host it under V2I, or None. On approach `arm` (None: each
     spec's own `approach`, "" meaning the site's), with that approach's poles."""
@@ -191,8 +182,6 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
             problems[name] = f"cannot be staged: {exc}"
             continue
         straight = straight_staging_problem(approach) if spec.placement != "turn" else None
-        if spec.placement == "turn" and len(approach.lane_ids) < 2:
-            straight = ONE_LANE_TURN_PROBLEM.format(edge=approach.edge_id)
         if straight:
             problems[name] = f"cannot be staged: site {site.name}: {straight}"
             continue

@@ -4,6 +4,7 @@
     python -m pedsafe_sumo.replay DIR --episode N --condition sv --screenshot case.png --at collision
     python -m pedsafe_sumo.replay DIR --episode N --condition v2i --export-fcd case.fcd.xml
     python -m pedsafe_sumo.replay DIR --episode N --condition sv --export-xosc case.xosc
+    python -m pedsafe_sumo.replay DIR --episode N --condition sv --scenario crossing --approach E
 
 The episode runs again with the seed, scenario, parameters and AD stack the run recorded in run.json
 (never today's defaults), and every step is checked against the case log: a difference is reported
@@ -65,6 +66,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--condition", required=True, help="sv or v2i")
     parser.add_argument("--scenario", help="scenario of the episode (needed when the run has several)")
+    parser.add_argument(
+        "--approach",
+        metavar="ARM",
+        help="approach of the episode, N, E, S or W (needed when the run, made with batch --approach, has "
+        "several)",
+    )
     parser.add_argument(
         "--site", help="the run's site (name or folder) when it is not where run.json says [its site_path]"
     )
@@ -219,7 +226,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         size_px = check_args(args)
-        logged = load_logged_episode(args.run_dir, args.episode, args.condition, args.scenario, args.site)
+        logged = load_logged_episode(
+            args.run_dir, args.episode, args.condition, args.scenario, args.site, args.approach
+        )
     except (UsageError, ReplayError) as exc:
         return error(str(exc))
     if args.export_fcd is not None:

@@ -10,7 +10,11 @@ a scenario under a condition takes, from the run and never from today's defaults
 - the site: the folder run.json["site_path"] names (else the site named run.json["site"]), or the one
   given as --site; its files must be the run's (run.json["site_files_sha256"]);
 - the case, when there is one: cases/<scenario>_<condition>_<seed>.parquet (the per-step log the
-  replay is checked against) and .json (the episode's initial world, its outcome and end reason).
+  replay is checked against) and .json (the episode's initial world, its outcome and end reason);
+- the approach: a batch run with --approach records its units as `<scenario>@<arm>` in run.json and
+  names its case logs `<scenario>_<condition>_<seed>_<arm>`; the same episode runs on every approach, so
+  a run of several approaches needs --approach (a run of one approach, or one made without --approach,
+  does not).
 Every problem is a ReplayError whose message is one line naming it.
 """
 
@@ -73,18 +77,31 @@ class LoggedEpisode:
 
     @property
     def case_path(self) -> Path:
-        return self.run_dir / CASES_DIR / f"{case_stem(self.scenario, self.condition, self.seed)}.parquet"
+        return case_log_path(self.run_dir, self.scenario, self.condition, self.seed, self.spec.approach)
 
     def describe(self) -> str:
-        return f"{self.scenario} episode {self.episode}, condition {self.condition}, seed {self.seed}"
+        where = f" on approach {self.spec.approach}" if self.spec.approach else ""
+        return f"{self.scenario} episode {self.episode}{where}, condition {self.condition}, seed {self.seed}"
+
+
+def case_log_path(run_dir: Path, scenario: str, condition: str, seed: int, approach: str = "") -> Path:
+    """Where the batch wrote the case log of an episode; `approach` is the spec's field (the arm of a
+    batch --approach unit, "" otherwise), which the batch put in the case's name."""
+    return Path(run_dir) / CASES_DIR / f"{case_stem(scenario, condition, int(seed), approach)}.parquet"
 
 
 def load_logged_episode(
-    run_dir: Path, episode: int, condition: str, scenario: str | None = None, site: str | None = None
+    run_dir: Path,
+    episode: int,
+    condition: str,
+    scenario: str | None = None,
+    site: str | None = None,
+    approach: str | None = None,
 ) -> LoggedEpisode:
     """Episode `episode` of `scenario` under `condition` in the run at `run_dir`; ReplayError if any of
     them is missing or the run's settings cannot be rebuilt. `site` (a name or folder) replaces the
-    site the run recorded, e.g. a copy of its folder on another machine; its files must be the run's."""
+    site the run recorded, e.g. a copy of its folder on another machine; its files must be the run's.
+    `approach` (N, E, S, W) picks the episode of a batch run with --approach on that arm."""
     run_dir = Path(run_dir)
     if not run_dir.exists():
         raise ReplayError(f"run directory {run_dir} does not exist")
@@ -110,6 +127,7 @@ def load_logged_episode(
     elif scenario not in scenarios:
         raise ReplayError(f"scenario '{scenario}' is not in run {run_dir} (it has: {', '.join(scenarios)})")
     of_scenario = episodes[episodes["scenario"] == scenario]
+    unit, of_scenario = _approach_unit(run_dir, run_info, scenario, of_scenario, approach)
     ran = sorted(of_scenario["condition"].unique())
     if condition not in ran:
         raise ReplayError(f"condition '{condition}' was not run in {run_dir} (it has: {', '.join(ran)})")
@@ -129,7 +147,7 @@ def load_logged_episode(
             f"{run_dir / RUN_FILE} lacks {', '.join(missing)}: cannot rebuild the run's settings"
         )
     resolved_site = run_site(run_info, site)
-    spec = scenario_from_record(run_info["scenarios"], scenario, notes)
+    spec = scenario_from_record(run_info["scenarios"], unit, notes)
     params = params_from_record(run_info["parameters"], notes)
     algorithm = str(run_info["algorithm"])
     try:
@@ -141,7 +159,7 @@ def load_logged_episode(
         notes.append(f"the batch recorded an error for this episode: {outcome.get('error', '')}")
 
     case_log, case_meta = None, None
-    case_path = run_dir / CASES_DIR / f"{case_stem(scenario, condition, seed)}.parquet"
+    case_path = case_log_path(run_dir, scenario, condition, seed, spec.approach)
     if case_path.is_file():
         try:
             case_log, case_meta = read_case(case_path)
@@ -166,6 +184,36 @@ def load_logged_episode(
         step_length_s=step_length_s,
         notes=notes,
     )
+
+
+def _approach_unit(
+    run_dir: Path, run_info: dict[str, Any], scenario: str, rows: pd.DataFrame, approach: str | None
+) -> tuple[str, pd.DataFrame]:
+    """The key of the scenario's settings in run.json["scenarios"] (`<scenario>@<arm>` for a unit of a
+    batch run with --approach, else `<scenario>`) and the scenario's rows on that approach."""
+    scenarios = run_info.get("scenarios")
+    recorded: dict[str, Any] = scenarios if isinstance(scenarios, dict) else {}
+    arms = sorted(key.partition("@")[2] for key in recorded if key.partition("@")[0] == scenario)
+    in_rows = sorted({str(a) for a in rows["approach"]}) if "approach" in rows.columns else []
+    if "" in arms or not arms:
+        # A run without --approach: one approach, the site's own (the rows say which, "" before the column).
+        if approach is not None and approach not in in_rows:
+            ran = f"approach {', '.join(in_rows)}" if in_rows else "no --approach"
+            raise ReplayError(f"run {run_dir} ran {scenario} on {ran}, not on approach {approach}")
+        return scenario, rows
+    if approach is None:
+        if len(arms) > 1:
+            raise ReplayError(
+                f"run {run_dir} ran {scenario} on approaches {', '.join(arms)}: say which with --approach"
+            )
+        approach = arms[0]
+    elif approach not in arms:
+        raise ReplayError(
+            f"run {run_dir} did not run {scenario} on approach {approach} (it has: {', '.join(arms)})"
+        )
+    if "approach" in rows.columns:
+        rows = rows[rows["approach"] == approach]
+    return f"{scenario}@{approach}", rows
 
 
 #: The roadside pole every scenario's V2I condition received before ScenarioSpec.roadside_units.

@@ -126,16 +126,7 @@ def _case_card(run: RunDirectory, row: pd.Series) -> str:
         outcome = '<span class="conflict">conflict</span>'
     else:
         outcome = "no collision, no conflict"
-    run_dir = str(run.path)
-    base = (
-        f"python -m pedsafe_sumo.replay {run_dir} --episode {episode} --condition {condition} "
-        f"--scenario {scenario}"
-    )
-    commands = [
-        base,
-        f"{base} --screenshot {screenshot}",
-        f"{base} --export-fcd {scenario}_{condition}_{seed}.fcd.xml",
-    ]
+    commands = replay_commands(run, row)
     image = f'<img alt="{html.escape(label)}" src="{_png_data_uri(picture)}">' if picture else ""
     sensors = html.escape(str(row.get("detected_by", "")) or "never")
     details = (
@@ -146,6 +137,25 @@ def _case_card(run: RunDirectory, row: pd.Series) -> str:
         f'<div class="case"><b>{html.escape(label)}</b><br>{image}<small>{html.escape(caption)}</small><br>'
         f"{outcome}; {details}" + "".join(f"<code>{html.escape(c)}</code>" for c in commands) + "</div>"
     )
+
+
+def replay_commands(run: RunDirectory, row: pd.Series) -> list[str]:
+    """The commands that replay a case, render its picture (beside its case log, where the gallery
+    looks) and export it as FCD. A case of a batch run with --approach (its log named after the arm)
+    is picked with --approach: the run holds the same episode on every approach."""
+    scenario, condition = row["scenario"], row["condition"]
+    episode, seed = int(row["episode"]), int(row["seed"])
+    log_path = run.case_path(scenario, condition, seed)
+    arm = run.approach if run.approach and log_path.stem.endswith(f"_{run.approach}") else ""
+    base = (
+        f"python -m pedsafe_sumo.replay {run.path} --episode {episode} --condition {condition} "
+        f"--scenario {scenario}" + (f" --approach {arm}" if arm else "")
+    )
+    return [
+        base,
+        f"{base} --screenshot {log_path.with_suffix('.png')}",
+        f"{base} --export-fcd {log_path.stem}.fcd.xml",
+    ]
 
 
 def gallery_rows(run: RunDirectory) -> tuple[pd.DataFrame, int]:

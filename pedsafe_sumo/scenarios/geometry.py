@@ -252,6 +252,33 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
     )
 
 
+@lru_cache(maxsize=16)
+def refuge_walkingareas(site: Site) -> tuple[str, ...]:
+    """The walking areas of the site's network that no sidewalk leads to or from: only crosswalks do
+    (netconvert's median refuge between the two halves of a crosswalk over a divided road; on the zhixin
+    clip `:..._w5` between the crosswalks over the west arm's two carriageways).
+
+    SUMO 1.28 crashes (segmentation fault) when a person moved by `person.moveToXY` reaches one while its
+    walking route ends there: MSPModel_Striping::PState::moveToXY asks getNextLane for the way on with no
+    previous lane, the pedestrian router finds no way from the walking area to the route's end (itself),
+    and the fallback for that case reads the previous lane (`prevLane->getLinkTo(...)`, a null pointer).
+    The episode avoids it by giving the person a route whose end is a sidewalk (docs/sites.md)."""
+    import xml.etree.ElementTree as ET
+
+    walking: set[str] = set()
+    with_sidewalk: set[str] = set()
+    for _, element in ET.iterparse(site.file("net.xml")):
+        if element.tag == "edge" and element.get("function") == "walkingarea":
+            walking.add(element.get("id", ""))
+        elif element.tag == "connection":
+            ends = (element.get("from", ""), element.get("to", ""))
+            if not all(end.startswith(":") for end in ends):  # a normal edge (a sidewalk) on one side
+                with_sidewalk.update(ends)
+        if element.tag != "net":
+            element.clear()
+    return tuple(sorted(walking - with_sidewalk))
+
+
 def straight_staging_problem(approach: Approach, ego_lane: int = 1) -> str | None:
     """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (the lane
     next to the kerb lane, where crossing, jaywalking and background blending put it), or None. A lane

@@ -64,7 +64,13 @@ from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Family
-from pedsafe_sumo.scenarios.geometry import approach_unit_ids, default_arm, load_approach, load_turn
+from pedsafe_sumo.scenarios.geometry import (
+    approach_unit_ids,
+    default_arm,
+    load_approach,
+    load_turn,
+    refuge_walkingareas,
+)
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
     VEHICLE_CLASSES,
@@ -277,6 +283,20 @@ def _move_pedestrian(api, pose, radius_m: float) -> None:
     )
 
 
+def add_pedestrian(api, sidewalk_edge: str, type_id: str, refuges: bool) -> None:
+    """Add the scenario's pedestrian on `sidewalk_edge`, to be moved by the behaviour model (moveToXY).
+
+    With the waiting stage alone, SUMO's first moveToXY gives the person a walking route of its current
+    edge, and moving it on rebuilds that route to end on the walking area ahead. On a median refuge (a
+    walking area no sidewalk reaches, `refuges`: the network has one) SUMO 1.28 then crashes
+    (scenarios.geometry.refuge_walkingareas, docs/sites.md): the person first gets a walking route that
+    ends on its sidewalk, which the rebuilt routes keep. Networks without refuges are staged as before."""
+    api.person.add(PED_ID, sidewalk_edge, pos=1.0, depart=0.0, typeID=type_id)
+    if refuges:
+        api.person.appendWalkingStage(PED_ID, [sidewalk_edge, sidewalk_edge], arrivalPos=1.0)
+    api.person.appendWaitingStage(PED_ID, 100_000.0, "pedsafe: moved by the behaviour model")
+
+
 def _is_crossing_or_walkingarea(edge_id: str) -> bool:
     """SUMO's netconvert names crossings ':<junction>_c<k>' and walking areas ':<junction>_w<k>'."""
     if not edge_id.startswith(":"):
@@ -319,6 +339,8 @@ class EpisodeRunner:
         #: The site's files staged on each approach a spec asked for ("": the site's own), read once.
         self._by_approach: dict[str, SiteData] = {"": data}
         self._site_arm = data.arm
+        #: Whether the network has median refuges (walking areas no sidewalk reaches): see person.add.
+        self._refuges = bool(refuge_walkingareas(site))
         self._use_approach("")
         self.session = SumoSession(gui=gui)
 
@@ -541,9 +563,7 @@ class EpisodeRunner:
         api.vehicletype.setLength("ped_type", 2 * ped.radius_m)
         api.vehicletype.setHeight("ped_type", ped.height_m)
         api.vehicletype.setColor("ped_type", (*ped.clothing_rgb, 255))
-        sidewalk_edge = approach.sidewalk_lane_id.rsplit("_", 1)[0]
-        api.person.add(PED_ID, sidewalk_edge, pos=1.0, depart=0.0, typeID="ped_type")
-        api.person.appendWaitingStage(PED_ID, 100_000.0, "pedsafe: moved by the behaviour model")
+        add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", self._refuges)
 
     # ------------------------------------------------------------------ run
     def run(

@@ -102,8 +102,8 @@ def test_a_lane_that_only_turns_is_no_lane_for_the_straight_ego():
 
 
 def test_a_one_lane_approach_is_refused_per_scenario_saying_why():
-    """Linye Daxue North Road (the west arm) enters with one vehicle lane: every scenario is refused there,
-    each in one line naming why."""
+    """Linye Daxue North Road (the west arm) enters with one vehicle lane: every straight scenario is
+    refused there, each in one line naming why."""
     from pedsafe_sumo.network.hosting import site_hosting
     from pedsafe_sumo.params import load_params
     from pedsafe_sumo.scenarios.registry import SCENARIOS
@@ -117,12 +117,10 @@ def test_a_one_lane_approach_is_refused_per_scenario_saying_why():
             f"cannot be staged: site xueqing: approach {edge.getID()} has 1 vehicle lane(s): no lane beside "
             "the kerb lane for the ego to pass the vehicle that hides the pedestrian"
         )
-    # Turns from one-lane approaches are refused too (SUMO crashed in one on the zhixin clip).
+    # The turns are staged there (the SUMO crash once seen on a one-lane approach had another cause, a
+    # median refuge: tests/network/test_one_lane_turns.py); whether the poles see them is another matter.
     for name in ("right_turn", "left_turn"):
-        assert problems[name] == (
-            f"cannot be staged: site xueqing: approach {edge.getID()} has 1 vehicle lane: turns from "
-            "one-lane approaches are not staged (SUMO crashed in one, docs/sites.md)"
-        )
+        assert problems[name] is None or problems[name].startswith("not seen under V2I"), problems[name]
 
 
 def test_an_episode_on_another_approach_is_staged_there():

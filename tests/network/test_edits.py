@@ -77,11 +77,15 @@ SOUTH_ENTRY = "1104710653#0"
 
 @pytest.mark.slow
 def test_a_lower_speed_limit(tmp_path):
-    """The scenarios' approach and the southern entry lowered from 60 to 30 km/h: the ego's initial speed is
-    the same draw scaled by 8.33 / 16.67 (traffic.fit_speed_limit_mps, the limit the fits were measured
-    at). The background's desired speeds are not scaled yet (docs/sites.md): checked unchanged."""
+    """The scenarios' approach and the southern entry lowered from 60 to 30 km/h: the ego's initial speed
+    and the desired speeds of the background entering there are the same draws scaled by 8.33 / 16.67
+    (traffic.fit_speed_limit_mps, the limit the fits were measured at); every other entry is unchanged, and
+    each background driver keeps its speed factor (desired speed / limit), so SUMO drives them at the scaled
+    speed on the slowed road and at the fit's speed once on a 60 km/h road. With
+    traffic.background_speed_limit_scaled = false the background's desired speeds are the draws as they are
+    (paper-v5's model)."""
     from pedsafe_sumo.control.reference import ReferenceStack
-    from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.params import load_params, with_overrides
     from pedsafe_sumo.scenarios.registry import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
@@ -93,23 +97,30 @@ def test_a_lower_speed_limit(tmp_path):
     assert {round(lane.getSpeed(), 2) for lane in _vehicle_lanes(site.file("net.xml"), APPROACH)} == {8.33}
     params = load_params(None)
     assert params["traffic"]["fit_speed_limit_mps"] == 16.67
+    assert params["traffic"]["background_speed_limit_scaled"] is True
+    unscaled = with_overrides(params, {"traffic.background_speed_limit_scaled": False})
     # No clipping of the ego's speed in this test: the scale is what is checked.
     spec = get_scenario("jaywalking").with_overrides({"ego_speed_min_mps": 0.1, "ego_speed_max_mps": 50})
-    runners = [EpisodeRunner(s, params, ReferenceStack) for s in (resolve_site("xueqing"), site)]
+    runners = [
+        EpisodeRunner(s, p, ReferenceStack)
+        for s, p in ((resolve_site("xueqing"), params), (site, params), (site, unscaled))
+    ]
     try:
         for seed in (1, 2, 3):
-            before, after = (runner.draw_setup(spec, seed) for runner in runners)
+            before, after, off = (runner.draw_setup(spec, seed) for runner in runners)
             assert after.ego.speed_mps == pytest.approx(before.ego.speed_mps * 8.33 / 16.67, rel=1e-9)
             old = {v.vehicle_id: v for v in before.background}
             new = {v.vehicle_id: v for v in after.background}
+            kept = {v.vehicle_id: v for v in off.background}
             slowed = [i for i in old if i in new and new[i].route[0] == SOUTH_ENTRY]
             others = [i for i in old if i in new and new[i].route[0] != SOUTH_ENTRY]
             assert slowed and others
-            # The background is not scaled yet (docs/sites.md): the same desired speeds on every entry, so
-            # on the slowed one its speed factors (desired / limit) double.
             for i in slowed:
-                assert new[i].desired_speed_mps == old[i].desired_speed_mps
-                assert new[i].speed_factor == pytest.approx(old[i].speed_factor * 16.67 / 8.33)
+                assert new[i].desired_speed_mps == pytest.approx(old[i].desired_speed_mps * 8.33 / 16.67)
+                assert new[i].speed_factor == pytest.approx(old[i].speed_factor)
+                # Unscaled: the same draw, so on the slowed road its speed factor doubles.
+                assert kept[i].desired_speed_mps == pytest.approx(old[i].desired_speed_mps)
+                assert kept[i].speed_factor == pytest.approx(old[i].speed_factor * 16.67 / 8.33)
             for i in others:
                 assert new[i].desired_speed_mps == old[i].desired_speed_mps
     finally:

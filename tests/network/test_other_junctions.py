@@ -220,13 +220,14 @@ def test_every_hosted_scenario_runs_on_every_approach_with_roadside_detections(b
     own = info["rsu_watch_arm"]
     verdicts = _hosting_by_approach(stdout, own)
     hosted = {combo for combo, verdict in verdicts.items() if verdict.startswith("hosted")}
-    # N and S have one vehicle lane each: every scenario is refused there, saying why.
+    # N and S have one vehicle lane each: the straight scenarios are refused there, saying why; the right
+    # turn is staged there (its left turn's crosswalk is not seen by the poles, as on E and W).
     for arm in ("N", "S"):
         for name in ("crossing", "jaywalking", "background_blending"):
             assert "has 1 vehicle lane(s): no lane beside the kerb lane" in verdicts[(name, arm)]
-        for name in ("right_turn", "left_turn"):
-            assert "turns from one-lane approaches are not staged" in verdicts[(name, arm)]
-    assert {arm for _, arm in hosted} == {"E", "W"}
+        assert ("right_turn", arm) in hosted
+        assert verdicts[("left_turn", arm)].startswith("NOT hosted: not seen under V2I")
+    assert {arm for _, arm in hosted} == {"N", "E", "S", "W"}
     out = tmp_path / "run"
     proc = _run(
         "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "1",
