@@ -131,7 +131,8 @@ def point_at(path: OncomingPath, pos_m: float) -> tuple[float, float]:
     lane_id, on_lane_m = placement(path, pos_m)
     lane = next(ln for ln in path.lanes if ln.lane_id == lane_id)
     offset = lane_pos_to_offset_m(lane.shape, lane.length_m, on_lane_m)
-    return tuple(sumolib.geomhelper.positionAtShapeOffset(lane.shape, offset))  # type: ignore[return-value]
+    x_m, y_m = sumolib.geomhelper.positionAtShapeOffset(lane.shape, offset)[:2]
+    return float(x_m), float(y_m)
 
 
 def oncoming_signal_problem(site: Site, arm: str | None, ego_lane_id: str, ego_to_edge: str) -> str | None:
