@@ -136,7 +136,8 @@ def pair_runs(episodes_a: pd.DataFrame, episodes_b: pd.DataFrame) -> pd.DataFram
     weight_b = pairs["weight_b"] if "weight_b" in pairs else pd.Series(1.0, index=pairs.index)
     if not np.allclose(weight_a.to_numpy(dtype=float), weight_b.to_numpy(dtype=float), rtol=1e-9):
         raise CompareError(
-            "the runs weight the same episodes differently: they were drawn from different proposals"
+            "the runs weight the same episodes differently: they were drawn from different proposals "
+            "(run B with `batch --sampler is --is-proposal RUN_A` to draw A's episodes)"
         )
     pairs["weight"] = weight_a.to_numpy(dtype=float)
     ok = (pairs["status_a"] == OK_STATUS) & (pairs["status_b"] == OK_STATUS)

@@ -112,7 +112,9 @@ def describe_signals(result: EpisodeResult) -> list[str]:
     state = result.signal_states[step]
     users = [("ego", staging.ego_link_index), ("pedestrian", staging.ped_link_index)]
     if result.setup.parked:
-        users.append(("occluder (kerb-lane right turn)", staging.occluder_link_index))
+        oncoming = any(v.vehicle_id.startswith("oncoming_") for v in result.setup.parked)
+        name = "oncoming vehicle (through)" if oncoming else "occluder (kerb-lane right turn)"
+        users.append((name, staging.occluder_link_index))
     parts = [
         f"{name} {colour_of_link(state, link)}" + (f" (link {link})" if link != NO_LINK else "")
         for name, link in users

@@ -58,6 +58,8 @@ def compare(is_rows: pd.DataFrame, mc_rows: pd.DataFrame) -> pd.DataFrame:
                     "is_low": low,
                     "is_high": high,
                     "ess": float(r.ess),
+                    "mean_weight": float(r.mean_weight) if "mean_weight" in r else math.nan,
+                    "weight_note": str(r.weight_note) if "weight_note" in r else "",
                     "is_episodes_run": int(r.n_run),
                     "mc_estimate": float(m[mest]),
                     "mc_low": float(m[mlo]),

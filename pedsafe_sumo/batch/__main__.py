@@ -40,6 +40,7 @@ from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_diges
 from pedsafe_sumo.batch.sampled import (
     SAMPLER_IS,
     SAMPLER_MC,
+    SamplerError,
     plan_sampled_chunks,
     run_sampled,
     sampler_identity,
@@ -60,12 +61,18 @@ from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.safety.stats import ERROR_STATUS
+from pedsafe_sumo.sampling.importance import SQRT_HALF
 from pedsafe_sumo.sampling.stages import (
     DEFAULT_PILOT_EPISODES,
     DEFAULT_PILOT_STAGES,
+    INPUT_MODES,
+    INPUTS_SCREENED,
     MAX_PILOT_EPISODES,
     MAX_PILOT_STAGES,
     MIN_PILOT_EPISODES,
+    MIN_SPREAD_FLAG,
+    SCORE_CLEARANCE,
+    SCORES,
 )
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
@@ -98,6 +105,10 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "sampler": SAMPLER_MC,
     "is_pilot_stages": DEFAULT_PILOT_STAGES,
     "is_pilot_episodes": DEFAULT_PILOT_EPISODES,
+    "is_inputs": INPUTS_SCREENED,
+    "is_min_spread": SQRT_HALF,
+    "is_proposal": None,
+    "is_score": SCORE_CLEARANCE,
 }
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
@@ -262,6 +273,39 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         f"they come on top of --episodes and count in the cost [{DEFAULT_PILOT_EPISODES}]",
     )
     parser.add_argument(
+        "--is-inputs",
+        choices=INPUT_MODES,
+        dest="is_inputs",
+        help="--sampler is: which inputs the proposal moves: 'screened' = those whose pilot elite differs "
+        "from the nominal (chi-square at p < 0.01, docs/sampling.md), 'all' = every input a collision may "
+        f"depend on [{INPUTS_SCREENED}]",
+    )
+    parser.add_argument(
+        "--is-min-spread",
+        type=float,
+        dest="is_min_spread",
+        metavar="FRACTION",
+        help=f"--sampler is: a proposed input's spread never falls below this fraction of the nominal's, "
+        f"{MIN_SPREAD_FLAG}..1 [sqrt(1/2) = {SQRT_HALF:.4f}: below it a normal's weights have infinite "
+        "variance]",
+    )
+    parser.add_argument(
+        "--is-score",
+        choices=SCORES,
+        dest="is_score",
+        help="--sampler is: how the pilot stages rank an episode without a collision: 'clearance' = "
+        "closest clearance [m], 'ttc' = smallest time to collision [s] (docs/sampling.md) "
+        f"[{SCORE_CLEARANCE}]",
+    )
+    parser.add_argument(
+        "--is-proposal",
+        dest="is_proposal",
+        metavar="RUN",
+        help="--sampler is: take every stage's proposal (and the pilot settings) of this earlier IS run "
+        "(its directory or run.json) instead of adapting one: with the same --seed the two runs draw the "
+        "same episodes with the same weights, and `compare` pairs them (build against build)",
+    )
+    parser.add_argument(
         "--protocol",
         type=Path,
         metavar="FILE.toml",
@@ -290,6 +334,8 @@ def _explicit_arguments(args: argparse.Namespace) -> dict[str, Any]:
         given["params"] = str(Path(given["params"]).resolve())
     if "protocol" in given:
         given["protocol"] = str(Path(given["protocol"]))
+    if "is_proposal" in given:
+        given["is_proposal"] = str(Path(given["is_proposal"]).resolve())
     return given
 
 
@@ -402,10 +448,28 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(
             f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
         )
-    if arguments["sampler"] == SAMPLER_MC and (
-        "is_pilot_stages" in explicit or "is_pilot_episodes" in explicit
+    is_flags = (
+        "is_pilot_stages",
+        "is_pilot_episodes",
+        "is_inputs",
+        "is_min_spread",
+        "is_score",
+        "is_proposal",
+    )
+    if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
+        given = ", ".join(f"--{name.replace('_', '-')}" for name in is_flags if name in explicit)
+        raise UsageError(f"{given}: need --sampler is")
+    if arguments.get("is_proposal") and any(
+        name in explicit
+        for name in ("is_pilot_stages", "is_pilot_episodes", "is_inputs", "is_min_spread", "is_score")
     ):
-        raise UsageError("--is-pilot-stages and --is-pilot-episodes need --sampler is")
+        raise UsageError(
+            "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"
+        )
+    if not MIN_SPREAD_FLAG <= arguments["is_min_spread"] <= 1.0:
+        raise UsageError(
+            f"--is-min-spread must lie in {MIN_SPREAD_FLAG}..1, got {arguments['is_min_spread']}"
+        )
     if not 1 <= arguments["is_pilot_stages"] <= MAX_PILOT_STAGES:
         raise UsageError(
             f"--is-pilot-stages must lie in 1..{MAX_PILOT_STAGES}, got {arguments['is_pilot_stages']}"
@@ -455,7 +519,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "parameters": params,
         "site_files_sha256": digests,
         "chunk_size_pairs": arguments["chunk_size"],
-        "sampler": sampler_identity(arguments),
+        "sampler": _sampler_identity(arguments, scenarios),
     }
     scenario_overrides, _ = parse_set(arguments["set"])
     if protocol is not None:
@@ -516,6 +580,13 @@ def approach_units(
         raise UsageError(f"site {site.name} hosts none of these combinations (see the lines above)")
     units = [f"{name}@{arm}" for name, arm in hosted]
     return units, {f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm) for name, arm in hosted}
+
+
+def _sampler_identity(arguments: dict[str, Any], scenarios: list[str]) -> dict[str, Any] | None:
+    try:
+        return sampler_identity(arguments, scenarios)
+    except SamplerError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def _with_protocol(

@@ -10,16 +10,25 @@ the rows an uninterrupted run would have written, on any number of workers or on
 
 from __future__ import annotations
 
+import hashlib
+import json
+from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
 from pedsafe_sumo.io.run_store import read_parts
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
+from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
     COLLISION_SCORE,
     DEFENSIVE_SHARE,
     ELITE_FRACTION,
+    INPUTS_ALL,
+    INPUTS_SCREENED,
+    SCORE_CLEARANCE,
+    SCORE_TTC,
+    SCREEN_P_VALUE,
     cross_entropy_update,
     stage_layout,
 )
@@ -30,11 +39,25 @@ PROPOSALS_KEY = "sampler_proposals"
 LEVELS_KEY = "sampler_levels"
 
 
-def sampler_identity(arguments: dict[str, Any]) -> dict[str, Any] | None:
-    """What run.json records of the sampler (None under plain Monte Carlo, as in runs before it)."""
+#: The sampler settings a run with --is-proposal takes from the run whose proposals it shares.
+SHARED_KEY = "shared_proposals"
+
+
+class SamplerError(ValueError):
+    """A sampler setting that cannot be used (one line for the batch's stderr)."""
+
+
+def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = None) -> dict[str, Any] | None:
+    """What run.json records of the sampler (None under plain Monte Carlo, as in runs before it).
+
+    With `is_proposal` (batch --is-proposal RUN): the settings and every stage's proposal of that run
+    (shared_proposal_of), so that this run draws the very episodes and weights it drew.
+    """
     if arguments["sampler"] != SAMPLER_IS:
         return None
-    return {
+    if arguments.get("is_proposal"):
+        return shared_proposal_of(Path(arguments["is_proposal"]), scenarios or [])
+    identity = {
         "kind": SAMPLER_IS,
         "pilot_stages": int(arguments["is_pilot_stages"]),
         "pilot_episodes": int(arguments["is_pilot_episodes"]),
@@ -43,7 +66,42 @@ def sampler_identity(arguments: dict[str, Any]) -> dict[str, Any] | None:
         "defensive_share": DEFENSIVE_SHARE,
         "score": "collision: 1 + impact_speed_mps; otherwise -min_clearance_m",
         "threshold": COLLISION_SCORE,
+        "inputs": arguments.get("is_inputs", INPUTS_SCREENED),
+        "screen_p_value": SCREEN_P_VALUE,
+        "min_spread_of_nominal": float(arguments["is_min_spread"]),
     }
+    if arguments.get("is_score", SCORE_CLEARANCE) != SCORE_CLEARANCE:
+        # Only when not the first score, so that runs made before --is-score keep their identity.
+        identity.update(score="collision: 1 + impact_speed_mps; otherwise -min_ttc_s", score_kind=SCORE_TTC)
+    return identity
+
+
+def shared_proposal_of(source: Path, scenarios: list[str]) -> dict[str, Any]:
+    """The sampler of the run at `source` (its directory or its run.json), with every stage's proposal
+    of each of `scenarios` under SHARED_KEY and their SHA-256; SamplerError (one line) when that run is
+    not an importance-sampling run that has fixed every proposal of these scenarios."""
+    path = source / "run.json" if source.is_dir() else source
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SamplerError(f"--is-proposal: cannot read {path}: {exc}") from None
+    sampler = info.get("sampler") if isinstance(info, dict) else None
+    if not isinstance(sampler, dict) or sampler.get("kind") != SAMPLER_IS:
+        raise SamplerError(f"--is-proposal: {path} is not a run made with --sampler is")
+    stored = info.get(PROPOSALS_KEY) or {}
+    shared = {}
+    n_stages = int(sampler["pilot_stages"]) + 1
+    for scenario in scenarios:
+        proposals = stored.get(scenario, [])
+        if len(proposals) < n_stages:
+            raise SamplerError(
+                f"--is-proposal: {path} has {len(proposals)} of the {n_stages} proposals of {scenario} "
+                "(a scenario it did not run, or a run that stopped before its final stage)"
+            )
+        shared[scenario] = list(proposals[:n_stages])
+    digest = hashlib.sha256(json.dumps(shared, sort_keys=True).encode()).hexdigest()
+    settings = {key: value for key, value in sampler.items() if key not in (SHARED_KEY, "shared_sha256")}
+    return {**settings, SHARED_KEY: shared, "shared_sha256": digest}
 
 
 def plan_sampled_chunks(
@@ -99,6 +157,10 @@ def run_sampled(
             if stage == 0:
                 known.append("")
                 continue
+            shared = identity["sampler"].get(SHARED_KEY)
+            if shared is not None:  # --is-proposal: the other run's proposal, not refitted
+                known.append(shared[scenario][stage])
+                continue
             previous = [
                 c
                 for c in plan_sampled_chunks([scenario], plan.conditions, identity, proposals)
@@ -106,7 +168,14 @@ def run_sampled(
             ]
             rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in previous])
             current = product_from_json(known[stage - 1]).families
-            update = cross_entropy_update(rows, current)
+            # Runs recorded before the input screen proposed every input, with the spread floor of 0.2.
+            update = cross_entropy_update(
+                rows,
+                current,
+                identity["sampler"].get("inputs", INPUTS_ALL),
+                identity["sampler"].get("min_spread_of_nominal", MIN_SPREAD_OF_NOMINAL),
+                identity["sampler"].get("score_kind", SCORE_CLEARANCE),
+            )
             known.append(product_to_json(update.proposal))
             levels.setdefault(scenario, []).append(
                 {
@@ -114,6 +183,8 @@ def run_sampled(
                     "level": update.level,
                     "n_elite": update.n_elite,
                     "n_collisions_sv": update.n_collisions,
+                    "proposed": sorted(update.proposal.families),
+                    "screen_p_values": update.screen,
                 }
             )
         run_dir.save_run_info(run_info)

@@ -26,6 +26,12 @@ of the step: someone standing against a bumper walks along it and out, as people
 because their path runs a fraction of a degree off the bumper's line. A vehicle moving into a standing
 pedestrian is then the vehicle striking them.
 
+A pedestrian whose forward step standing vehicles have refused for `detour_wait_s` walks round them, as
+people walk round a car stopped on a crosswalk: they step sideways, off their line, round the nearer end
+of the vehicle(s) in the way (in front of or behind it), at most `detour_max_offset_m` aside (within the
+crosswalk or just beside it), then walk on at that offset. Sidesteps obey the same body rule. A vehicle
+that still moves, or one that cannot be passed within that offset, keeps them blocked.
+
 The model is pure: the episode loop feeds it the ego's pose, the vehicle footprints and a line-of-sight
 test, and moves the SUMO person to the returned position (traci person.moveToXY), so it works on and
 off the crosswalks alike.
@@ -40,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.safety.geometry_kernels import walks_into_body
 
 RISK_PREFERENCES = ("unaware", "hasten", "yield")
@@ -58,6 +65,8 @@ class BehaviourParams:
     body_clearance_m: float = 0.1  # nearest a pedestrian steps towards any vehicle body [m]
     body_graze_angle_deg: float = 5.0  # inside the clearance, steps this close to parallel go on [deg]
     gap_startup_clearance_s: float = 3.0  # gap acceptance: start-up and clearance time t_s [s]
+    detour_wait_s: float = 2.0  # blocked this long by standing vehicles, they walk round them [s]
+    detour_max_offset_m: float = 3.0  # farthest they step aside from their line to walk round [m]
     stopped_speed_mps: float = 0.1  # a vehicle slower than this stands still [m/s]
     radius_m: float = 0.3  # the pedestrian's body circle [m]
     avoids_bodies: bool = True  # False: a test-track dummy that keeps its path into a vehicle
@@ -76,7 +85,7 @@ class PedestrianPose:
     heading_rad: float  # direction of motion, counter-clockwise from +x
     speed_mps: float  # signed along the path: negative when stepping back
     #: "waiting", "walking", "reacting", "hastening", "yielding", "stepping_back", "clearing",
-    #: "blocked", "finished"
+    #: "blocked", "detouring" (a sidestep round standing vehicles), "finished"
     state: str
 
 
@@ -144,6 +153,13 @@ class PedestrianWalker:
         self._hastening = False  # reacted by hastening, until across or the ego has passed
         self._seen_ego = False  # has had the ego in sight during this encounter
         self._ego_stopped_since_s: float | None = None
+        # Walking round standing vehicles: the offset from the path (left of the walking direction
+        # positive); since when the way ahead has been blocked by the same standing bodies, and their
+        # centres at the last blocked step; the offset that passes them.
+        self.offset_m = 0.0
+        self._blocked_since_s: float | None = None
+        self._blocker_xy: np.ndarray | None = None
+        self._detour_to_m: float | None = None
         self.state = "waiting"
 
     def position(self, s_m: float) -> tuple[float, float, float]:
@@ -155,6 +171,13 @@ class PedestrianWalker:
         seg_len = cum[i + 1] - cum[i]
         u = (s - cum[i]) / seg_len if seg_len > 0 else 0.0
         return ax + u * (bx - ax), ay + u * (by - ay), math.atan2(by - ay, bx - ax)
+
+    def _xy(self, s_m: float, offset_m: float) -> tuple[float, float, float]:
+        """As `position`, moved `offset_m` to the left of the walking direction (a detour)."""
+        x, y, heading = self.position(s_m)
+        if offset_m:
+            x, y = x - offset_m * math.sin(heading), y + offset_m * math.cos(heading)
+        return x, y, heading
 
     @property
     def finished(self) -> bool:
@@ -208,7 +231,7 @@ class PedestrianWalker:
             x, y, heading = self.position(self.s_m)
             return PedestrianPose(x, y, heading, 0.0, "waiting")
         if self.finished:
-            x, y, heading = self.position(self.length_m)
+            x, y, heading = self._xy(self.length_m, self.offset_m)
             self.state = "finished"
             return PedestrianPose(x, y, heading, 0.0, "finished")
 
@@ -271,16 +294,96 @@ class PedestrianWalker:
             new_s = max(target_s or 0.0, self.s_m + speed * dt_s, 0.0)  # target_s is set when stepping back
         else:
             new_s = min(self.length_m, self.s_m + speed * dt_s)
+        sidestep_m = 0.0
         if new_s != self.s_m and p.avoids_bodies and bodies is not None and len(bodies.x_m):
-            if self._walks_into(bodies, self.s_m, new_s):
+            if new_s > self.s_m and self._detour_to_m is not None:
+                # A detour under way: sideways until at the offset that passes the bodies, then on.
+                sidestep_m = self._sidestep(bodies, new_s - self.s_m)
+            if sidestep_m:
+                new_s = self.s_m
+            elif self._walks_into(bodies, self.s_m, new_s):
+                if new_s > self.s_m:
+                    sidestep_m = self._detour_step(bodies, time_s, dt_s, new_s - self.s_m)
                 new_s, speed, state = self.s_m, 0.0, "blocked"
+            elif self._blocked_since_s is not None:
+                self._blocked_since_s, self._blocker_xy, self._detour_to_m = None, None, None
         self.s_m = new_s
+        if sidestep_m:
+            # Sideways at the step's pace; the pose's heading is the direction of the sidestep.
+            self.offset_m += sidestep_m
+            speed, state = abs(sidestep_m) / dt_s, "detouring"
         self.speed_mps = speed
         self.state = state
-        x, y, heading = self.position(self.s_m)
+        x, y, heading = self._xy(self.s_m, self.offset_m)
+        if sidestep_m:
+            heading += math.copysign(math.pi / 2, sidestep_m)
         if speed < 0:
             heading += math.pi
         return PedestrianPose(x, y, heading, speed, state)
+
+    def _detour_step(self, bodies: VehicleBodies, time_s: float, dt_s: float, step_m: float) -> float:
+        """The sidestep (left of the walking direction positive; 0: none) of a pedestrian whose forward step
+        of `step_m` the body rule refused. Taken only once the same bodies have blocked them, standing (each
+        centre within `stopped_speed_mps` x dt of where it was at the last blocked step), for
+        `detour_wait_s`; towards the offset that passes the nearer end of those bodies (`_detour_offset`),
+        at most `step_m` sideways, and only if the body rule allows that sidestep."""
+        p = self.params
+        x0, y0, heading = self._xy(self.s_m, self.offset_m)
+        ahead = (x0 + step_m * math.cos(heading), y0 + step_m * math.sin(heading))
+        blockers = np.flatnonzero(self._refused(bodies, (x0, y0), ahead, step_m))
+        centres = np.column_stack([bodies.x_m[blockers], bodies.y_m[blockers]])
+        previous, self._blocker_xy = self._blocker_xy, centres
+        standing = previous is not None and len(previous) > 0 and len(centres) > 0
+        if standing:
+            assert previous is not None
+            tolerance_m = p.stopped_speed_mps * dt_s + 1e-9
+            shift = centres[:, None, :] - previous[None, :, :]
+            moved_m = np.hypot(shift[..., 0], shift[..., 1]).min(axis=1)  # each to its nearest of before
+            standing = bool(np.all(moved_m <= tolerance_m))
+        if not standing or self._blocked_since_s is None:
+            self._blocked_since_s, self._detour_to_m = time_s, None
+            return 0.0
+        if time_s - self._blocked_since_s < p.detour_wait_s - 1e-9:
+            return 0.0
+        if self._detour_to_m is None:
+            self._detour_to_m = self._detour_offset(bodies, blockers, heading)
+            if self._detour_to_m is None:
+                return 0.0
+        return self._sidestep(bodies, step_m)
+
+    def _sidestep(self, bodies: VehicleBodies, step_m: float) -> float:
+        """At most `step_m` sideways towards the detour's offset, if the body rule allows it; else 0."""
+        assert self._detour_to_m is not None
+        to_go = self._detour_to_m - self.offset_m
+        if abs(to_go) < 1e-9:
+            return 0.0
+        sidestep = math.copysign(min(abs(to_go), step_m), to_go)
+        x0, y0, _ = self._xy(self.s_m, self.offset_m)
+        x1, y1, _ = self._xy(self.s_m, self.offset_m + sidestep)
+        if bool(np.any(self._refused(bodies, (x0, y0), (x1, y1), abs(sidestep)))):
+            return 0.0
+        return sidestep
+
+    def _detour_offset(self, bodies: VehicleBodies, blockers: np.ndarray, heading_rad: float) -> float | None:
+        """The offset from the path (left positive) that passes the nearer end of the blocking bodies, the
+        body circle twice `body_clearance_m` clear of their corners; of the two ends, the one nearer the
+        pedestrian's current offset. None when neither is within `detour_max_offset_m`."""
+        p = self.params
+        x, y, _ = self.position(self.s_m)
+        nx, ny = -math.sin(heading_rad), math.cos(heading_rad)
+        lateral = []
+        for k in blockers:
+            c, s = math.cos(bodies.yaw_rad[k]), math.sin(bodies.yaw_rad[k])
+            half_l, half_w = bodies.length_m[k] / 2, bodies.width_m[k] / 2
+            for a, b in ((half_l, half_w), (half_l, -half_w), (-half_l, half_w), (-half_l, -half_w)):
+                corner_x, corner_y = bodies.x_m[k] + a * c - b * s, bodies.y_m[k] + a * s + b * c
+                lateral.append((corner_x - x) * nx + (corner_y - y) * ny)
+        reach_m = p.radius_m + 2 * p.body_clearance_m
+        ends = (max(lateral) + reach_m, min(lateral) - reach_m)
+        options = [end for end in ends if abs(end) <= p.detour_max_offset_m]
+        if not options:
+            return None
+        return min(options, key=lambda end: abs(end - self.offset_m))
 
     def _accepts_gap(self, time_s: float, time_to_path_s: float, to_clear_m: float) -> bool:
         """Gap acceptance (HCM critical headway): walk on only if the ego reaches the path later than the
@@ -298,8 +401,8 @@ class PedestrianWalker:
         """Whether moving s_from -> s_to overlaps a vehicle footprint, or brings the body within
         `body_clearance_m` of one while heading towards it: the distance falls by more than
         sin(`body_graze_angle_deg`) of the step (walking along a body it stands against is allowed)."""
-        x1, y1, _ = self.position(s_to)
-        x0, y0, _ = self.position(s_from)
+        x1, y1, _ = self._xy(s_to, self.offset_m)
+        x0, y0, _ = self._xy(s_from, self.offset_m)
         half_diagonal = bodies.half_diagonal_m
         if half_diagonal is None:
             half_diagonal = 0.5 * np.hypot(bodies.length_m, bodies.width_m)
@@ -320,3 +423,15 @@ class PedestrianWalker:
                 graze_m,
             )
         )
+
+    def _refused(
+        self, bodies: VehicleBodies, xy_from: tuple[float, float], xy_to: tuple[float, float], step_m: float
+    ) -> np.ndarray:
+        """Per body, whether the body rule of `_walks_into` refuses a step of length `step_m` from `xy_from`
+        to `xy_to`, in any direction (a sidestep too)."""
+        r, margin = self.params.radius_m, self.params.body_clearance_m
+        box = (bodies.x_m, bodies.y_m, bodies.yaw_rad, bodies.length_m, bodies.width_m)
+        before = rectangle_circle_distance_m(*box, xy_from[0], xy_from[1], r)
+        after = rectangle_circle_distance_m(*box, xy_to[0], xy_to[1], r)
+        graze_m = step_m * math.sin(math.radians(self.params.body_graze_angle_deg))
+        return (after <= 0.0) | ((after < margin) & (after < before - graze_m))

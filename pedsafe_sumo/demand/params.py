@@ -45,6 +45,8 @@ PEDESTRIAN_UPPER_BOUNDS: Bounds = {
     "body_clearance_m": (5.0, "a pedestrian this far from every vehicle cannot move through a queue"),
     "body_graze_angle_deg": (45.0, "steeper is walking into the body, not along it"),
     "gap_startup_clearance_s": (60.0, "twenty times the HCM start-up time (3 s)"),
+    "detour_wait_s": (600.0, "longer than any episode (at most 600 s): the rule would never act"),
+    "detour_max_offset_m": (20.0, "wider than the study site's road"),
 }
 AGE_GROUP_UPPER_BOUNDS: Bounds = {
     "age_max_years": (120.0, "older than anyone recorded"),
@@ -133,6 +135,8 @@ def validate_pedestrians(section: dict[str, Any], where: str = "pedestrians") ->
     _non_negative(section, "body_clearance_m", where)
     _non_negative(section, "body_graze_angle_deg", where)
     _non_negative(section, "gap_startup_clearance_s", where)
+    _non_negative(section, "detour_wait_s", where)
+    _non_negative(section, "detour_max_offset_m", where)
     if not 0.0 < _positive(section, "eye_height_fraction", where) <= 1.0:
         raise ParameterError(f"parameter '{where}.eye_height_fraction' must lie in (0, 1]")
     check_upper_bounds(section, PEDESTRIAN_UPPER_BOUNDS, where)

@@ -182,6 +182,12 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
             problems[name] = f"cannot be staged: {exc}"
             continue
         straight = straight_staging_problem(approach) if spec.placement != "turn" else None
+        if not straight and getattr(spec, "oncoming_vehicle", 0) and turn is not None:
+            from pedsafe_sumo.scenarios.oncoming import oncoming_signal_problem
+
+            straight = oncoming_signal_problem(
+                site, spec_arm, approach.lane_ids[turn.lane_index], turn.route[1]
+            )
         if straight:
             problems[name] = f"cannot be staged: site {site.name}: {straight}"
             continue

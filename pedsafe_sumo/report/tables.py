@@ -21,6 +21,15 @@ CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: conflict (a conflict in an episode without a collision), derived by `paired_of_run`.
 PAIRED_OUTCOMES = {"collision": "collision", "table_conflict": "conflict"}
 TABLE_FILES = ("table1.csv", "table1.md", "paired.csv", "paired.md")
+#: An importance-sampling row is flagged when its final stage's mean weight lies further from 1 (its
+#: expectation under any proposal) than this many of its standard errors: the weights' tail was then not
+#: sampled, and the central-limit interval understates the spread (docs/sampling.md). 3 standard errors:
+#: a false flag in about 1 row of 370 when the weights behave.
+WEIGHT_CHECK_Z = 3.0
+#: ... or when one episode carries more than this share of the collision estimate sum w_i f_i: the
+#: estimate (and its interval) then rests on one draw. A quarter: with that share from one draw of
+#: tens, the product's sample variance is dominated by it.
+WEIGHT_CHECK_MAX_SHARE = 0.25
 
 
 def condition_label(condition: str) -> str:
@@ -71,9 +80,34 @@ def table_one_weighted(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.D
                 "conflict_high": est["conflict"].high,
                 "ess": est["collision"].ess,
                 "n_run": len(group),
+                **weight_check(weights, collisions.astype(float)),
             }
         )
     return pd.DataFrame(rows)
+
+
+def weight_check(weights: np.ndarray, collisions: np.ndarray) -> dict[str, object]:
+    """The final stage's mean weight (expectation 1 under any proposal), the largest share one episode has
+    of the collision estimate, and `weight_note`: "" when both look sound, else why the central-limit
+    interval should not be trusted (WEIGHT_CHECK_Z, WEIGHT_CHECK_MAX_SHARE)."""
+    w = np.asarray(weights, dtype=float)
+    if len(w) < 2:
+        return {
+            "mean_weight": float(np.mean(w)) if len(w) else math.nan,
+            "max_share": math.nan,
+            "weight_note": "",
+        }
+    mean_w = float(np.mean(w))
+    se = float(np.std(w, ddof=1)) / math.sqrt(len(w))
+    products = w * np.asarray(collisions, dtype=float)
+    total = float(np.sum(products))
+    max_share = float(np.max(products) / total) if total > 0 else math.nan
+    notes = []
+    if abs(mean_w - 1.0) > WEIGHT_CHECK_Z * se:
+        notes.append(f"mean weight {mean_w:.3f} is more than {WEIGHT_CHECK_Z:g} SE from 1")
+    if total > 0 and max_share > WEIGHT_CHECK_MAX_SHARE:
+        notes.append(f"one episode carries {max_share:.0%} of the collision estimate")
+    return {"mean_weight": mean_w, "max_share": max_share, "weight_note": "; ".join(notes)}
 
 
 def table_one_of_run(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
@@ -160,6 +194,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
         header += ["ESS", "episodes run (pilots included)"]
         for cells, r in zip(rows, table.itertuples(index=False)):
             cells += [f"{r.ess:.1f}", str(r.n_run)]
+        if "mean_weight" in table.columns:  # the weights' check (weight_check)
+            header += ["mean weight", "check"]
+            for cells, r in zip(rows, table.itertuples(index=False)):
+                cells += [f"{r.mean_weight:.3f}", r.weight_note or "ok"]
     return header, rows
 
 

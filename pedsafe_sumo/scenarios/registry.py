@@ -32,9 +32,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import sumolib
 
 from pedsafe_sumo.sampling.draws import Draws, as_draws
-from pedsafe_sumo.scenarios.geometry import Approach, Turn, path_pos_m
+from pedsafe_sumo.scenarios.geometry import Approach, Turn, lane_pos_to_offset_m, path_pos_m
+from pedsafe_sumo.scenarios.oncoming import OncomingPath, placement, sight_line_pos_m
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     SIGNAL_STATES,
@@ -211,6 +213,12 @@ class ScenarioSpec:
     turn_leader: float = 0
     turn_leader_front_min_m: float = 0.1
     turn_leader_front_max_m: float = 1.0
+    #: Turning scenarios: a vehicle of class `occluder_class` coming the other way (the opposite approach's
+    #: median lane, straight on, at the ego's speed) whose body is, at the start, across the line of sight
+    #: from the ego's roof sensor to the pedestrian (1), or none (0). Its signal must show green from the
+    #: start until `signal_hold_after_s` after the staged conflict, so a program that stops the opposing
+    #: approach while the ego turns (split phasing, as on Xueqing) cannot stage it (scenarios/oncoming.py).
+    oncoming_vehicle: float = 0
     #: The arm the ego comes in on (N, E, S or W; batch --approach): staging, poles and signals follow
     #: it. "" is the site's own approach, the one its first roadside pole watches.
     approach: str = ""
@@ -261,6 +269,17 @@ class ScenarioSpec:
             (self.signal_hold_after_s >= 0, "signal_hold_after_s >= 0"),
             (self.turn_leader in (0, 1), "turn_leader is 0 or 1"),
             (self.turn_leader == 0 or self.placement == "turn", "turn_leader only in a turning scenario"),
+            (self.oncoming_vehicle in (0, 1), "oncoming_vehicle is 0 or 1"),
+            (
+                self.oncoming_vehicle == 0 or self.placement == "turn",
+                "oncoming_vehicle only in a turning scenario",
+            ),
+            # libsumo 1.28 crashed (segmentation fault) in the first step of the next episode when one ended
+            # before a step had followed the oncoming vehicle's move onto the junction (time limit 0.05 s).
+            (
+                self.oncoming_vehicle == 0 or self.time_limit_s >= 0.1,
+                "time_limit_s >= 0.1 with an oncoming vehicle (two steps: libsumo crashed after one)",
+            ),
             (
                 0 < self.turn_leader_front_min_m <= self.turn_leader_front_max_m,
                 "0 < turn_leader_front_min_m <= turn_leader_front_max_m",
@@ -363,15 +382,23 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         ScenarioSpec(
             "left_turn",
             "the ego turns left on a permissive green from the median lane; a pedestrian crosses the road "
-            "it turns into with the walk signal, from the far corner; unoccluded where the program gives "
-            "the approach its own phase (split phasing, as on Xueqing): no opposing vehicle moves, and none "
-            "waiting at its red stands between the ego and the pedestrian",
+            "it turns into with the walk signal, from the far corner, hidden at the start by a vehicle "
+            "coming the other way on the same green; needs a program that lets the opposing approach move "
+            "while the ego turns left (a two-phase plan: networks/xueqing_two_phase); Xueqing's split "
+            "phasing cannot stage it",
             placement="turn",
             ego_speed_fit="intersection",
             turn="left",
             ped_start_corner="far",
             ped_signal="green",
             ped_signal_hold="step_off",
+            # "Hidden by opposing traffic" (issue 13): an oncoming through vehicle, the class of the
+            # crossing occluder (scenarios/oncoming.py, docs/engine.md).
+            oncoming_vehicle=1,
+            # The corner pole does not see where the pedestrian starts (the south end of the east
+            # crosswalk); the south-east corner pole of the E approach, which watches that crosswalk,
+            # does (network/hosting.py).
+            roadside_units="rsu_camera_0,rsu_camera_0_E",
             ego_speed_max_mps=8.33,
             # Staging bound, not a behaviour fit: the ego enters the junction on green and reaches the
             # far crosswalk (about 40 m of turn on Xueqing) within the approach's green (16 s with its
@@ -417,6 +444,11 @@ class VehicleSetup:
     #: Edges it drives at `speed_mps` (the turning scenarios' leader, on the road it turns into); empty:
     #: it stands on the approach (parked and queued vehicles), or it is the ego (EpisodeSetup.ego_route).
     route: tuple[str, ...] = ()
+    #: A junction's internal lane and the position of the front on it where the vehicle stands at the start
+    #: (the oncoming vehicle of left_turn): SUMO inserts on `lane_id`, the episode moves it there before the
+    #: first step. "": it starts where it is inserted.
+    internal_lane_id: str = ""
+    internal_pos_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -505,8 +537,10 @@ def draw_episode(
     ego_speed_mps: float,
     rng: np.random.Generator | Draws,
     turn: Turn | None = None,
+    oncoming: OncomingPath | None = None,
 ) -> EpisodeSetup:
-    """Place one episode of `spec` on the approach (for a turning scenario, on `turn`).
+    """Place one episode of `spec` on the approach (for a turning scenario, on `turn`; with an oncoming
+    vehicle, on the `oncoming` path).
 
     `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
     demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
@@ -519,7 +553,9 @@ def draw_episode(
     if spec.placement == "turn":
         if turn is None:
             raise ScenarioError(f"scenario '{spec.name}' needs the geometry of its {spec.turn} turn")
-        return _draw_turn_episode(spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, draws)
+        return _draw_turn_episode(
+            spec, approach, turn, seed, pedestrian_traits, ego_speed_mps, draws, oncoming
+        )
     ego_size = VEHICLE_CLASSES["car"]
     # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
     # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
@@ -680,6 +716,7 @@ def _draw_turn_episode(
     traits: dict,
     ego_speed_mps: float,
     rng: np.random.Generator | Draws,
+    oncoming: OncomingPath | None = None,
 ) -> EpisodeSetup:
     """A turning ego and a pedestrian on the crosswalk over the road it turns into (right_turn,
     left_turn): the pedestrian walks from `ped_start_corner` with the walk signal (the signal staging
@@ -695,6 +732,11 @@ def _draw_turn_episode(
     # Drawn after the draws above (and only when there is a leader), so the scenarios without one keep
     # their worlds seed for seed.
     leader_draws = _draw_turn_leader(spec, draws) if spec.turn_leader else None
+    oncoming_colour = (
+        CAR_COLOURS_RGB[draws.index("oncoming_0.colour", len(CAR_COLOURS_RGB))]
+        if spec.oncoming_vehicle
+        else None
+    )
     near, far = turn.crosswalk_path
     start, end = (near, far) if spec.ped_start_corner == "near" else (far, near)
     # From 1 m back on the sidewalk to 1 m beyond the crosswalk's other end.
@@ -727,13 +769,18 @@ def _draw_turn_episode(
     ego = VehicleSetup(
         "ego", approach.lane_ids[turn.lane_index], front_pos, ego_speed_mps, EGO_BLUE_RGB, ego_size
     )
+    others = [leader] if leader is not None else []
+    if oncoming_colour is not None:
+        if oncoming is None:
+            raise ScenarioError(f"scenario '{spec.name}' needs the oncoming through movement of its approach")
+        others.append(_oncoming_vehicle(spec, turn, ego, path[0], oncoming, oncoming_colour))
     return EpisodeSetup(
         scenario=spec.name,
         seed=seed,
         ego=ego,
         ego_route=turn.route,
         pedestrian=_pedestrian(traits, clothing, start_delay_s, path),
-        parked=(leader,) if leader is not None else (),
+        parked=tuple(others),
         conflict_xy=(float(conflict_xy[0]), float(conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
         time_limit_s=spec.time_limit_s,
@@ -762,6 +809,44 @@ def _turn_leader(
         "leader_0", turn.exit_lane_id, front_m, speed_mps, colour, size, route=(turn.route[1],)
     )
     return leader, max(0.0, rear_before_m + 0.3) / speed_mps
+
+
+def _oncoming_vehicle(
+    spec: ScenarioSpec, turn: Turn, ego: VehicleSetup, ped_xy, oncoming: OncomingPath, colour
+) -> VehicleSetup:
+    """The oncoming through vehicle (class `occluder_class`, at the ego's speed), its centre where its path
+    crosses the line of sight from the ego's box centre (where the roof LiDAR is) to the pedestrian at the
+    start."""
+    size = VEHICLE_CLASSES[spec.occluder_class]
+    (shape, length_m) = turn.lanes[0]
+    centre_offset_m = lane_pos_to_offset_m(shape, length_m, ego.front_pos_m) - ego.size.length_m / 2
+    eye_xy = tuple(sumolib.geomhelper.positionAtShapeOffset(shape, centre_offset_m))
+    crossing_m = sight_line_pos_m(oncoming, eye_xy, ped_xy)
+    if crossing_m is None:
+        raise ScenarioError(
+            f"scenario '{spec.name}': the oncoming path ({oncoming.lanes[0].lane_id} straight on) does not "
+            "cross the line of sight from the ego to the pedestrian"
+        )
+    lane_id, pos_m = placement(oncoming, crossing_m + size.length_m / 2)
+    first, last = oncoming.lanes[0], oncoming.lanes[-1]
+    if lane_id == first.lane_id:
+        return VehicleSetup("oncoming_0", lane_id, pos_m, ego.speed_mps, colour, size, route=oncoming.route)
+    if lane_id == last.lane_id:
+        return VehicleSetup(
+            "oncoming_0", lane_id, pos_m, ego.speed_mps, colour, size, route=(oncoming.route[1],)
+        )
+    # On the junction: inserted at the start of its approach lane (clear of the stop line), then moved.
+    return VehicleSetup(
+        "oncoming_0",
+        first.lane_id,
+        min(size.length_m + 1.0, first.length_m),
+        ego.speed_mps,
+        colour,
+        size,
+        route=oncoming.route,
+        internal_lane_id=lane_id,
+        internal_pos_m=pos_m,
+    )
 
 
 def _first_crossing(polyline, path) -> tuple[float, float] | None:
@@ -837,6 +922,14 @@ def stage_signals(
         step_off_s = min(setup.pedestrian.start_delay_s, until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
         required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
+    # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too.
+    oncoming_links = [
+        junction.vehicle_link(v.lane_id, v.route[1])
+        for v in setup.parked
+        if v.vehicle_id.startswith("oncoming_") and len(v.route) == 2
+    ]
+    for link in oncoming_links:
+        required[link] = ("green", 0.0, until_s)
     # The point in the cycle is one uniform draw on [0, 1), recorded (never proposed) as signal_cycle_u.
     source = as_draws(rng).uniform_source("signal_cycle_u")
     cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, source)  # type: ignore[arg-type]
@@ -846,6 +939,12 @@ def stage_signals(
         cycle_start_s=round(cycle_start_s, 6),
         ego_link_index=ego_link,
         ped_link_index=ped_link,
-        occluder_link_index=junction.turn_link(setup.parked[0].lane_id, "r") if setup.parked else NO_LINK,
+        occluder_link_index=(
+            oncoming_links[0]
+            if oncoming_links
+            else junction.turn_link(setup.parked[0].lane_id, "r")
+            if setup.parked
+            else NO_LINK
+        ),
     )
     return dataclasses.replace(setup, signals=staging)

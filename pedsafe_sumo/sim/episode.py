@@ -71,6 +71,7 @@ from pedsafe_sumo.scenarios.geometry import (
     load_turn,
     refuge_walkingareas,
 )
+from pedsafe_sumo.scenarios.oncoming import load_oncoming
 from pedsafe_sumo.scenarios.registry import (
     CAR_COLOURS_RGB,
     VEHICLE_CLASSES,
@@ -402,7 +403,8 @@ class EpisodeRunner:
             self.approach.speed_limit_mps, self.params["traffic"]
         )
         turn = load_turn(self.site, spec.turn, spec.approach or None) if spec.placement == "turn" else None
-        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn)
+        oncoming = load_oncoming(self.site, spec.approach or None) if spec.oncoming_vehicle else None
+        setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn, oncoming)
         if spec.approach:
             setup = dataclasses.replace(setup, approach=spec.approach)
         setup = stage_signals(spec, setup, self.signals, draws)
@@ -598,6 +600,7 @@ class EpisodeRunner:
         self._populate(api, setup)
         start_signals(api, setup.signals, self.signals.program if self.signals else None)
         api.simulation.step()  # inserts everything at t = 0
+        self._place_on_junction(api, setup)
         timings["sumo_s"] += clock() - started
 
         dims: dict[str, tuple[float, float, float, tuple[int, int, int]]] = {}
@@ -881,6 +884,14 @@ class EpisodeRunner:
         return EpisodeResult(setup, condition, log, outcome, end_reason, timings, sumo_record, signal_states)
 
     @staticmethod
+    def _place_on_junction(api, setup: EpisodeSetup) -> None:
+        """Move the vehicles that stand on a junction's internal lane at the start (left_turn's oncoming
+        vehicle) there from where SUMO inserted them (it inserts on edges only)."""
+        for vehicle in setup.parked:
+            if vehicle.internal_lane_id and vehicle.vehicle_id in api.vehicle.getIDList():
+                api.vehicle.moveTo(vehicle.vehicle_id, vehicle.internal_lane_id, vehicle.internal_pos_m)
+
+    @staticmethod
     def _sumo_collision(api, time_s: float) -> dict[str, Any]:
         """SUMO's collision between the moving ego and the pedestrian in the last step, if it saw one.
 
@@ -907,6 +918,8 @@ class EpisodeRunner:
             body_clearance_m=p["body_clearance_m"],
             body_graze_angle_deg=p["body_graze_angle_deg"],
             gap_startup_clearance_s=p["gap_startup_clearance_s"],
+            detour_wait_s=p["detour_wait_s"],
+            detour_max_offset_m=p["detour_max_offset_m"],
             stopped_speed_mps=STATIONARY_SPEED_MPS,
             radius_m=ped.radius_m,
             avoids_bodies=ped.avoids_vehicle_bodies,

@@ -28,6 +28,12 @@ CROSSING = ["--scenario", "crossing", "--episodes", "2"]
         (["--sampler", "is", "--is-pilot-episodes", "5"], "--is-pilot-episodes must lie in 20..100,000"),
         (["--sampler", "is", "--is-pilot-episodes", "1000000000000"], "--is-pilot-episodes must lie in"),
         (["--is-pilot-stages", "2"], "need --sampler is"),
+        (["--is-inputs", "all"], "--is-inputs: need --sampler is"),
+        (["--sampler", "is", "--is-inputs", "some"], "invalid choice"),
+        (["--sampler", "is", "--is-min-spread", "0.01"], "--is-min-spread must lie in 0.05..1"),
+        (["--sampler", "is", "--is-min-spread", "1000000000000"], "--is-min-spread must lie in 0.05..1"),
+        (["--sampler", "is", "--is-proposal", "/nonexistent/run"], "--is-proposal: cannot read"),
+        (["--sampler", "is", "--is-proposal", "X", "--is-pilot-stages", "2"], "leave out the other --is-*"),
         (["--sampler", "is", "--condition", "v2i"], "adapts its proposal on the SV condition"),
         (["--sampler", "xyz"], "invalid choice"),
     ],
@@ -38,6 +44,29 @@ def test_bad_sampler_flags_are_refused_in_one_line(capsys, tmp_path, extra, mess
         code = main([*CROSSING, "--out", str(out), *extra])
     except SystemExit as exc:  # argparse's own errors
         code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("run_json", "message"),
+    [
+        ({"sampler": None}, "is not a run made with --sampler is"),
+        (
+            {"sampler": {"kind": "is", "pilot_stages": 1}, "sampler_proposals": {"jaywalking": ["", "{}"]}},
+            "has 0 of the 2 proposals of crossing",
+        ),
+        ("not json", "--is-proposal: cannot read"),
+    ],
+)
+def test_a_proposal_source_that_cannot_serve_is_refused_in_one_line(capsys, tmp_path, run_json, message):
+    source = tmp_path / "a"
+    source.mkdir()
+    (source / "run.json").write_text(run_json if isinstance(run_json, str) else json.dumps(run_json))
+    out = tmp_path / "run"
+    code = main([*CROSSING, "--sampler", "is", "--is-proposal", str(source), "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 2, err
     assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
@@ -59,9 +88,11 @@ def test_the_sampler_may_be_given_beside_a_protocol(tmp_path):
     assert plain.identity["sampler"] is None
 
 
+#: --is-inputs all: 20 pilot pairs (an elite of 2) are too few for the input screen to select anything,
+#: and this test checks the weights of a proposal that moves the inputs.
 IS_RUN = (
     "--scenario", "right_turn", "--episodes", "3", "--seed", "4", "--sampler", "is",
-    "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--chunk-size", "5",
+    "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--chunk-size", "5", "--is-inputs", "all",
 )  # fmt: skip
 
 

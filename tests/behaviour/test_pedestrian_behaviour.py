@@ -134,10 +134,11 @@ def test_nobody_walks_into_a_standing_vehicle_body():
     # The audit's 0 km/h contact: an ego standing across the path. Its centre (30, 1.02), heading +x,
     # 4.5 m x 1.8 m: near flank at y = 0.12. With 0.1 m of body clearance the pedestrian's centre stops
     # at y <= 0.12 - 0.1 - 0.3 = -0.28, s <= 5.72 m: the last 0.075 m step that fits ends at 76 * 0.075
-    # = 5.70 m. Whatever their risk preference.
+    # = 5.70 m. Whatever their risk preference. (Blocked from t = 3.80 s; at 5.5 s the 2 s they wait
+    # before walking round a standing vehicle have not passed: test_blocked_by_a_standing_vehicle_...)
     ego = VehicleBodies(np.array([30.0]), np.array([1.02]), np.array([0.0]), np.array([4.5]), np.array([1.8]))
     for risk in ("unaware", "hasten", "yield"):
-        walker, pose = run(risk, 10.0, ego_xy=(30.0, 1.02), ego_speed=0.0, bodies=ego)
+        walker, pose = run(risk, 5.5, ego_xy=(30.0, 1.02), ego_speed=0.0, bodies=ego)
         assert walker.s_m == pytest.approx(5.70), risk
         assert pose.state == "blocked" and pose.speed_mps == 0.0
     # Walking along a body without closing in on it is allowed: a 20 m bus parallel to the path, its
@@ -148,6 +149,68 @@ def test_nobody_walks_into_a_standing_vehicle_body():
     )  # fmt: skip
     walker, pose = run("unaware", 2.0, ego_xy=(0.0, 0.0), ego_speed=10.0, bodies=beside)
     assert walker.s_m == pytest.approx(3.0) and pose.state == "walking"
+
+
+def _clearance(pose, bodies):
+    """Body edge to the nearest footprint, by hand: the circle's centre in each box's frame."""
+    gaps = []
+    for x, y, yaw, length, width in zip(
+        bodies.x_m, bodies.y_m, bodies.yaw_rad, bodies.length_m, bodies.width_m
+    ):
+        dx, dy = pose.x_m - x, pose.y_m - y
+        lon, lat = dx * np.cos(yaw) + dy * np.sin(yaw), -dx * np.sin(yaw) + dy * np.cos(yaw)
+        out_x, out_y = max(abs(lon) - length / 2, 0.0), max(abs(lat) - width / 2, 0.0)
+        gaps.append(np.hypot(out_x, out_y) - 0.3)
+    return min(gaps)
+
+
+def test_blocked_by_a_standing_vehicle_the_pedestrian_walks_round_it_after_the_wait():
+    # The standing ego across the path of the test above: blocked at s = 5.70 m (y = -0.30) by the step
+    # of t = 3.80 s. After detour_wait_s = 2 s of the same standing body (t = 5.80 s) they step sideways
+    # round its nearer end: its corners lie 2.25 m either side of the path (x = 27.75 and 32.25), so
+    # either end is passed 2.25 + 0.3 + 2 x 0.1 = 2.75 m aside (within 3 m); on a tie, the left of the
+    # walking direction (+y): -x, behind the car, at x = 27.25. 2.75 m of 0.075 m sidesteps: 37 steps,
+    # t = 5.80-7.60 s (steps 116-152); then on along x = 27.25 (0.5 m from the rear: 0.2 m clear of the
+    # body) to the end of the path, 12 - 5.70 = 6.30 m, 84 steps (153-236): at y = 6 at t = 11.80 s.
+    ego = VehicleBodies(np.array([30.0]), np.array([1.02]), np.array([0.0]), np.array([4.5]), np.array([1.8]))
+    walker = PedestrianWalker(PATH, BehaviourParams("unaware", 1.5))
+    poses = {}
+    for k in range(260):
+        poses[k] = walker.step(DT, k * DT, (30.0, 1.02), 0.0, 0.0, bodies=ego)
+        assert _clearance(poses[k], ego) >= 0.1 - 1e-9, k
+    assert poses[75].state == "walking" and poses[76].state == "blocked"
+    assert all(poses[k].state == "blocked" for k in range(76, 116))
+    assert (poses[115].x_m, poses[115].y_m) == pytest.approx((30.0, -0.30))
+    assert all(poses[k].state == "detouring" for k in range(116, 153))
+    assert poses[116].x_m == pytest.approx(30.0 - 0.075) and poses[116].y_m == pytest.approx(-0.30)
+    assert (poses[152].x_m, poses[152].y_m) == pytest.approx((27.25, -0.30))
+    assert poses[153].state == "walking" and poses[153].y_m == pytest.approx(-0.225)
+    assert poses[236].state == "walking" and poses[237].state == "finished"
+    assert (poses[236].x_m, poses[236].y_m) == pytest.approx((27.25, 6.0))
+
+
+def test_no_walking_round_a_moving_vehicle_or_beyond_the_largest_offset():
+    # The same car creeping +x at 0.4 m/s (0.02 m a step, over the 0.1 m/s x 0.05 s = 0.005 m a standing
+    # body may move): its body covers x = 30 until t = 6.05 s; they stay blocked behind it, not round it.
+    walker = PedestrianWalker(PATH, BehaviourParams("unaware", 1.5))
+    for k in range(120):
+        ego_x = 30.0 + 0.02 * max(k - 76, 0)
+        body = VehicleBodies(
+            np.array([ego_x]), np.array([1.02]), np.array([0.0]), np.array([4.5]), np.array([1.8])
+        )
+        pose = walker.step(DT, k * DT, (ego_x, 1.02), 0.0, 0.4, bodies=body)
+    assert pose.state == "blocked" and walker.offset_m == 0.0 and walker.s_m == pytest.approx(5.70)
+    # A standing 12 m bus across the path: 6.55 m to either end, more than detour_max_offset_m (3 m).
+    bus = VehicleBodies(
+        np.array([30.0]), np.array([1.02]), np.array([0.0]), np.array([12.0]), np.array([1.8])
+    )
+    walker, pose = run("unaware", 15.0, ego_xy=(30.0, 1.02), ego_speed=0.0, bodies=bus)
+    assert pose.state == "blocked" and walker.offset_m == 0.0 and walker.s_m == pytest.approx(5.70)
+    # With 7 m allowed they go round it: 6 + 0.5 = 6.5 m aside, at x = 23.5, and on to the end.
+    walker = PedestrianWalker(PATH, BehaviourParams("unaware", 1.5, detour_max_offset_m=7.0))
+    for k in range(400):
+        pose = walker.step(DT, k * DT, (30.0, 1.02), 0.0, 0.0, bodies=bus)
+    assert pose.state == "finished" and (pose.x_m, pose.y_m) == pytest.approx((23.5, 6.0))
 
 
 def _rear_at_angle(phi_deg):

@@ -3,6 +3,8 @@ real batches of the same and of a deliberately worse stack."""
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import subprocess
 import sys
@@ -137,3 +139,59 @@ def test_same_stack_passes_and_a_slower_reacting_stack_fails(tmp_path):
     collision_rows = [line for line in worse.stdout.splitlines() if " collision " in f" {line} "]
     assert any("FAIL" in line for line in collision_rows)
     assert f"python -m pedsafe_sumo.replay {slow} --episode" in worse.stdout
+
+
+def _is_batch(out, *extra):
+    """A small importance-sampled crossing run, SV only: one pilot stage of 20 pairs (every input
+    proposed: 20 pairs are too few for the screen), 20 final pairs."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.batch", "--scenario", "crossing", "--condition", "sv"]
+        + ["--episodes", "20", "--seed", "5", "--workers", "1", "--sampler", "is", "--out", str(out), *extra],
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        env=dict(os.environ),
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+@pytest.mark.slow
+def test_builds_on_a_shared_proposal_compare_with_their_weights(tmp_path):
+    """batch --is-proposal A: B (the same stack) draws A's episodes with A's weights, so compare pairs
+    them and passes at a margin above the resolution of the weighted sample; a stack reacting 2.6 s later
+    on the same proposal fails; the weighted difference is the one recomputed from the rows."""
+    run_a, run_b, slow = tmp_path / "a", tmp_path / "b", tmp_path / "slow"
+    _is_batch(run_a, "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--is-inputs", "all")
+    _is_batch(run_b, "--is-proposal", str(run_a))
+    _is_batch(slow, "--is-proposal", str(run_a), "--set", "algorithm.reaction_time_s=3.0")
+    rows_a = pd.read_parquet(run_a / "episodes.parquet")
+    rows_b = pd.read_parquet(run_b / "episodes.parquet")
+    info_a = json.loads((run_a / "run.json").read_text())
+    info_b = json.loads((run_b / "run.json").read_text())
+    assert info_b["sampler_proposals"] == info_a["sampler_proposals"]
+    assert info_a["sampler_proposals"]["crossing"][1] != ""  # a proposal that moves inputs
+    weights = rows_a["weight"].to_numpy(dtype=float)
+    assert not np.allclose(weights[rows_a["sampler_stage"] == 1], 1.0)
+    # Same draws, same weights, same outcomes: the same stack on the same episodes.
+    pd.testing.assert_frame_equal(rows_a, rows_b)
+    # No pair differs: the interval is the rule-of-three bound on the weights' effective size,
+    # -ln(0.025) / ESS (docs/compare.md); the same stack passes at any margin above it, never below.
+    bound = -math.log(0.025) / (weights.sum() ** 2 / (weights**2).sum())
+    indexes = ("collision", "conflict", "injury_probability")
+    same = _compare(run_a, run_b, *[f"--margin={i}={1.01 * bound}" for i in indexes])
+    assert same.returncode == 0, same.stdout + same.stderr
+    assert same.stdout.strip().splitlines()[-1].startswith("PASS")
+    below = _compare(run_a, run_b, *[f"--margin={i}={0.99 * bound}" for i in indexes])
+    assert below.returncode == 1, below.stdout + below.stderr
+    rows_slow = pd.read_parquet(slow / "episodes.parquet")
+    assert np.array_equal(rows_slow["weight"].to_numpy(), weights)
+    # The slower stack collides more on the weighted estimate, (1/n) sum w (B - A), recomputed here.
+    collided = rows_slow["collision"].astype(float) - rows_a["collision"].astype(float)
+    diff = float(np.mean(weights * collided))
+    assert diff > 0
+    worse = _compare(run_a, slow, "--margin", "collision=0.1", "--margin", "conflict=0.1")
+    assert worse.returncode == 1, worse.stdout + worse.stderr
+    assert worse.stdout.strip().splitlines()[-1].startswith("FAIL")
+    collision_line = next(line for line in worse.stdout.splitlines() if " collision " in f" {line} ")
+    assert f"{diff:+.4f}" in collision_line and collision_line.endswith("FAIL"), (diff, collision_line)

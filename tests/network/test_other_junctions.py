@@ -226,7 +226,8 @@ def test_every_hosted_scenario_runs_on_every_approach_with_roadside_detections(b
         for name in ("crossing", "jaywalking", "background_blending"):
             assert "has 1 vehicle lane(s): no lane beside the kerb lane" in verdicts[(name, arm)]
         assert ("right_turn", arm) in hosted
-        assert verdicts[("left_turn", arm)].startswith("NOT hosted: not seen under V2I")
+        # The build's split phasing (tls.layout incoming) lets no oncoming vehicle move with the left turn.
+        assert "never shows green to the oncoming through movement" in verdicts[("left_turn", arm)]
     assert {arm for _, arm in hosted} == {"N", "E", "S", "W"}
     out = tmp_path / "run"
     proc = _run(

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 import pytest
 
-from pedsafe_sumo.report.tables import is_weighted, table_one_of_run, table_one_rows
+from pedsafe_sumo.report.tables import is_weighted, table_one_of_run, table_one_rows, weight_check
 from pedsafe_sumo.safety.stats import table_one
 
 
@@ -64,9 +65,15 @@ def test_weighted_table_one_by_hand():
     assert (sv["n_run"], sv["n"], sv["n_error"]) == (8, 4, 0)
     v2i = table[table.condition == "v2i"].iloc[0]
     assert v2i["collision_rate"] == 0.0 and v2i["n_run"] == 8
-    # The Markdown/text rows carry ESS and the episodes run.
+    # The weights' check: mean of the final SV weights (0.5 + 0.5 + 2 + 1) / 4 = 1; the largest share
+    # of sum w f (0.5 + 2) is 2 / 2.5 = 80% > 25%: flagged.
+    assert sv["mean_weight"] == pytest.approx(1.0)
+    assert sv["max_share"] == pytest.approx(0.8)
+    assert sv["weight_note"] == "one episode carries 80% of the collision estimate"
+    # The Markdown/text rows carry ESS, the episodes run, the mean weight and the check.
     header, rows = table_one_rows(table)
-    assert header[-2:] == ["ESS", "episodes run (pilots included)"] and rows[0][-1] == "8"
+    assert header[-4:] == ["ESS", "episodes run (pilots included)", "mean weight", "check"]
+    assert rows[0][-3:-1] == ["8", "1.000"]
 
 
 def test_plain_monte_carlo_table_is_unchanged():
@@ -79,3 +86,18 @@ def test_plain_monte_carlo_table_is_unchanged():
     assert "ess" not in table.columns
     pd.testing.assert_frame_equal(table, table_one(episodes).reset_index(drop=True))
     assert math.isfinite(table["collision_high"].iloc[0])
+
+
+def test_weight_check_flags_a_mean_weight_far_from_one():
+    """Weights 0.5 +- a little (mean 0.5, SE 0.0097): 0.5 lies 51 SE from 1, flagged; weights with mean 1
+    and collisions spread over 40 episodes pass (no share above 1/40)."""
+    weights = np.array([0.45, 0.55] * 20)
+    se = np.std(weights, ddof=1) / math.sqrt(40)
+    assert (1 - 0.5) / se > 3
+    check = weight_check(weights, np.ones(40))
+    assert check["mean_weight"] == pytest.approx(0.5)
+    assert check["weight_note"].startswith("mean weight 0.500 is more than 3 SE from 1")
+    good = weight_check(np.array([0.8, 1.2] * 20), np.ones(40))
+    assert good["weight_note"] == "" and good["max_share"] == pytest.approx(1.2 / 40)
+    # No collision: no share, and the mean weight alone decides.
+    assert math.isnan(weight_check(np.array([0.8, 1.2] * 20), np.zeros(40))["max_share"])

@@ -77,7 +77,9 @@ def test_sumo_draws_the_staged_vehicles_at_the_intended_points(name):
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     spec = get_scenario(name).with_overrides({"background_traffic": 0})
-    runner = EpisodeRunner(get_site("xueqing"), load_params(), ReferenceStack)
+    # left_turn needs a program that lets the oncoming vehicle move with the ego's left (not Xueqing's).
+    site = get_site("xueqing_two_phase" if name == "left_turn" else "xueqing")
+    runner = EpisodeRunner(site, load_params(), ReferenceStack)
     approach = runner.approach
     try:
         for seed in range(3):
@@ -86,6 +88,7 @@ def test_sumo_draws_the_staged_vehicles_at_the_intended_points(name):
             api = runner.session.api
             runner._populate(api, setup)
             api.simulation.step()  # inserts everything, as the engine does
+            runner._place_on_junction(api, setup)
             dt = api.simulation.getDeltaT()
             assert api.vehicle.getLanePosition("ego") == pytest.approx(setup.ego.front_pos_m, abs=1e-6)
             parked = {v.vehicle_id: v for v in setup.parked}
@@ -106,6 +109,19 @@ def test_sumo_draws_the_staged_vehicles_at_the_intended_points(name):
                 # The body circle touches the waiting vehicle's rear (blend gap 0): centre a radius away.
                 rear = _rear(api, parked["waiting_0"])
                 assert math.dist(rear, path[0]) == pytest.approx(setup.pedestrian.radius_m, abs=0.05)
+            elif name == "left_turn":
+                # The oncoming vehicle stands on the junction, its centre on the line from the ego's centre
+                # (the roof LiDAR) to where the pedestrian waits, on SUMO's own positions.
+                assert api.vehicle.getLaneID("oncoming_0").startswith(":")
+                ego_rear, on_rear = _rear(api, setup.ego), _rear(api, parked["oncoming_0"])
+                ego_front, on_front = api.vehicle.getPosition("ego"), api.vehicle.getPosition("oncoming_0")
+                eye = ((ego_rear[0] + ego_front[0]) / 2, (ego_rear[1] + ego_front[1]) / 2)
+                centre = ((on_rear[0] + on_front[0]) / 2, (on_rear[1] + on_front[1]) / 2)
+                (ex, ey), (px, py) = eye, path[0]
+                off_line = abs((px - ex) * (centre[1] - ey) - (py - ey) * (centre[0] - ex)) / math.dist(
+                    eye, path[0]
+                )
+                assert off_line < 0.1, f"seed {seed}: the oncoming vehicle's centre is {off_line:.2f} m off"
             # The ego at its initial speed, nobody reacting: its front is at the staged conflict point
             # conflict_time_s after its insertion (interpolated between the two steps around it).
             api.vehicle.setSpeedMode("ego", 0)

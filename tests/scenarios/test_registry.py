@@ -10,6 +10,7 @@ import pytest
 
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
+from pedsafe_sumo.scenarios.oncoming import load_oncoming
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError, draw_episode, get_scenario
 
 TRAITS = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
@@ -23,7 +24,9 @@ def approach():
 def draw(name, seed, approach, speed=8.0, traits=TRAITS):
     spec = get_scenario(name)
     turn = load_turn(get_site("xueqing"), spec.turn) if spec.placement == "turn" else None
-    return draw_episode(spec, approach, seed, traits, speed, np.random.default_rng(seed), turn)
+    # Xueqing's geometry (its program cannot stage left_turn's oncoming vehicle; drawing needs no signals).
+    oncoming = load_oncoming(get_site("xueqing")) if spec.oncoming_vehicle else None
+    return draw_episode(spec, approach, seed, traits, speed, np.random.default_rng(seed), turn, oncoming)
 
 
 def _segments_intersect(p, q, a, b):

@@ -89,12 +89,23 @@ def test_right_turn_leader_hides_the_pedestrian_at_the_start_under_sv(runner):
     assert all(shown), "without the leader the onboard sensors must see the pedestrian at the start"
 
 
+@pytest.fixture(scope="module")
+def two_phase_runner():
+    from pedsafe_sumo.sim.episode import EpisodeRunner
+
+    runner = EpisodeRunner(get_site("xueqing_two_phase"), load_params(), ReferenceStack)
+    yield runner
+    runner.close()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["right_turn", "left_turn"])
-def test_turning_scenarios_run_under_both_conditions(runner, name):
+def test_turning_scenarios_run_under_both_conditions(runner, two_phase_runner, name):
     """Real SUMO, both conditions, same world: the episode ends normally, the ego has green at the
-    conflict, and the pedestrian stepped off on the walk signal (SUMO's state at that step)."""
+    conflict, and the pedestrian stepped off on the walk signal (SUMO's state at that step). left_turn on
+    the two-phase plan (Xueqing's cannot stage it)."""
     spec = get_scenario(name)
+    runner = two_phase_runner if name == "left_turn" else runner
     for seed in range(2):
         worlds = []
         for condition in ("sv", "v2i"):
@@ -128,3 +139,80 @@ def test_xueqing_lets_no_other_approach_move_while_the_ego_turns_left():
     assert green_phases
     for state in green_phases:
         assert all(state[link] == "r" for link in others)
+
+
+def test_left_turn_is_hosted_on_the_two_phase_plan_and_refused_on_xueqing():
+    """The hosting check reads the program: on Xueqing's split phasing no phase shows green to the oncoming
+    through movement (S approach, median lane) with the ego's left (N approach, median lane); on the two-phase
+    plan phase 1 does, and the SE corner pole sees where the pedestrian starts."""
+    from pedsafe_sumo.network.hosting import site_hosting
+    from pedsafe_sumo.scenarios.registry import SCENARIOS
+
+    spec = {"left_turn": SCENARIOS["left_turn"]}
+    refused = site_hosting(get_site("xueqing"), spec, load_params())["left_turn"]
+    assert refused is not None and "never shows green to the oncoming through movement" in refused
+    assert site_hosting(get_site("xueqing_two_phase"), spec, load_params())["left_turn"] is None
+
+
+def _in_footprint(api, vehicle_id: str, length_m: float, width_m: float, xy) -> float:
+    """Distance from `xy` to the vehicle's footprint (0 inside), on SUMO's front position and angle."""
+    fx, fy = api.vehicle.getPosition(vehicle_id)
+    heading = math.radians(90.0 - api.vehicle.getAngle(vehicle_id))
+    cx, cy = fx - length_m / 2 * math.cos(heading), fy - length_m / 2 * math.sin(heading)
+    dx, dy = xy[0] - cx, xy[1] - cy
+    lon = dx * math.cos(heading) + dy * math.sin(heading)
+    lat = -dx * math.sin(heading) + dy * math.cos(heading)
+    return math.hypot(max(abs(lon) - length_m / 2, 0.0), max(abs(lat) - width_m / 2, 0.0))
+
+
+@pytest.mark.slow
+def test_left_turn_on_the_two_phase_plan_permissive_green_walk_and_hidden_at_the_start(two_phase_runner):
+    """left_turn on networks/xueqing_two_phase, 12 SV starts: SUMO shows the ego's left a permissive green
+    ('g') and the oncoming vehicle's through movement green at the first step, the pedestrian's crosswalk
+    the walk signal ('G') when they step off; the oncoming vehicle's body is across the line from the ego's
+    centre (the roof LiDAR) to the pedestrian; at the first step neither onboard sensor detects the
+    pedestrian in most starts, while in the same worlds without the oncoming vehicle one of them does."""
+    runner = two_phase_runner
+    spec = get_scenario("left_turn")
+    hidden, shown = [], []
+    for seed in range(12):
+        setup = runner.draw_setup(spec, seed)
+        (oncoming,) = setup.parked
+        first = {}
+
+        def at_start(api, row, first=first, setup=setup, oncoming=oncoming):
+            if first:
+                return
+            state = api.trafficlight.getRedYellowGreenState(setup.signals.tls_id)
+            first["ego"] = state[setup.signals.ego_link_index]
+            first["oncoming"] = state[setup.signals.occluder_link_index]
+            # The line from the ego's centre to the pedestrian passes through the oncoming vehicle's body.
+            ex, ey = row["ego_x_m"], row["ego_y_m"]
+            px, py = setup.pedestrian.path_xy[0]
+            samples = [(ex + k / 200 * (px - ex), ey + k / 200 * (py - ey)) for k in range(201)]
+            size = oncoming.size
+            first["across"] = min(
+                _in_footprint(api, "oncoming_0", size.length_m, size.width_m, xy) for xy in samples
+            )
+
+        short = dataclasses.replace(setup, time_limit_s=0.1)
+        row = runner.run(spec, "sv", seed, setup=short, on_step=at_start).log.iloc[0]
+        assert first["ego"] == "g" and first["oncoming"] in "Gg", (seed, first)
+        assert first["across"] == 0.0, f"seed {seed}: the oncoming vehicle is not across the line of sight"
+        hidden.append(not (row["detected_onboard_camera"] or row["detected_onboard_lidar"]))
+        bare = runner.run(spec, "sv", seed, setup=dataclasses.replace(short, parked=())).log.iloc[0]
+        shown.append(bool(bare["detected_onboard_camera"] or bare["detected_onboard_lidar"]))
+        ped = cycle_state_at(setup, setup.pedestrian.start_delay_s)[setup.signals.ped_link_index]
+        assert ped == "G", f"seed {seed}: the pedestrian steps off on {ped!r}"
+    assert sum(hidden) > len(hidden) / 2, f"hidden at the start in {sum(hidden)} of {len(hidden)}"
+    assert all(shown), "without the oncoming vehicle an onboard sensor must see the pedestrian at the start"
+
+
+def cycle_state_at(setup, time_s: float) -> str:
+    """The program's state `time_s` after the episode's start, walked from the net file's phases."""
+    from pedsafe_sumo.scenarios.signals import load_junction_signals
+
+    site = get_site("xueqing_two_phase")
+    program = load_junction_signals(site.file("net.xml"), setup.signals.tls_id).program
+    index, _ = program.phase_at(setup.signals.cycle_start_s + time_s)
+    return program.states[index]

@@ -163,3 +163,49 @@ def test_sumo_and_we_agree_on_a_close_pass_and_on_a_contact_on_the_crosswalk(nev
     assert result.outcome["sumo_collision"] is True
     assert result.sumo_collision["time_s"] == pytest.approx(result.log["time_s"].iloc[-1], abs=1e-9)
     assert np.isclose(result.sumo_collision["ego_speed_mps"], result.outcome["impact_speed_mps"], atol=0.01)
+
+
+@pytest.mark.slow
+def test_the_right_turn_deadlock_ends_with_both_road_users_clear():
+    """right_turn, SV, seed 691683199 (episode 36 of `batch --scenario right_turn --episodes 100 --seed 1`):
+    a hastening pedestrian ran out in front of the turning ego, which stopped with its front corner 0.3 m
+    into their line, 0.11 m from them; the body rule refused every step, the stack waited for the
+    pedestrian in its path, and the episode ran to the 30 s limit (both conditions). Now the pedestrian,
+    blocked for 2 s (detour_wait_s) by the standing car, sidesteps in front of its bumper, walks on, and
+    the ego drives on once they have left its path."""
+    params = load_params()
+    runner = EpisodeRunner(SITE, params, ReferenceStack)
+    try:
+        result = runner.run(get_scenario("right_turn"), "sv", 691683199)
+    finally:
+        runner.close()
+    log, outcome, setup = result.log, result.outcome, result.setup
+    assert result.end_reason == "both_cleared" and log["time_s"].iloc[-1] < 15.0
+    assert not outcome["collision"] and log["clearance_m"].min() > 0.0
+    states = log["ped_state"].tolist()
+    first_detour = states.index("detouring")
+    first_block = states.index("blocked")
+    blocked = log.iloc[first_block:first_detour]
+    # Blocked at least detour_wait_s before the first sidestep, the ego standing all that time.
+    wait_s = params["pedestrians"]["detour_wait_s"]
+    assert (blocked["ped_state"] == "blocked").all() and len(blocked) * STEP_S >= wait_s - 1e-9
+    assert (log["ego_speed_mps"].iloc[first_block : first_detour + 1] < 0.1).all()
+    # The sidestep is square to the pedestrian's path and stays within detour_max_offset_m of it.
+    (ax, ay), (bx, by) = setup.pedestrian.path_xy[0], setup.pedestrian.path_xy[-1]
+    ux, uy = (bx - ax) / math.hypot(bx - ax, by - ay), (by - ay) / math.hypot(bx - ax, by - ay)
+    step = log.iloc[first_detour][["ped_x_m", "ped_y_m"]].to_numpy() - log.iloc[first_detour - 1][
+        ["ped_x_m", "ped_y_m"]
+    ].to_numpy(dtype=float)
+    assert abs(step[0] * ux + step[1] * uy) < 1e-9 < math.hypot(*step)
+    px, py = log["ped_x_m"].to_numpy(), log["ped_y_m"].to_numpy()
+    aside = np.abs(-(px - ax) * uy + (py - ay) * ux)
+    assert aside.max() <= params["pedestrians"]["detour_max_offset_m"] + 1e-9
+    # At the end, both clear, from the log and the path alone: the pedestrian at the end of their path, the
+    # ego's rear past the path's line by their radius (the ego crosses it in the direction -> its left).
+    last = log.iloc[-1]
+    assert (px[-1] - ax) * ux + (py[-1] - ay) * uy == pytest.approx(math.hypot(bx - ax, by - ay), abs=1e-6)
+    rear_x = last["ego_x_m"] - last["ego_length_m"] / 2 * math.cos(last["ego_yaw_rad"])
+    rear_y = last["ego_y_m"] - last["ego_length_m"] / 2 * math.sin(last["ego_yaw_rad"])
+    start_side = np.sign(-(log["ego_x_m"].iloc[0] - ax) * uy + (log["ego_y_m"].iloc[0] - ay) * ux)
+    rear_side = -(rear_x - ax) * uy + (rear_y - ay) * ux
+    assert rear_side * start_side < -setup.pedestrian.radius_m
