@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.safety.geometry_kernels import walks_into_body
 
 RISK_PREFERENCES = ("unaware", "hasten", "yield")
 
@@ -100,6 +101,11 @@ class VehicleBodies:
     #: Half diagonals (circumscribed radii) of the footprints; computed when not given. The episode
     #: loop passes them, rebuilt only when vehicles enter or leave, to keep the per-step cost down.
     half_diagonal_m: np.ndarray | None = None
+
+
+def _float_arrays(*arrays) -> tuple[np.ndarray, ...]:
+    """The arrays as float64 (no copy when they are already, as the episode loop's are)."""
+    return tuple(np.asarray(a, dtype=float) for a in arrays)
 
 
 def _conflict_point(path_xy, ego_xy: tuple[float, float], ego_yaw_rad: float):
@@ -396,28 +402,27 @@ class PedestrianWalker:
         `body_clearance_m` of one while heading towards it: the distance falls by more than
         sin(`body_graze_angle_deg`) of the step (walking along a body it stands against is allowed)."""
         x1, y1, _ = self._xy(s_to, self.offset_m)
-        r, margin = self.params.radius_m, self.params.body_clearance_m
-        # Cheap bound first (this runs every step): only footprints whose circumscribed circle comes
-        # within the margin of the body can be too close.
+        x0, y0, _ = self._xy(s_from, self.offset_m)
         half_diagonal = bodies.half_diagonal_m
         if half_diagonal is None:
             half_diagonal = 0.5 * np.hypot(bodies.length_m, bodies.width_m)
-        dx, dy, reach = bodies.x_m - x1, bodies.y_m - y1, half_diagonal + (r + margin)
-        near = dx * dx + dy * dy <= reach * reach
-        if not near.any():
-            return False
-        x0, y0, _ = self._xy(s_from, self.offset_m)
-        box = (
-            bodies.x_m[near],
-            bodies.y_m[near],
-            bodies.yaw_rad[near],
-            bodies.length_m[near],
-            bodies.width_m[near],
-        )
-        before = rectangle_circle_distance_m(*box, x0, y0, r)
-        after = rectangle_circle_distance_m(*box, x1, y1, r)
         graze_m = abs(s_to - s_from) * math.sin(math.radians(self.params.body_graze_angle_deg))
-        return bool(np.any((after <= 0.0) | ((after < margin) & (after < before - graze_m))))
+        # Compiled (this runs every step a pedestrian moves; the same arithmetic as
+        # safety.geometry.rectangle_circle_distance_m, bit for bit), with the same cheap bound first: only
+        # footprints whose circumscribed circle comes within the margin of the body can be too close.
+        return bool(
+            walks_into_body(
+                *_float_arrays(bodies.x_m, bodies.y_m, bodies.yaw_rad, bodies.length_m, bodies.width_m),
+                np.asarray(half_diagonal, dtype=float),
+                x0,
+                y0,
+                x1,
+                y1,
+                float(self.params.radius_m),
+                float(self.params.body_clearance_m),
+                graze_m,
+            )
+        )
 
     def _refused(
         self, bodies: VehicleBodies, xy_from: tuple[float, float], xy_to: tuple[float, float], step_m: float

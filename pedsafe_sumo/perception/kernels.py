@@ -500,17 +500,27 @@ def lidar_kernel(
         direction = np.empty((count, 3))
         t_max = np.empty(count)
         skip = np.full(count, -1, dtype=np.int64)
-        for q in range(count):
-            az = (k0 + q // n_ch) * res + yaw
-            el = elev[c0 + q % n_ch]
-            ce = np.cos(el)
-            direction[q, 0] = ce * np.cos(az)
-            direction[q, 1] = ce * np.sin(az)
-            direction[q, 2] = np.sin(el)
-            origin[q, 0] = o0
-            origin[q, 1] = o1
-            origin[q, 2] = zs
-            t_max[q] = tmax
+        # The ray q is azimuth column q // n_ch and channel q % n_ch: each column's and each channel's
+        # cos and sin are computed once (the same calls on the same arguments as per ray: same bits).
+        cos_el = np.empty(n_ch)
+        sin_el = np.empty(n_ch)
+        for c in range(n_ch):
+            cos_el[c] = np.cos(elev[c0 + c])
+            sin_el[c] = np.sin(elev[c0 + c])
+        q = 0
+        for a in range(n_az):
+            az = (k0 + a) * res + yaw
+            cos_az = np.cos(az)
+            sin_az = np.sin(az)
+            for c in range(n_ch):
+                direction[q, 0] = cos_el[c] * cos_az
+                direction[q, 1] = cos_el[c] * sin_az
+                direction[q, 2] = sin_el[c]
+                origin[q, 0] = o0
+                origin[q, 1] = o1
+                origin[q, 2] = zs
+                t_max[q] = tmax
+                q += 1
         t_hit = np.empty(count)
         kind = np.empty(count, dtype=np.int8)
         idx = np.empty(count, dtype=np.int64)
@@ -524,6 +534,18 @@ def lidar_kernel(
                 n_on += 1
         merged = False
         if n_on > 0:
+            # The returns on the pedestrian, computed once (the same expressions as per pair before).
+            on_x = np.empty(n_on)
+            on_y = np.empty(n_on)
+            on_z = np.empty(n_on)
+            n = 0
+            for p in range(count):
+                if kind[p] == KIND_PEDESTRIAN and idx[p] == j:
+                    tp = t_hit[p]
+                    on_x[n] = o0 + direction[p, 0] * tp
+                    on_y[n] = o1 + direction[p, 1] * tp
+                    on_z[n] = zs + direction[p, 2] * tp
+                    n += 1
             for q in range(count):
                 kq = kind[q]
                 if not (kq == KIND_VEHICLE or kq == KIND_PRISM or kq == KIND_CYLINDER):
@@ -536,13 +558,10 @@ def lidar_kernel(
                 vertical = max(max(-qz, qz - h), 0.0)
                 if not (np.hypot(radial, vertical) <= tol):
                     continue
-                for p in range(count):
-                    if not (kind[p] == KIND_PEDESTRIAN and idx[p] == j):
-                        continue
-                    tp = t_hit[p]
-                    ax = qx - (o0 + direction[p, 0] * tp)
-                    ay = qy - (o1 + direction[p, 1] * tp)
-                    az_ = qz - (zs + direction[p, 2] * tp)
+                for p in range(n_on):
+                    ax = qx - on_x[p]
+                    ay = qy - on_y[p]
+                    az_ = qz - on_z[p]
                     if ax * ax + ay * ay + az_ * az_ <= tol * tol:
                         merged = True
                         break

@@ -422,7 +422,8 @@ def _perceive(snapshot, ego, sensors, rng, time_s, link, compiled: bool) -> Dete
     if link is not None:
         link_rng = link.rng if link.rng is not None else rng
         for unit, pose, det in zip(sensors.roadside_units, sensors.roadside_poses, rsu_dets, strict=True):
-            sent = select(det)
+            # One roadside unit: its detections are `roadside` (the same mask), already selected.
+            sent = roadside if det is rsu_any else select(det)
             link.send(time_s, unit.id, pose.world_to_sensor, sent.ids, sent.xy_m, link_rng)
         received, pixels = _receive(link.receive(time_s), ego, sensors, compiled)
     return Detections(

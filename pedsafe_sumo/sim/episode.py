@@ -60,7 +60,7 @@ from pedsafe_sumo.perception import (
 )
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
-from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
+from pedsafe_sumo.safety.geometry_kernels import rectangle_circle_clearance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Family
@@ -771,8 +771,9 @@ class EpisodeRunner:
                 t3 = clock()
                 timings["agent_s"] += t3 - t2
 
+                # Compiled scalar form of safety.geometry.rectangle_circle_distance_m (the same bits).
                 clearance_m = float(
-                    rectangle_circle_distance_m(
+                    rectangle_circle_clearance_m(
                         ego_x, ego_y, ego_yaw, ego_length, ego_width, pose.x_m, pose.y_m, ped.radius_m
                     )
                 )
