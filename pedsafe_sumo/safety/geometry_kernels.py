@@ -20,10 +20,17 @@ import numpy as np
 from pedsafe_sumo.perception.kernels import _jit, _nmax, _nmin
 
 
-@_jit
+@_jit  # type: ignore[untyped-decorator]  # numba compiles it; the annotations are for readers
 def rectangle_circle_clearance_m(
-    rect_x_m, rect_y_m, rect_yaw_rad, rect_length_m, rect_width_m, x_m, y_m, radius_m
-):
+    rect_x_m: float,
+    rect_y_m: float,
+    rect_yaw_rad: float,
+    rect_length_m: float,
+    rect_width_m: float,
+    x_m: float,
+    y_m: float,
+    radius_m: float,
+) -> float:
     """:func:`geometry.rectangle_circle_distance_m` for one rectangle and one circle (floats)."""
     dx = x_m - rect_x_m
     dy = y_m - rect_y_m
@@ -38,10 +45,22 @@ def rectangle_circle_clearance_m(
     return outside + inside - radius_m
 
 
-@_jit
+@_jit  # type: ignore[untyped-decorator]  # numba compiles it; the annotations are for readers
 def walks_into_body(
-    x_m, y_m, yaw_rad, length_m, width_m, half_diagonal_m, x0, y0, x1, y1, radius_m, margin_m, graze_m
-):
+    x_m: np.ndarray,
+    y_m: np.ndarray,
+    yaw_rad: np.ndarray,
+    length_m: np.ndarray,
+    width_m: np.ndarray,
+    half_diagonal_m: np.ndarray,
+    x0: float,
+    y0: float,
+    x1: float,
+    y1: float,
+    radius_m: float,
+    margin_m: float,
+    graze_m: float,
+) -> bool:
     """The body test of :meth:`PedestrianWalker._walks_into` over the footprints (arrays): whether the
     circle moving (x0, y0) -> (x1, y1) ends overlapping a footprint, or within `margin_m` of one while its
     clearance falls by more than `graze_m`. Footprints whose circumscribed circle stays farther than the
