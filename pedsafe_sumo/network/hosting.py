@@ -191,7 +191,7 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
         if straight:
             problems[name] = f"cannot be staged: site {site.name}: {straight}"
             continue
-        ids = approach_unit_ids(spec.roadside_unit_ids, spec_arm, site_arm)
+        ids = approach_unit_ids(spec.roadside_unit_ids, spec_arm, site_arm, spec.turn)
         spec = dataclasses.replace(spec, roadside_units=",".join(ids))
         problems[name] = hosting_problem(spec, approach, by_id, params, static, turn)
     return problems

@@ -161,15 +161,39 @@ def default_arm(site: Site) -> str:
     return str(info["roadside_unit"]["watched_arm"])
 
 
-def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str) -> tuple[str, ...]:
+#: Arms clockwise; a left turn leaves by the next arm clockwise, a right turn by the previous one.
+_ARMS_CLOCKWISE = ("N", "E", "S", "W")
+
+
+def exit_arm(arm: str, turn: str) -> str:
+    """The arm a `turn` ("left" or "right") from approach `arm` leaves by (right-hand traffic)."""
+    step = {"left": 1, "right": -1}[turn]
+    return _ARMS_CLOCKWISE[(_ARMS_CLOCKWISE.index(arm) + step) % 4]
+
+
+def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str, turn: str = "") -> tuple[str, ...]:
     """The poles a scenario's `roadside_units` name on approach `arm`: the site's own approach keeps the
     ids (rsu_camera_0, rsu_camera_1); the build names another approach's poles after its arm
-    (rsu_camera_0_E, rsu_camera_1_E: tools/build_network.py)."""
-    if not arm or arm == site_arm:
-        return tuple(unit_ids)
-    # Only the build's own ids follow the approach; a pole named otherwise (--set roadside_units=...) is
-    # taken as named.
-    return tuple(f"{unit}_{arm}" if re.fullmatch(r"rsu_camera_\d+", unit) else unit for unit in unit_ids)
+    (rsu_camera_0_E, rsu_camera_1_E: tools/build_network.py). `rsu_camera_K@exit` names pole K of the
+    arm a turning ego leaves by (left_turn's pedestrian walks on that arm's crosswalk), so a turn
+    scenario names the right pole on every approach and every site."""
+    arm = arm or site_arm
+
+    def pole(index: str, of_arm: str) -> str:
+        return f"rsu_camera_{index}" if of_arm == site_arm else f"rsu_camera_{index}_{of_arm}"
+
+    ids = []
+    for unit in unit_ids:
+        own = re.fullmatch(r"rsu_camera_(\d+)", unit)
+        leaving = re.fullmatch(r"rsu_camera_(\d+)@exit", unit)
+        if own:
+            ids.append(pole(own.group(1), arm))
+        elif leaving and turn in ("left", "right") and arm in _ARMS_CLOCKWISE:
+            ids.append(pole(leaving.group(1), exit_arm(arm, turn)))
+        else:
+            # A pole named otherwise (--set roadside_units=...) is taken as named.
+            ids.append(unit)
+    return tuple(ids)
 
 
 @lru_cache(maxsize=16)

@@ -395,10 +395,10 @@ SCENARIOS: dict[str, ScenarioSpec] = {
             # "Hidden by opposing traffic" (issue 13): an oncoming through vehicle, the class of the
             # crossing occluder (scenarios/oncoming.py, docs/engine.md).
             oncoming_vehicle=1,
-            # The corner pole does not see where the pedestrian starts (the south end of the east
-            # crosswalk); the south-east corner pole of the E approach, which watches that crosswalk,
-            # does (network/hosting.py).
-            roadside_units="rsu_camera_0,rsu_camera_0_E",
+            # The corner pole does not see where the pedestrian starts (the far end of the crosswalk
+            # over the road the ego turns into); the corner pole of that road's approach, which watches
+            # that crosswalk, does (network/hosting.py): rsu_camera_0@exit, rsu_camera_0_E from the N.
+            roadside_units="rsu_camera_0,rsu_camera_0@exit",
             ego_speed_max_mps=8.33,
             # Staging bound, not a behaviour fit: the ego enters the junction on green and reaches the
             # far crosswalk (about 40 m of turn on Xueqing) within the approach's green (16 s with its

@@ -362,7 +362,7 @@ class EpisodeRunner:
 
     def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
         """The onboard sensors and the roadside poles the scenario names (built once per set of poles)."""
-        ids = approach_unit_ids(spec.roadside_unit_ids, spec.approach, self._site_arm)
+        ids = approach_unit_ids(spec.roadside_unit_ids, spec.approach, self._site_arm, spec.turn)
         if ids not in self._suites:
             unknown = [i for i in ids if i not in self.roadside_units]
             if unknown:

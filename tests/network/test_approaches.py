@@ -40,6 +40,18 @@ def test_pole_ids_follow_the_approach():
     assert approach_unit_ids(("my_pole", "rsu_camera_1"), "S", "N") == ("my_pole", "rsu_camera_1_S")
 
 
+def test_a_turns_exit_pole_is_the_pole_of_the_arm_it_leaves_by():
+    # Right-hand traffic: from the north a left turn leaves by the east arm, a right turn by the west;
+    # the site's own arm (here N) keeps the bare id.
+    exit_pole = ("rsu_camera_0", "rsu_camera_0@exit")
+    assert approach_unit_ids(exit_pole, "N", "N", "left") == ("rsu_camera_0", "rsu_camera_0_E")
+    assert approach_unit_ids(exit_pole, "N", "N", "right") == ("rsu_camera_0", "rsu_camera_0_W")
+    assert approach_unit_ids(exit_pole, "S", "N", "left") == ("rsu_camera_0_S", "rsu_camera_0_W")
+    assert approach_unit_ids(exit_pole, "E", "N", "left") == ("rsu_camera_0_E", "rsu_camera_0_S")
+    assert approach_unit_ids(exit_pole, "W", "N", "left") == ("rsu_camera_0_W", "rsu_camera_0")
+    assert approach_unit_ids(exit_pole, "", "W", "right") == ("rsu_camera_0", "rsu_camera_0_S")
+
+
 def test_every_arm_with_an_entering_road_is_an_approach_with_its_own_poles():
     junction = NET.getNode(INFO["main_junction"])
     centre = junction.getCoord()
