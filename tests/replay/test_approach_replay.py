@@ -21,6 +21,8 @@ import pandas as pd
 import pytest
 from replay_runs import NEVER_BRAKES, run_cli
 
+from pedsafe_sumo import REPO_ROOT
+
 HAVE_DISPLAY = bool(os.environ.get("DISPLAY")) or shutil.which("xvfb-run") is not None
 #: On Xueqing, crossing can be staged on the N (the site's own) and S approaches only (docs/sites.md).
 ARMS = ("N", "S")
@@ -55,7 +57,10 @@ def printed_commands(run: Path, arm: str) -> list[str]:
 def run_printed(command: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
     argv = shlex.split(command)
     assert argv[:3] == ["python", "-m", "pedsafe_sumo.replay"]
-    env = {**os.environ, "LIBGL_ALWAYS_SOFTWARE": "1"}
+    # The run's stack lives in the tests package (tests.sim.plugin_agents): importable from the
+    # repository root, while the command runs in its own folder so that its outputs land there.
+    python_path = os.pathsep.join(filter(None, [str(REPO_ROOT), os.environ.get("PYTHONPATH", "")]))
+    env = {**os.environ, "LIBGL_ALWAYS_SOFTWARE": "1", "PYTHONPATH": python_path}
     return subprocess.run(
         [sys.executable, *argv[1:]], capture_output=True, text=True, cwd=cwd, timeout=timeout, env=env
     )
