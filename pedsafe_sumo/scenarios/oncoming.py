@@ -19,6 +19,7 @@ import sumolib
 
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.scenarios.geometry import (
+    _lanes_of,
     default_arm,
     lane_pos_to_offset_m,
     load_approach,
@@ -69,16 +70,7 @@ def load_oncoming(site: Site, arm: str | None = None) -> OncomingPath:
             f"lane {lane.getID()} of the {opposite} approach (the oncoming lane) has no straight movement"
         )
     connection = straight[0]
-    lanes = [connection.getFromLane()]
-    via = connection.getViaLaneID()
-    current = net.getLane(via) if via else connection.getToLane()
-    for _ in range(8):  # internal lanes split at internal junctions, then the lane beyond
-        lanes.append(current)
-        if current.getEdge().getFunction() != "internal":
-            break
-        following = current.getOutgoing()[0]
-        via = following.getViaLaneID()
-        current = net.getLane(via) if via else following.getToLane()
+    lanes = _lanes_of(net, connection)
     return OncomingPath(
         arm=opposite,
         lanes=tuple(
