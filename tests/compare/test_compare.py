@@ -98,10 +98,9 @@ def test_bad_margin_is_one_line_and_exit_2(capsys, tmp_path):
     assert err.count("\n") == 1 and "--margin collision" in err
 
 
-def _batch(out, *extra):
+def _run_batch(*args):
     proc = subprocess.run(
-        [sys.executable, "-m", "pedsafe_sumo.batch", "--scenario", "crossing", "--episodes", "40"]
-        + ["--seed", "5", "--workers", "1", "--out", str(out), *extra],
+        [sys.executable, "-m", "pedsafe_sumo.batch", *args],
         capture_output=True,
         text=True,
         cwd=REPO_ROOT,
@@ -109,6 +108,13 @@ def _batch(out, *extra):
         timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def _batch(out, *extra):
+    _run_batch(
+        *("--scenario", "crossing", "--episodes", "40", "--seed", "5", "--workers", "1"),
+        *("--out", str(out), *extra),
+    )
 
 
 def _compare(a, b, *extra):
@@ -144,16 +150,10 @@ def test_same_stack_passes_and_a_slower_reacting_stack_fails(tmp_path):
 def _is_batch(out, *extra):
     """A small importance-sampled crossing run, SV only: one pilot stage of 20 pairs (every input
     proposed: 20 pairs are too few for the screen), 20 final pairs."""
-    proc = subprocess.run(
-        [sys.executable, "-m", "pedsafe_sumo.batch", "--scenario", "crossing", "--condition", "sv"]
-        + ["--episodes", "20", "--seed", "5", "--workers", "1", "--sampler", "is", "--out", str(out), *extra],
-        capture_output=True,
-        text=True,
-        cwd=REPO_ROOT,
-        env=dict(os.environ),
-        timeout=600,
+    _run_batch(
+        *("--scenario", "crossing", "--condition", "sv", "--episodes", "20", "--seed", "5", "--workers", "1"),
+        *("--sampler", "is", "--out", str(out), *extra),
     )
-    assert proc.returncode == 0, proc.stderr[-2000:]
 
 
 @pytest.mark.slow
