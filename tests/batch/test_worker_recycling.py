@@ -4,9 +4,12 @@ are those of a run without recycling, because an episode's rows depend on its se
 
 from __future__ import annotations
 
+import json
+
 import pandas as pd
 import pytest
 from batch_cli import SMALL_RUN_ARGS, batch
+from test_worker_faults import kill_env
 
 from pedsafe_sumo.batch.__main__ import main
 from pedsafe_sumo.io.run_store import Manifest
@@ -52,3 +55,28 @@ def test_recycle_chunks_out_of_range_is_refused_in_one_line(capsys, tmp_path, ex
     assert code == 2, err
     assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_worker_killed_between_recycled_generations_loses_and_repeats_nothing(small_run, tmp_path):
+    """Episode 2 kills its worker once (tests/batch/plugin_agents.py); with a fresh pool every chunk per
+    worker, the broken generation's chunk reruns alone and the generations after it still run."""
+    reference, _ = small_run
+    out = tmp_path / "run"
+    proc = batch(
+        *SMALL_RUN_ARGS,
+        "--workers",
+        "2",
+        "--recycle-chunks",
+        "1",
+        "--algorithm",
+        "tests.batch.plugin_agents:KillsWorkerOnce",
+        "--out",
+        str(out),
+        env=kill_env(tmp_path),
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (tmp_path / "killed-once").read_text().startswith("killed pid")
+    table = pd.read_parquet(out / "episodes.parquet")
+    pd.testing.assert_frame_equal(table, pd.read_parquet(reference / "episodes.parquet"))
+    assert json.loads((out / "run.json").read_text())["sessions"][0]["worker_deaths"] >= 1
