@@ -275,7 +275,7 @@ def _move_pedestrian(api, pose, radius_m: float) -> None:
     """
     # units.yaw_rad_to_sumo_angle on one float, in math: the same bits (numpy's rad2deg and math.degrees
     # multiply by the same 180/pi, np.mod and % are both Python's modulo; 2 M angles checked), without
-    # numpy's per-call cost on a scalar (~15 us per step under load, as much as SUMO's moveToXY itself).
+    # numpy's per-call cost on a scalar (~4 us per step on a quiet machine; BENCHMARKS.md, session 6).
     api.person.moveToXY(
         PED_ID,
         "",
