@@ -58,7 +58,7 @@ MAX_STARTUP_DEATHS = 3
 #: Chunks per worker process before the pool's processes are replaced (--recycle-chunks; module docstring):
 #: with the automatic chunk size (at most 25 pairs) at most about 5,000 episodes per process, so libsumo's
 #: creep (about 1 MiB per 1,000 episodes) stays under about 5 MiB, while a fresh pool (spawn, imports,
-#: SUMO's start: about 2 s) per 100 chunks of about 4 s each costs under 1 % (BENCHMARKS.md).
+#: SUMO's start: 2-4 s) per 100 chunks of about 4 s each costs under 1 % (BENCHMARKS.md).
 DEFAULT_RECYCLE_CHUNKS = 100
 #: Upper bound of --recycle-chunks (0 = never): beyond it a run's processes are never replaced anyway.
 MAX_RECYCLE_CHUNKS = 1_000_000

@@ -71,7 +71,7 @@ class LogError(ValueError):
     """A per-step log breaks the contract; the message names the column and the rule."""
 
 
-class _ValidatedLog(dict):
+class _ValidatedLog(dict[str, np.ndarray]):
     """What `as_arrays` returns: columns already checked. `episode_indexes` hands it to eight index
     functions, each of which calls `as_arrays` again; that call copies the mapping instead of checking
     every column once more (the arrays were shared before too: asarray of a float64 array is itself)."""
