@@ -53,7 +53,8 @@ def space_pose(approach: Approach, vehicle: VehicleSetup) -> tuple[float, float,
 
 def parking_xml(approach: Approach, vehicles: tuple[VehicleSetup, ...]) -> str:
     """SUMO additional file: one parking area per parked vehicle, on its lane from its rear to its front,
-    with one space at the kerb (space_pose)."""
+    with one space at the kerb (space_pose). The area's `width` is the car's: sumo-gui draws the area
+    lane width / 2 + width / 2 beside the lane (MSParkingArea's shape), over the car's footprint."""
     lines = ["<additional>"]
     for vehicle in vehicles:
         x, y, heading = space_pose(approach, vehicle)
@@ -62,7 +63,8 @@ def parking_xml(approach: Approach, vehicles: tuple[VehicleSetup, ...]) -> str:
         angle_deg = (90.0 + math.degrees(heading)) % 360.0
         lines += [
             f"    <parkingArea id={quoteattr(parking_area_id(vehicle))} lane={quoteattr(vehicle.lane_id)} "
-            f'startPos="{start_m!r}" endPos="{end_m!r}" roadsideCapacity="0">',
+            f'startPos="{start_m!r}" endPos="{end_m!r}" roadsideCapacity="0" '
+            f'width="{vehicle.size.width_m!r}">',
             f'        <space x="{x!r}" y="{y!r}" angle="{angle_deg!r}" width="{vehicle.size.width_m!r}" '
             f'length="{vehicle.size.length_m!r}"/>',
             "    </parkingArea>",
