@@ -355,3 +355,33 @@ def test_hosting_refuses_in_one_line_what_cannot_be_staged_at_the_kerb(zhixin):
     # 106.45 m of lane: 45 m + 1.25 m + 5 m + 3 x (3 m + 5 m) = 75.25 m fit; 8 queued cars do not.
     long_queue = get_scenario("jaywalking").with_overrides({"queue_vehicles": 8})
     assert "the cars parked at its kerb may need 115.2 m" in kerb_staging_problem(long_queue, approach)
+
+
+@pytest.mark.slow
+def test_a_batch_refuses_in_one_line_a_row_of_parked_cars_the_approach_cannot_hold(zhixin, tmp_path):
+    """Named explicitly, a one-lane staging that cannot be staged is refused at batch start, before anything
+    is written (exit 2, one line with the reason); with --approach all it is skipped, saying why."""
+    out = tmp_path / "run"
+    common = ["-m", "pedsafe_sumo.batch", "--scenario", "jaywalking", "--set", "queue_vehicles=8",
+              "--episodes", "1", "--workers", "1", "--site", str(zhixin), "--out", str(out)]  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, *common, "--approach", "N"],
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        timeout=300,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "may need 115.2 m before the stop line" in proc.stderr
+    assert not out.exists()
+    proc = subprocess.run(
+        [sys.executable, *common, "--approach", "all", "--condition", "sv"],
+        capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    for arm in ("N", "S"):
+        assert (
+            f"skipping scenario 'jaywalking' on approach {arm} of site zhixin: cannot be staged"
+            in proc.stdout
+        )
+    assert set(pd.read_parquet(out / "episodes.parquet")["approach"]) == {"E", "W"}
