@@ -25,6 +25,7 @@ import math
 import shutil
 import tempfile
 import time
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -366,7 +367,7 @@ class EpisodeRunner:
     def close(self) -> None:
         self.session.close()
         if self._kerb_dir is not None:
-            shutil.rmtree(self._kerb_dir, ignore_errors=True)
+            self._kerb_cleanup()
             self._kerb_dir = None
 
     def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
@@ -504,6 +505,9 @@ class EpisodeRunner:
         """This episode's parking areas of the cars parked at the kerb (sim/kerb.py), written for SUMO."""
         if self._kerb_dir is None:
             self._kerb_dir = Path(tempfile.mkdtemp(prefix="pedsafe_kerb_"))
+            # Removed by close(), or when the runner is collected or the process exits (batch workers
+            # end without closing their runner).
+            self._kerb_cleanup = weakref.finalize(self, shutil.rmtree, self._kerb_dir, True)
         path = self._kerb_dir / "kerb_parking.add.xml"
         path.write_text(parking_xml(self.approach, vehicles), encoding="utf-8")
         return path
