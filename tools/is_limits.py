@@ -6,14 +6,17 @@
    MC rows (drawn from the nominal p): w(x) = p(x) / (lambda p(x) + (1 - lambda) q(x)) is the weight the IS
    run gives an episode with inputs x (the defensive mixture of sampling/draws.py), f the collision.
    It is the efficiency the IS run's final stage would show on average, without its run's noise.
-2. `bound`: the most any proposal over the drawn inputs can give, whatever its form. An episode's
-   collision is random given its inputs x (background traffic, sensor noise, the SUMO dynamics are not
-   proposed): with pi(x) = P(collision | x), Var_q(w f) = E_p[pi p / q] - P^2 is smallest at
-   q ∝ p sqrt(pi), where it is (E_p sqrt(pi))^2 - P^2 (Lagrange; the zero-variance proposal needs pi in
-   {0, 1}). pi is estimated by a ridge logistic regression of the collision on the inputs (each
-   continuous input, its square and pairwise products; categories as indicators), cross-fitted on two
-   halves. Also `r2` = Var(pi) / (P (1 - P)), the share of the collision's variance the inputs explain.
-   A model estimate: a smoother pi than the true one lowers the bound, a noisier one raises it.
+2. `sqrt_pi`: what a proposal shaped by the inputs' collision probability gives, whatever its form (not
+   a product of one family per input as the cross-entropy stages fit). An episode's collision is random
+   given its inputs x (background traffic, sensor noise, the SUMO dynamics are not proposed): with
+   pi(x) = P(collision | x), Var_q(w f) = E_p[pi p / q] - P^2 is smallest at q ∝ p sqrt(pi) (Lagrange;
+   the zero-variance proposal needs pi in {0, 1}). pi is estimated by a ridge logistic regression of the
+   collision on the inputs (each continuous input, its square and pairwise products; categories as
+   indicators) on one half of the rows; the proposal q = lambda p + (1 - lambda) p sqrt(pi) / E_p sqrt(pi)
+   (the same defensive share) is then evaluated as in 1 on the other half, and the halves swapped: an
+   out-of-sample efficiency of a real proposal, so neither the fit's smoothing nor its noise inflates it
+   (it is not an upper bound: a sharper pi would do better). Also `r2` = Var(pi) / (P (1 - P)) on the
+   held-out half, the share of the collision's variance the inputs explain.
 
     .venv/bin/python tools/is_limits.py MC_RUN [--proposal IS_RUN] [--inputs proposed|all]
 """
@@ -32,6 +35,7 @@ from scipy import optimize, special
 
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
 from pedsafe_sumo.sampling.importance import Categorical, Product
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 #: Ridge penalty of the logistic fit (on standardised inputs); small against 10,000 rows.
 RIDGE = 1.0
@@ -103,21 +107,26 @@ def _logistic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
 
 
-def input_bound(
-    y: np.ndarray, inputs: pd.DataFrame, categorical: set[str], seed: int = 0
-) -> tuple[float, float]:
-    """(bound, r2) of the module docstring, item 2: pi cross-fitted on two random halves."""
+def sqrt_pi_efficiency(
+    y: np.ndarray, inputs: pd.DataFrame, categorical: set[str], defensive_share: float, seed: int = 0
+) -> tuple[float, float, float]:
+    """(efficiency on each held-out half, averaged; the two halves' spread as max - min; r2) of the
+    module docstring, item 2."""
     p_hat = float(np.mean(y))
     if not 0 < p_hat < 1:
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     x = _design(inputs, categorical)
     fold = np.random.default_rng(seed).integers(2, size=len(y))
-    pi = np.empty(len(y))
+    efficiencies, r2 = [], []
     for k in (0, 1):
         beta = _logistic(x[fold != k], y[fold != k])
-        pi[fold == k] = special.expit(x[fold == k] @ beta)
-    best = float(np.mean(np.sqrt(pi))) ** 2 - p_hat**2
-    return p_hat * (1 - p_hat) / best, float(np.var(pi) / (p_hat * (1 - p_hat)))
+        pi = special.expit(x[fold == k] @ beta)
+        held = y[fold == k]
+        w = 1.0 / (defensive_share + (1 - defensive_share) * np.sqrt(pi) / np.mean(np.sqrt(pi)))
+        p_k = float(np.mean(held))
+        efficiencies.append(p_k * (1 - p_k) / (float(np.mean(w * held)) - p_k**2))
+        r2.append(float(np.var(pi) / (p_k * (1 - p_k))))
+    return float(np.mean(efficiencies)), max(efficiencies) - min(efficiencies), float(np.mean(r2))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -144,9 +153,11 @@ def main(argv: list[str] | None = None) -> int:
         kept = [c for c in inputs.columns if not c.endswith(".colour") and not c.startswith("queued_")]
         chosen = sorted(nominal) if args.inputs == "proposed" else kept
         y = rows["collision"].astype(float).to_numpy()
-        bound, r2 = input_bound(y, inputs[chosen].fillna(0.0), categorical)
+        sqrt_pi, spread, r2 = sqrt_pi_efficiency(
+            y, inputs[chosen].fillna(0.0), categorical, share or DEFENSIVE_SHARE
+        )
         row = {"scenario": scenario, "condition": condition, "n": len(y), "collision_rate": y.mean()}
-        row.update(r2=r2, bound=bound)
+        row.update(r2=r2, sqrt_pi=sqrt_pi, sqrt_pi_halves_differ=spread)
         if args.proposal:
             final = proposals[scenario][-1]
             proposal = product_from_json(final) if final else Product({})
