@@ -18,7 +18,7 @@
    (it is not an upper bound: a sharper pi would do better). Also `r2` = Var(pi) / (P (1 - P)) on the
    held-out half, the share of the collision's variance the inputs explain.
 
-    .venv/bin/python tools/is_limits.py MC_RUN [--proposal IS_RUN] [--inputs proposed|all]
+    .venv/bin/python tools/is_limits.py MC_RUN [--proposal IS_RUN [--stage S]] [--inputs proposed|all]
 """
 
 from __future__ import annotations
@@ -134,6 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("mc_run", type=Path)
     parser.add_argument("--proposal", type=Path, help="an IS run: its final-stage proposal per scenario")
     parser.add_argument("--inputs", choices=("proposed", "all"), default="proposed")
+    parser.add_argument(
+        "--stage",
+        type=int,
+        default=-1,
+        help="which stage's proposal of --proposal (0 the nominal) [the final]",
+    )
     args = parser.parse_args(argv)
     try:
         mc = rows_of(args.mc_run)
@@ -159,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         row = {"scenario": scenario, "condition": condition, "n": len(y), "collision_rate": y.mean()}
         row.update(r2=r2, sqrt_pi=sqrt_pi, sqrt_pi_halves_differ=spread)
         if args.proposal:
-            final = proposals[scenario][-1]
+            final = proposals[scenario][args.stage]
             proposal = product_from_json(final) if final else Product({})
             row["proposed"] = ",".join(sorted(proposal.families)) or "-"
             row["proposal_efficiency"], row["mean_q_over_p"] = proposal_efficiency(
