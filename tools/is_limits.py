@@ -21,7 +21,7 @@
    fitted by its weighted maximum likelihood (Family.refit) on every collision of one half of the MC
    rows (the event itself as the elite, no smoothing, the spread floor of `--min-spread`), evaluated as
    in 1 on the other half and swapped: what the product family reaches on those inputs when its elite
-   is 2,500 episodes rather than a pilot stage's 20-50.
+   is every collision of 5,000 nominal episodes rather than a pilot stage's 20 episodes near the event.
 
     .venv/bin/python tools/is_limits.py MC_RUN [--proposal IS_RUN [--stage S] [--min-spread F]] [--inputs ...]
 """
