@@ -45,8 +45,8 @@ class NcapRunner(EpisodeRunner):
     by the test, not by SUMO.
     """
 
-    def _populate(self, api, setup) -> None:
-        super()._populate(api, setup)
+    def _populate(self, api, setup, start_s: float = 0.0) -> None:
+        super()._populate(api, setup, start_s)
         link = ego_signal_link(str(self.site.file("net.xml")), setup.ego.lane_id, setup.ego_route[1])
         if link is not None:
             tls_id, index = link

@@ -88,6 +88,12 @@ def staging_points(spec, approach, turn=None) -> list[StagingPoint]:
         return points
     # behind_waiting_vehicle: a car's length, the gap and the body behind a car at the stop line.
     behind_m = 0.5 + VEHICLE_CLASSES["car"].length_m + spec.blend_gap_max_m + PEDESTRIAN_RADIUS_M
+    if lanes == 1:
+        # The car stands parked at the kerb beside the one lane (registry.kerb_parking_offset_m): the
+        # pedestrian starts behind it, then crosses the lane.
+        from pedsafe_sumo.scenarios.registry import kerb_parking_offset_m
+
+        offsets = [0.0, -kerb_parking_offset_m(approach, VEHICLE_CLASSES["car"]), 0.0]
     return [
         StagingPoint(
             f"{behind_m:.1f} m before the stop line, {offset_m:+.1f} m",
@@ -182,6 +188,10 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
             problems[name] = f"cannot be staged: {exc}"
             continue
         straight = straight_staging_problem(approach) if spec.placement != "turn" else None
+        if not straight and spec.placement != "turn" and len(approach.lane_ids) == 1:
+            from pedsafe_sumo.scenarios.registry import kerb_staging_problem
+
+            straight = kerb_staging_problem(spec, approach)
         if not straight and getattr(spec, "oncoming_vehicle", 0) and turn is not None:
             from pedsafe_sumo.scenarios.oncoming import oncoming_signal_problem
 

@@ -119,6 +119,9 @@ class Approach:
     through_lanes: tuple[int, ...] = ()
     #: The approach's speed limit (its fastest vehicle lane's) [m/s].
     speed_limit_mps: float = math.nan
+    #: Whether the kerb-side vehicle lane lies right beside the sidewalk (no lane between them): a car
+    #: parked at the kerb of a one-lane approach stands next to that lane (registry.kerb_staging_problem).
+    sidewalk_beside_lane: bool = True
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -238,13 +241,15 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
             return lane_path_in(net, lane, through_edge_id)
         return ((tuple(tuple(p) for p in lane.getShape()), float(lane.getLength())),)
 
+    crossings = [
+        c
+        for c in net.getEdges(withInternal=True)
+        if c.getFunction() == "crossing" and edge in c._crossingEdges
+    ]
+    # The one at the stop line: a crosswalk over the approach at its upstream end belongs to another
+    # junction (Xueqing's west approach has one there, found first).
     crossing = next(
-        (
-            c
-            for c in net.getEdges(withInternal=True)
-            if c.getFunction() == "crossing" and edge in c._crossingEdges
-        ),
-        None,
+        (c for c in crossings if c.getFromNode() == junction), crossings[0] if crossings else None
     )
     if crossing is None:
         raise ValueError(f"site {site.name}: no crosswalk over {edge.getID()}")
@@ -268,6 +273,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         junction_id=junction.getID(),
         through_paths=tuple(through_path(lane) for lane in vehicle_lanes),
         speed_limit_mps=max(lane.getSpeed() for lane in vehicle_lanes),
+        sidewalk_beside_lane=vehicle_lanes[0].getIndex() == sidewalk.getIndex() + 1,
         through_lanes=tuple(
             k
             for k, lane in enumerate(vehicle_lanes)
@@ -303,14 +309,15 @@ def refuge_walkingareas(site: Site) -> tuple[str, ...]:
     return tuple(sorted(walking - with_sidewalk))
 
 
-def straight_staging_problem(approach: Approach, ego_lane: int = 1) -> str | None:
-    """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (the lane
-    next to the kerb lane, where crossing, jaywalking and background blending put it), or None. A lane
-    that only turns (on Xueqing's east approach the second lane turns left) would have the ego drive
-    straight from a turning lane, against the lane's marking. An approach with one vehicle lane has no lane
-    beside the kerb lane: the vehicle that hides the pedestrian (queued, parked or waiting at the kerb)
-    would stand in the ego's own lane, ahead of it, and the scene would be a car following, not a
-    pedestrian stepping out from behind a vehicle beside the ego."""
+def straight_staging_problem(approach: Approach, ego_lane: int | None = None) -> str | None:
+    """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (None: the
+    lane next to the kerb lane, where crossing, jaywalking and background blending put it; on a one-lane
+    approach the lane itself, the vehicles that hide the pedestrian parked at the kerb beside it:
+    registry.kerb_staging_problem says whether they fit), or None. A lane that only turns (on Xueqing's
+    east approach the second lane turns left) would have the ego drive straight from a turning lane,
+    against the lane's marking."""
+    if ego_lane is None:
+        ego_lane = 0 if len(approach.lane_ids) == 1 else 1
     if ego_lane >= len(approach.lane_ids):
         return (
             f"approach {approach.edge_id} has {len(approach.lane_ids)} vehicle lane(s): no lane beside the "

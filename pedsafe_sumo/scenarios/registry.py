@@ -449,6 +449,10 @@ class VehicleSetup:
     #: first step. "": it starts where it is inserted.
     internal_lane_id: str = ""
     internal_pos_m: float = 0.0
+    #: > 0: the vehicle stands parked at the kerb beside `lane_id`, its centre this far to the right of
+    #: the lane's centre (a one-lane approach: kerb_parking_offset_m); SUMO inserts it on the lane at
+    #: `front_pos_m` and parks it in a parking space there (sim/kerb.py). 0: it stands in its lane.
+    kerb_offset_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -559,8 +563,11 @@ def draw_episode(
     ego_size = VEHICLE_CLASSES["car"]
     # The occluders stand in the kerb lane; the pedestrian crosses from the kerb towards the median, so
     # the ego drives the lane next to the kerb lane on that side (lanes are listed kerb to median).
+    # On a one-lane approach they stand parked at the kerb beside the lane instead, and the ego drives
+    # the lane itself, next to them (kerb_offset_m); the draws are the same.
     kerb_lane = 0
-    ego_lane = adjacent_lane(kerb_lane, +1, len(approach.lane_ids))
+    one_lane = len(approach.lane_ids) == 1
+    ego_lane = 0 if one_lane else adjacent_lane(kerb_lane, +1, len(approach.lane_ids))
     kerb_lane_id = approach.lane_ids[kerb_lane]
     ego_speed_mps = float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps))
     radius_m = 0.3
@@ -639,9 +646,16 @@ def draw_episode(
         # in 3 of 30 episodes even at gap 0; from the sidewalk both onboard sensors saw them before
         # they ever blended.)
         start_offset_m = 0.0
+        if one_lane:
+            # Behind the car parked at the kerb, centred on its rear as in the kerb lane.
+            start_offset_m = -kerb_parking_offset_m(approach, waiting.size)
         path = approach.across(kerb_lane, cross_pos, start_offset_m, far_offset_m)
         parked.append(waiting)
         clothing = waiting.colour_rgb
+    if one_lane:
+        parked = [
+            dataclasses.replace(v, kerb_offset_m=kerb_parking_offset_m(approach, v.size)) for v in parked
+        ]
 
     # Where the pedestrian's path meets the centre of the ego's lane, and when they get there.
     conflict_xy = _crossing_with_lane(approach, ego_lane, path)
@@ -870,6 +884,53 @@ def _crossing_with_polyline(polyline, path) -> tuple[float, float]:
     if crossing is None:
         raise ScenarioError("the pedestrian's path does not cross the ego's turn")
     return crossing
+
+
+def kerb_parking_offset_m(approach: Approach, size: VehicleSize) -> float:
+    """How far to the right of the centre of a one-lane approach's lane a car parked at the kerb stands
+    (its centre) [m]: on the sidewalk, its road-side flank on the kerb line (the lane's right edge).
+    Standing in the lane, or across the kerb, it would overlap the ego driving the lane's centre: a 1.8 m
+    car in a 3.2 m lane leaves 0.7 m to the kerb line, and every class is wider than that (docs/sites.md)."""
+    return approach.lane_width_m / 2 + size.width_m / 2
+
+
+def kerb_staging_problem(spec: ScenarioSpec, approach: Approach) -> str | None:
+    """Why `spec` (crossing, jaywalking, background blending) cannot be staged with cars parked at the kerb
+    of a one-lane approach, or None: the sidewalk must lie right beside the lane, hold the widest car the
+    scenario draws, and the approach must hold the row of parked cars (SUMO inserts each on the lane before
+    it parks: a car whose rear would stand before the lane's start cannot be inserted)."""
+    queue_classes = (
+        [VEHICLE_CLASSES[spec.waiting_vehicle_class]]
+        if spec.placement == "behind_waiting_vehicle" and spec.waiting_vehicle_class
+        else list(VEHICLE_CLASSES.values())
+    )
+    widest = max(queue_classes, key=lambda size: size.width_m)
+    if spec.placement == "crosswalk":
+        widest = max([widest, VEHICLE_CLASSES[spec.occluder_class]], key=lambda size: size.width_m)
+    if not approach.sidewalk_beside_lane:
+        return (
+            f"approach {approach.edge_id} has one vehicle lane and another lane between it and the sidewalk: "
+            "no kerb beside the lane for a parked car to hide the pedestrian"
+        )
+    if approach.sidewalk_width_m < widest.width_m:
+        return (
+            f"approach {approach.edge_id} has one vehicle lane and a {approach.sidewalk_width_m:g} m "
+            f"sidewalk: no room at the kerb for a parked car {widest.width_m:g} m wide to hide the pedestrian"
+        )
+    longest_m = max(size.length_m for size in VEHICLE_CLASSES.values())
+    queue_m = spec.queue_vehicles * (spec.queue_gap_max_m + longest_m)
+    if spec.placement == "crosswalk":
+        row_m = 0.5 + VEHICLE_CLASSES[spec.occluder_class].length_m + queue_m
+    elif spec.placement == "midblock":
+        row_m = spec.midblock_distance_max_m + spec.parked_gap_max_m / 2 + longest_m + queue_m
+    else:
+        row_m = 0.5 + max(size.length_m for size in queue_classes)
+    if row_m > approach.lane_lengths_m[0]:
+        return (
+            f"approach {approach.edge_id} has one vehicle lane {approach.lane_lengths_m[0]:.1f} m long: the "
+            f"cars parked at its kerb may need {row_m:.1f} m before the stop line"
+        )
+    return None
 
 
 def adjacent_lane(occluder_lane: int, towards: int, n_lanes: int) -> int:

@@ -22,7 +22,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
+import tempfile
 import time
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -86,6 +89,7 @@ from pedsafe_sumo.scenarios.registry import (
 from pedsafe_sumo.scenarios.signals import SignalStagingError, colour_of_link, load_junction_signals
 from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
+from pedsafe_sumo.sim.kerb import check_parked, kerb_parked, park_at_kerb, parking_xml, with_additional
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
 from pedsafe_sumo.sim.road_map import load_net_map
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
@@ -284,15 +288,16 @@ def _move_pedestrian(api, pose, radius_m: float) -> None:
     )
 
 
-def add_pedestrian(api, sidewalk_edge: str, type_id: str, refuges: bool) -> None:
+def add_pedestrian(api, sidewalk_edge: str, type_id: str, refuges: bool, depart_s: float = 0.0) -> None:
     """Add the scenario's pedestrian on `sidewalk_edge`, to be moved by the behaviour model (moveToXY).
 
     With the waiting stage alone, SUMO's first moveToXY gives the person a walking route of its current
     edge, and moving it on rebuilds that route to end on the walking area ahead. On a median refuge (a
     walking area no sidewalk reaches, `refuges`: the network has one) SUMO 1.28 then crashes
     (scenarios.geometry.refuge_walkingareas, docs/sites.md): the person first gets a walking route that
-    ends on its sidewalk, which the rebuilt routes keep. Networks without refuges are staged as before."""
-    api.person.add(PED_ID, sidewalk_edge, pos=1.0, depart=0.0, typeID=type_id)
+    ends on its sidewalk, which the rebuilt routes keep. Networks without refuges are staged as before.
+    `depart_s`: SUMO's time at the episode's start (sim.kerb: one step when cars are parked at the kerb)."""
+    api.person.add(PED_ID, sidewalk_edge, pos=1.0, depart=depart_s, typeID=type_id)
     if refuges:
         api.person.appendWalkingStage(PED_ID, [sidewalk_edge, sidewalk_edge], arrivalPos=1.0)
     api.person.appendWaitingStage(PED_ID, 100_000.0, "pedsafe: moved by the behaviour model")
@@ -342,6 +347,8 @@ class EpisodeRunner:
         self._site_arm = data.arm
         #: Whether the network has median refuges (walking areas no sidewalk reaches): see person.add.
         self._refuges = bool(refuge_walkingareas(site))
+        #: Folder of the per-episode parking file of cars parked at the kerb (sim/kerb.py), made on first use.
+        self._kerb_dir: Path | None = None
         self._use_approach("")
         self.session = SumoSession(gui=gui)
 
@@ -359,6 +366,9 @@ class EpisodeRunner:
 
     def close(self) -> None:
         self.session.close()
+        if self._kerb_dir is not None:
+            self._kerb_cleanup()
+            self._kerb_dir = None
 
     def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
         """The onboard sensors and the roadside poles the scenario names (built once per set of poles)."""
@@ -491,7 +501,20 @@ class EpisodeRunner:
             ]
         return args
 
-    def _add_vehicle(self, api, vehicle: VehicleSetup, route_id: str, parked: bool) -> None:
+    def _kerb_parking_file(self, setup: EpisodeSetup, vehicles) -> Path:
+        """This episode's parking areas of the cars parked at the kerb (sim/kerb.py), written for SUMO."""
+        if self._kerb_dir is None:
+            self._kerb_dir = Path(tempfile.mkdtemp(prefix="pedsafe_kerb_"))
+            # Removed by close(), or when the runner is collected or the process exits (batch workers
+            # end without closing their runner).
+            self._kerb_cleanup = weakref.finalize(self, shutil.rmtree, self._kerb_dir, True)
+        path = self._kerb_dir / "kerb_parking.add.xml"
+        path.write_text(parking_xml(self.approach, vehicles), encoding="utf-8")
+        return path
+
+    def _add_vehicle(
+        self, api, vehicle: VehicleSetup, route_id: str, parked: bool, depart: str = "0"
+    ) -> None:
         lane_index = int(vehicle.lane_id.rsplit("_", 1)[1])  # SUMO's index: the sidewalk is lane 0
         type_id = f"type_{vehicle.vehicle_id}"
         api.vehicletype.copy("DEFAULT_VEHTYPE", type_id)
@@ -516,24 +539,29 @@ class EpisodeRunner:
             vehicle.vehicle_id,
             route_id,
             typeID=type_id,
-            depart="0",
+            depart=depart,
             departLane=str(lane_index),
             departPos=repr(float(vehicle.front_pos_m)),
             departSpeed=repr(float(vehicle.speed_mps)),
         )
 
-    def _populate(self, api, setup: EpisodeSetup) -> None:
+    def _populate(self, api, setup: EpisodeSetup, start_s: float = 0.0) -> None:
+        """Add the episode's road users; `start_s` is SUMO's time at the episode's start (one step when
+        cars are parked at the kerb: they were inserted before, sim/kerb.py)."""
         approach = self.approach
         self._routes_added: set[str] = set()
+        depart = repr(start_s) if start_s else "0"
         api.route.add("ego_route", list(setup.ego_route))
         api.route.add("kerb_route", [approach.edge_id])
-        self._add_vehicle(api, setup.ego, "ego_route", parked=False)
+        self._add_vehicle(api, setup.ego, "ego_route", parked=False, depart=depart)
         for vehicle in setup.parked:
+            if vehicle.kerb_offset_m > 0:
+                continue
             route_id = "kerb_route"
             if vehicle.route:  # a vehicle that drives (the turning scenarios' leader)
                 route_id = "route_" + vehicle.vehicle_id
                 api.route.add(route_id, list(vehicle.route))
-            self._add_vehicle(api, vehicle, route_id, parked=True)
+            self._add_vehicle(api, vehicle, route_id, parked=True, depart=depart)
         if setup.background:
             api.vehicletype.copy("DEFAULT_VEHTYPE", "background")
             size = VEHICLE_CLASSES["car"]
@@ -551,7 +579,7 @@ class EpisodeRunner:
                 bg.vehicle_id,
                 route_id,
                 typeID="background",
-                depart=repr(bg.depart_s),
+                depart=repr(bg.depart_s + start_s) if start_s else repr(bg.depart_s),
                 departLane=str(bg.lane_index),
                 departPos=repr(bg.depart_pos_m),
                 # The fastest safe speed: a lognormal-tail desired speed (30+ m/s) just before a junction
@@ -565,7 +593,7 @@ class EpisodeRunner:
         api.vehicletype.setLength("ped_type", 2 * ped.radius_m)
         api.vehicletype.setHeight("ped_type", ped.height_m)
         api.vehicletype.setColor("ped_type", (*ped.clothing_rgb, 255))
-        add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", self._refuges)
+        add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", self._refuges, start_s)
 
     # ------------------------------------------------------------------ run
     def run(
@@ -594,13 +622,26 @@ class EpisodeRunner:
         clock = time.perf_counter
 
         started = clock()
-        self.session.run(self._sumo_args(seed))
+        kerb = kerb_parked(setup)
+        args = self._sumo_args(seed)
+        if kerb:
+            args = with_additional(args, self._kerb_parking_file(setup, kerb))
+        self.session.run(args)
         api = self.session.api
         tc = api.constants
-        self._populate(api, setup)
+        # Cars parked at the kerb go in a step ahead (SUMO parks a vehicle the step after inserting it):
+        # the episode's clock starts then (sim/kerb.py). Without them SUMO's clock is the episode's.
+        start_s = 0.0
+        if kerb:
+            park_at_kerb(
+                api, kerb, lambda api_, vehicle, route_id: self._add_vehicle(api_, vehicle, route_id, True)
+            )
+            start_s = api.simulation.getTime()
+        self._populate(api, setup, start_s)
         start_signals(api, setup.signals, self.signals.program if self.signals else None)
         api.simulation.step()  # inserts everything at t = 0
         self._place_on_junction(api, setup)
+        check_parked(api, kerb)
         timings["sumo_s"] += clock() - started
 
         dims: dict[str, tuple[float, float, float, tuple[int, int, int]]] = {}
@@ -694,6 +735,8 @@ class EpisodeRunner:
             while True:
                 t0 = clock()
                 time_s = api.simulation.getTime()
+                if start_s:
+                    time_s = round(time_s - start_s, 6)
                 if background:
                     register_departed()
                 results = api.vehicle.getAllSubscriptionResults()
