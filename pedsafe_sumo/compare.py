@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special
 
+from pedsafe_sumo.report.html import replay_commands
 from pedsafe_sumo.report.rundir import ReportError, load_run
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.sampling.importance import is_estimate
@@ -276,11 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     print()
     if len(worse):
         print(f"{len(worse)} episode(s) where B did worse than A; replay each under B with:")
-        for row in worse.itertuples():
-            print(
-                f"  python -m pedsafe_sumo.replay {args.run_b} --episode {row.episode} "
-                f"--condition {row.condition}   # {row.scenario}"
-            )
+        for _, row in worse.iterrows():
+            # The report's own command (scenario, and the approach of a batch run with --approach).
+            print(f"  {replay_commands(runs[1], row)[0]}")
         print()
     verdict = "PASS" if failed.empty else "FAIL"
     print(

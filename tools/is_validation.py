@@ -1,7 +1,8 @@
 """Importance sampling against plain Monte Carlo (issue 17, item 3): per scenario and condition, the IS
 estimate of a run made with --sampler is and the MC estimate of a reference run, their 95% intervals,
 whether they agree, and the efficiency (episodes MC needs for the IS interval's half-width h,
-p(1 - p)(1.96 / h)^2 with p the IS estimate, over the episodes IS ran, pilots included).
+p(1 - p)(1.96 / h)^2 with p the IS estimate, over the episodes IS ran, pilots included; and over the
+final stage's episodes alone).
 
     .venv/bin/python tools/is_validation.py IS_RUN MC_RUN [--markdown]
 
@@ -68,6 +69,8 @@ def compare(is_rows: pd.DataFrame, mc_rows: pd.DataFrame) -> pd.DataFrame:
                     "intervals_overlap": bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
                     "mc_in_is_interval": bool(low <= float(m[mest]) <= high),
                     "efficiency": mc_needed / int(r.n_run) if math.isfinite(mc_needed) else math.nan,
+                    # The final stage alone (its n episodes, errors left out): the pilots' cost aside.
+                    "efficiency_final": mc_needed / int(r.n) if math.isfinite(mc_needed) else math.nan,
                 }
             )
     return pd.DataFrame(out)

@@ -79,6 +79,7 @@ from pedsafe_sumo.sampling.stages import (
     MIN_PILOT_EPISODES,
     MIN_SPREAD_FLAG,
     SCORE_CLEARANCE,
+    SCORE_TTC,
     SCORES,
 )
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
@@ -115,8 +116,13 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "is_inputs": INPUTS_SCREENED,
     "is_min_spread": SQRT_HALF,
     "is_proposal": None,
-    "is_score": SCORE_CLEARANCE,
+    # TTC since session 6: the clearance score drove the proposal away from collisions on Xueqing's
+    # crossing; the TTC score agreed with plain MC on all four scenarios (docs/sampling.md).
+    "is_score": SCORE_TTC,
 }
+#: What runs recorded before an argument existed (or before its default changed) had: --resume fills a
+#: key missing from an older run.json with this, not with today's default, so the run stays the same run.
+RESUME_DEFAULTS_OF_OLDER_RUNS: dict[str, Any] = {"is_score": SCORE_CLEARANCE}
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
 #: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
@@ -310,7 +316,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         dest="is_score",
         help="--sampler is: how the pilot stages rank an episode without a collision: 'clearance' = "
         "closest clearance [m], 'ttc' = smallest time to collision [s] (docs/sampling.md) "
-        f"[{SCORE_CLEARANCE}]",
+        f"[{SCORE_TTC}]",
     )
     parser.add_argument(
         "--is-proposal",
@@ -395,6 +401,12 @@ def _recorded_run(out: Path) -> dict[str, Any]:
     return recorded
 
 
+def resumed_arguments(recorded: dict[str, Any], explicit: dict[str, Any]) -> dict[str, Any]:
+    """A resumed run's arguments: the flags given again over the recorded ones, over what runs recorded
+    before an argument existed had (RESUME_DEFAULTS_OF_OLDER_RUNS), over today's defaults."""
+    return {**RUN_ARGUMENT_DEFAULTS, **RESUME_DEFAULTS_OF_OLDER_RUNS, **recorded, **explicit}
+
+
 def prepare(args: argparse.Namespace) -> Plan:
     """Check everything about the command and its input files; writes nothing."""
     if args.workers is not None and args.cluster:
@@ -427,7 +439,7 @@ def prepare(args: argparse.Namespace) -> Plan:
                 f"{args.out} was started with --keep-logs {kept}; a resumed run keeps the same logs "
                 "(leave the flag out or repeat its value)"
             )
-        arguments = {**RUN_ARGUMENT_DEFAULTS, **recorded["arguments"], **explicit}
+        arguments = resumed_arguments(recorded["arguments"], explicit)
     else:
         if args.out is not None and holds_run(args.out):
             state = "complete" if (args.out / "episodes.parquet").exists() else "incomplete"

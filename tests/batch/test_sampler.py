@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from batch_cli import batch
 
-from pedsafe_sumo.batch.__main__ import main, parse_args, prepare
+from pedsafe_sumo.batch.__main__ import main, parse_args, prepare, resumed_arguments
 from pedsafe_sumo.batch.chunks import episode_seed
 from pedsafe_sumo.protocol import main as protocol_main
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
@@ -86,6 +86,23 @@ def test_the_sampler_may_be_given_beside_a_protocol(tmp_path):
     assert plan.identity["sampler"]["pilot_stages"] == 3 and plan.identity["sampler"]["pilot_episodes"] == 200
     plain = prepare(parse_args(["--protocol", str(protocol), "--out", str(tmp_path / "m")]))
     assert plain.identity["sampler"] is None
+
+
+def test_the_ttc_score_is_the_default_and_older_runs_resume_with_the_clearance_score(tmp_path):
+    """Since session 6 the pilot stages rank a miss by its TTC unless told otherwise; a run recorded
+    before --is-score existed ranked by clearance, and --resume must keep that (a missing key is filled
+    with the value such runs had, not with today's default)."""
+    plan = prepare(parse_args(["--scenario", "crossing", "--sampler", "is", "--out", str(tmp_path / "r")]))
+    assert plan.identity["sampler"]["score_kind"] == "ttc"
+    assert plan.identity["sampler"]["score"].endswith("-min_ttc_s")
+    older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
+    assert resumed_arguments(older, {})["is_score"] == "clearance"
+    assert resumed_arguments({**older, "is_score": "ttc"}, {})["is_score"] == "ttc"
+    assert resumed_arguments(older, {"is_score": "ttc"})["is_score"] == "ttc"
+    assert (
+        resumed_arguments(older, {})["episodes"] == 10
+        and resumed_arguments(older, {})["is_pilot_stages"] == 3
+    )
 
 
 #: --is-inputs all: 20 pilot pairs (an elite of 2) are too few for the input screen to select anything,

@@ -125,6 +125,25 @@ def test_one_update_is_the_smoothed_weighted_fit_of_the_elite():
     assert "ped_female" not in update.proposal.families
 
 
+def test_once_collisions_fill_the_elite_the_level_is_the_event_and_every_collision_is_elite():
+    """The multilevel rule (Rubinstein & Kroese 2004, alg. 3.4.1): the level never exceeds the event. A
+    stage of 200 episodes with 40 collisions (20%, twice the elite share): the 90% quantile lies among
+    the collisions' scores, the level is capped at COLLISION_SCORE, and the elite is all 40 collisions,
+    not the 20 hardest impacts; the refit mean is the smoothed mean of the collided episodes' ln speeds."""
+    rows = _toy_rows(np.random.default_rng(11), {}, 200)
+    logs = np.array([json.loads(t)["inputs"]["ego_speed_log"] for t in rows["sampler_inputs"]])
+    collided = logs >= np.sort(logs)[-40]  # the 40 fastest collide, their impact the speed above the cut
+    rows["collision"] = collided
+    rows["impact_speed_mps"] = np.where(collided, np.exp(logs) - np.exp(np.sort(logs)[-40]), np.nan)
+    rows["min_clearance_m"] = np.where(collided, 0.0, 1.0)
+    update = cross_entropy_update(rows, {})
+    assert update.level == COLLISION_SCORE
+    assert update.n_elite == update.n_collisions == 40
+    ego = update.proposal.families["ego_speed_log"]
+    expected = SMOOTHING_ALPHA * logs[collided].mean() + (1 - SMOOTHING_ALPHA) * LOG_MU
+    assert ego.mean == pytest.approx(expected)
+
+
 @pytest.mark.parametrize("pilot_stages", [1, 3])
 def test_pilots_then_final_stage_recover_a_rare_probability(pilot_stages):
     """P(ego speed > 14 m/s) = 0.0042 under the nominal; 1 or 3 pilot stages of 200 + 2,000 final draws
