@@ -55,11 +55,80 @@ def timed(owner, name: str, label: str) -> None:
     setattr(owner, name, wrapper)
 
 
+SUMO_CALL_CPU: dict[str, float] = defaultdict(float)
+SUMO_CALL_COUNT: dict[str, int] = defaultdict(int)
+#: Timed elsewhere (simulation.step, SUMO load through SumoSession.run) or not per episode.
+NOT_WRAPPED = {"simulation.step", "simulation.load", "simulation.start", "simulation.close"}
+
+
+def wrap_sumo_calls(libsumo) -> None:
+    """Every public function of libsumo's domains, with a CPU clock around it (SUMO_CALL_CPU)."""
+    cpu = time.process_time
+    for domain in ("vehicle", "person", "simulation", "trafficlight", "route", "vehicletype"):
+        owner = getattr(libsumo, domain)
+        for name in dir(owner):
+            label = f"{domain}.{name}"
+            real = getattr(owner, name)
+            if name.startswith("_") or not callable(real) or label in NOT_WRAPPED:
+                continue
+
+            def wrapper(*args, _real=real, _label=label, **kwargs):
+                c = cpu()
+                try:
+                    return _real(*args, **kwargs)
+                finally:
+                    SUMO_CALL_CPU[_label] += cpu() - c
+                    SUMO_CALL_COUNT[_label] += 1
+
+            setattr(owner, name, wrapper)
+
+
+def wrapper_cost_s() -> float:
+    """CPU seconds one wrapper adds around a call of nothing (its two clock reads and bookkeeping)."""
+    cpu, totals, counts = time.process_time, defaultdict(float), defaultdict(int)
+
+    def wrapper(*args, _real=lambda: None, _label="x", **kwargs):
+        c = cpu()
+        try:
+            return _real(*args, **kwargs)
+        finally:
+            totals[_label] += cpu() - c
+            counts[_label] += 1
+
+    best = float("inf")
+    for _ in range(5):
+        c = cpu()
+        for _ in range(20_000):
+            wrapper()
+        best = min(best, (cpu() - c) / 20_000)
+    return best
+
+
+def report_sumo_calls(episodes: int, steps: int) -> None:
+    overhead = wrapper_cost_s()
+    calls = sum(SUMO_CALL_COUNT.values())
+    total = sum(SUMO_CALL_CPU.values()) - calls * overhead
+    print(
+        f"other libsumo calls (CPU, less {overhead * 1e6:.2f} us of wrapper per call): {calls / steps:.1f} "
+        f"per step, {total / episodes * 1e3:.2f} ms per episode, {total / steps * 1e6:.1f} us per step"
+    )
+    for label in sorted(SUMO_CALL_CPU, key=SUMO_CALL_CPU.get, reverse=True)[:10]:
+        own = SUMO_CALL_CPU[label] - SUMO_CALL_COUNT[label] * overhead
+        per_step = SUMO_CALL_COUNT[label] / steps
+        print(f"  {label:40s} {per_step:5.2f} per step {own / steps * 1e6:8.1f} us per step")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--protocol", default="protocols/paper-v4.toml")
     parser.add_argument("--episodes", type=int, default=10, help="pairs per scenario")
     parser.add_argument("--cprofile", help="also profile with cProfile and write the stats here")
+    parser.add_argument(
+        "--sumo-calls",
+        action="store_true",
+        help="also time every other libsumo call (vehicle, person, simulation, trafficlight, route, "
+        "vehicletype), the wrapper's own cost subtracted: what SUMO costs outside its step and load",
+    )
     args = parser.parse_args()
     plan = prepare(
         parse_args(["--protocol", args.protocol, "--episodes", str(args.episodes), "--out", "/tmp/x"])
@@ -98,6 +167,8 @@ def main() -> None:
     timed(episode_module, "ego_in_sight", "pedestrian sight rays")
     timed(episode_module, "_move_pedestrian", "person.moveToXY")
 
+    if args.sumo_calls:
+        wrap_sumo_calls(libsumo)
     profiler = cProfile.Profile() if args.cprofile else None
     rows, steps = [], 0
     wall, cpu = time.perf_counter(), time.process_time()
@@ -131,6 +202,8 @@ def main() -> None:
             f"{CPU_TOTALS[label] / episodes * 1e3:10.2f} {TOTALS[label] / wall:6.1%}"
         )
     print(f"{'writing rows (to_table + parquet)':40s} {write_s / episodes * 1e3:10.2f}")
+    if args.sumo_calls:
+        report_sumo_calls(episodes, steps)
     print(f"the loop's own timers ({LOOP_TIMERS['logged steps']:.0f} logged steps):")
     for part, seconds in LOOP_TIMERS.items():
         if part != "logged steps":

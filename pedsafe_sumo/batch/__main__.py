@@ -33,7 +33,14 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE, Chunk, auto_chunk_size, plan_chunks
-from pedsafe_sumo.batch.executors import BatchError, DaskBackend, ProcessPoolBackend, make_backend
+from pedsafe_sumo.batch.executors import (
+    DEFAULT_RECYCLE_CHUNKS,
+    MAX_RECYCLE_CHUNKS,
+    BatchError,
+    DaskBackend,
+    ProcessPoolBackend,
+    make_backend,
+)
 from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
@@ -203,6 +210,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--workers",
         type=int,
         help="local worker processes, one SUMO each [min(2, cores)]; not with --cluster",
+    )
+    parser.add_argument(
+        "--recycle-chunks",
+        type=int,
+        dest="recycle_chunks",
+        metavar="CHUNKS",
+        help="replace the pool's worker processes after every CHUNKS chunks per worker, 0 = never (libsumo "
+        f"keeps ~1 KiB per episode; the rows do not change) [{DEFAULT_RECYCLE_CHUNKS}]; not with --cluster",
     )
     parser.add_argument(
         "--cluster",
@@ -400,6 +415,16 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
     if args.workers is not None and args.workers > MAX_WORKERS:
         raise UsageError(f"--workers must be at most {MAX_WORKERS}, got {args.workers} (more: use --cluster)")
+    if args.recycle_chunks is not None and args.cluster:
+        raise UsageError(
+            "--recycle-chunks applies to the process pool; Dask's workers are bounded by their nanny's "
+            "memory limit (docs/batch.md)"
+        )
+    if args.recycle_chunks is not None and not 0 <= args.recycle_chunks <= MAX_RECYCLE_CHUNKS:
+        raise UsageError(
+            f"--recycle-chunks must be between 0 (never) and {MAX_RECYCLE_CHUNKS:,}, "
+            f"got {args.recycle_chunks}"
+        )
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} is a file, not a run directory")
     explicit = _explicit_arguments(args)
@@ -693,7 +718,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         plan = prepare(args)
-        backend = make_backend(args.cluster, args.workers or min(2, os.cpu_count() or 1))
+        backend = make_backend(
+            args.cluster,
+            args.workers or min(2, os.cpu_count() or 1),
+            DEFAULT_RECYCLE_CHUNKS if args.recycle_chunks is None else args.recycle_chunks,
+        )
     except (*INPUT_ERRORS, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -16,6 +16,16 @@ process) must neither stop the batch nor lose or repeat an episode:
   then the task fails with KilledWorker, and the chunk is split into pairs as above, a pair that fails
   so becoming error rows.
 
+Worker memory. libsumo's `load` (one per episode) keeps about 0.9 KiB each time it is called (SUMO's, not
+ours: a loop of `load` alone shows it; BENCHMARKS.md, issue 19 session 6), so a worker's RSS creeps by about
+1 MiB per 1,000 episodes. The process pool therefore replaces its worker processes after every
+`recycle_chunks` chunks per worker (--recycle-chunks): the chunks go to the pool in generations of
+workers x recycle_chunks, each generation on a fresh pool. Rows do not change (an episode's rows depend on
+its seed only, never on the process); the cost is one worker start per generation and the wait for a
+generation's last chunk. Dask's workers are not recycled here: each runs under its nanny's memory limit
+(Dask's `distributed.worker.memory.terminate`, 95 % of the worker's memory_limit, restarts it), and a
+long-lived cluster can restart its workers with `dask worker --lifetime`.
+
 Any other exception out of a worker means the worker cannot run this batch at all (another network
 file, another version, a broken install): the batch stops with that message, and what is recorded
 stays for --resume.
@@ -45,6 +55,13 @@ OnChunkDone = Callable[[Chunk, ChunkOutput], None]
 PAIR_ATTEMPTS_ALONE = 2
 #: Pool breaks in a row in which no chunk had even started before the batch gives up.
 MAX_STARTUP_DEATHS = 3
+#: Chunks per worker process before the pool's processes are replaced (--recycle-chunks; module docstring):
+#: with the automatic chunk size (at most 25 pairs) at most about 5,000 episodes per process, so libsumo's
+#: creep (about 1 MiB per 1,000 episodes) stays under about 5 MiB, while a fresh pool (spawn, imports,
+#: SUMO's start: 2-4 s) per 100 chunks of about 4 s each costs under 1 % (BENCHMARKS.md).
+DEFAULT_RECYCLE_CHUNKS = 100
+#: Upper bound of --recycle-chunks (0 = never): beyond it a run's processes are never replaced anyway.
+MAX_RECYCLE_CHUNKS = 1_000_000
 LOCAL_CLUSTER_PREFIX = "local:"
 #: Most Dask workers local:N starts (one SUMO process each, as --workers; the same bound).
 MAX_LOCAL_CLUSTER_WORKERS = 256
@@ -89,15 +106,20 @@ def _failure(chunk: Chunk, exc: BaseException) -> BatchError:
 class ProcessPoolBackend:
     """Chunks on `workers` local processes (spawned: no SUMO state inherited from the driver)."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, recycle_chunks: int = DEFAULT_RECYCLE_CHUNKS) -> None:
         self.workers = workers
+        #: Chunks per worker before the pool's processes are replaced; 0 = never (module docstring).
+        self.recycle_chunks = recycle_chunks
+        #: Pools started: one per generation of chunks, and one more after each worker death.
+        self.generations = 0
         self.worker_deaths = 0
         self._context = multiprocessing.get_context("spawn")
         self._solo: ProcessPoolExecutor | None = None
 
     @property
     def description(self) -> str:
-        return f"process pool, {self.workers} worker(s)"
+        recycled = f", replaced every {self.recycle_chunks} chunks each" if self.recycle_chunks else ""
+        return f"process pool, {self.workers} worker(s){recycled}"
 
     @property
     def n_workers(self) -> int:
@@ -112,13 +134,17 @@ class ProcessPoolBackend:
     def run(self, config: WorkerConfig, chunks: list[Chunk], on_done: OnChunkDone) -> None:
         remaining = list(chunks)
         startup_deaths = 0
+        # One fresh pool per generation of chunks: its processes end with it (module docstring).
+        generation = self.workers * self.recycle_chunks if self.recycle_chunks else len(remaining)
         while remaining:
-            before = len(remaining)
-            remaining, suspects, broken = self._pass(config, remaining, on_done)
+            batch, rest = remaining[:generation], remaining[generation:]
+            self.generations += 1
+            left, suspects, broken = self._pass(config, batch, on_done)
+            remaining = left + rest
             if not broken:
-                break
+                continue
             self.worker_deaths += 1
-            finished = before - len(remaining) - len(suspects)
+            finished = len(batch) - len(left) - len(suspects)
             startup_deaths = 0 if suspects or finished else startup_deaths + 1
             if startup_deaths >= MAX_STARTUP_DEATHS:
                 raise BatchError(
@@ -359,5 +385,7 @@ class DaskBackend:
                 on_done(chunk, merge_outputs([p for p in parts if p is not None]))
 
 
-def make_backend(cluster: str | None, workers: int) -> DaskBackend | ProcessPoolBackend:
-    return DaskBackend(cluster) if cluster else ProcessPoolBackend(workers)
+def make_backend(
+    cluster: str | None, workers: int, recycle_chunks: int = DEFAULT_RECYCLE_CHUNKS
+) -> DaskBackend | ProcessPoolBackend:
+    return DaskBackend(cluster) if cluster else ProcessPoolBackend(workers, recycle_chunks)

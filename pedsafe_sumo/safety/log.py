@@ -71,12 +71,20 @@ class LogError(ValueError):
     """A per-step log breaks the contract; the message names the column and the rule."""
 
 
+class _ValidatedLog(dict[str, np.ndarray]):
+    """What `as_arrays` returns: columns already checked. `episode_indexes` hands it to eight index
+    functions, each of which calls `as_arrays` again; that call copies the mapping instead of checking
+    every column once more (the arrays were shared before too: asarray of a float64 array is itself)."""
+
+
 def as_arrays(log: Any) -> dict[str, np.ndarray]:
     """Validate a log and return its columns as numpy arrays (float64 or bool), extra sensors included.
 
     Raises `LogError` on a missing column, an empty log, columns of unequal length, a non-finite or
     out-of-range number, a non-boolean flag, or a time column that does not strictly increase.
     """
+    if type(log) is _ValidatedLog:
+        return _ValidatedLog(log)
     if not isinstance(log, Mapping) and not hasattr(log, "columns"):
         raise LogError(f"a log is a DataFrame or a mapping of columns, not {type(log).__name__}")
     names = list(log.columns) if hasattr(log, "columns") else list(log.keys())
@@ -84,7 +92,7 @@ def as_arrays(log: Any) -> dict[str, np.ndarray]:
     if missing:
         raise LogError(f"log lacks column(s): {', '.join(missing)}")
     extra_sensors = sorted(c for c in names if c.startswith(SENSOR_PREFIX) and c not in SENSOR_COLUMNS)
-    out: dict[str, np.ndarray] = {}
+    out: dict[str, np.ndarray] = _ValidatedLog()
     for name in NUMERIC_COLUMNS:
         out[name] = np.asarray(log[name], dtype=float).reshape(-1)
     for name in (*BOOLEAN_COLUMNS, *extra_sensors):

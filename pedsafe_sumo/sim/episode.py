@@ -92,7 +92,7 @@ from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.kerb import check_parked, kerb_parked, park_at_kerb, parking_xml, with_additional
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
 from pedsafe_sumo.sim.road_map import load_net_map
-from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre, yaw_rad_to_sumo_angle
+from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
 CONDITIONS = ("sv", "v2i")
 DEFAULT_ALGORITHM = "pedsafe_sumo.control.reference:ReferenceStack"
@@ -277,12 +277,15 @@ def _move_pedestrian(api, pose, radius_m: float) -> None:
     then centred on our circle (with the position itself, the box trailed 0.6 m behind the circle and
     SUMO saw contacts at 0.2-0.3 m of our clearance, e.g. with yielders stepping back).
     """
+    # units.yaw_rad_to_sumo_angle on one float, in math: the same bits (numpy's rad2deg and math.degrees
+    # multiply by the same 180/pi, np.mod and % are both Python's modulo; 2 M angles checked), without
+    # numpy's per-call cost on a scalar (~4 us per step on a quiet machine; BENCHMARKS.md, session 6).
     api.person.moveToXY(
         PED_ID,
         "",
         pose.x_m + radius_m * math.cos(pose.heading_rad),
         pose.y_m + radius_m * math.sin(pose.heading_rad),
-        angle=yaw_rad_to_sumo_angle(pose.heading_rad),
+        angle=(90.0 - math.degrees(pose.heading_rad)) % 360.0,
         keepRoute=2,
         matchThreshold=PED_MATCH_RADIUS_M,
     )
