@@ -82,14 +82,29 @@ class Restorer:
     def __init__(self, mode: str = "reseed") -> None:
         #: "reseed": the generators written for the episode's seed; "plain": as saved; "load_first":
         #: a `load` with the episode's arguments, then the plain restore (a diagnosis, not a saving: the
-        #: generators are the load's, everything else the restored state's).
-        self.mode = mode
+        #: generators are the load's, everything else the restored state's); "load_first_other_seed":
+        #: the same with the load's --seed one higher (generators of another seed, nothing else changed).
+        #: "+clear": remove every vehicle and person and step once before the restore.
+        self.clear = "+clear" in mode
+        #: "+unsubscribe": drop every vehicle subscription before the restore (a load drops them all).
+        self.unsubscribe = "+unsubscribe" in mode
+        self.mode = mode.split("+")[0]
+        self.report_stale = not self.unsubscribe
+        self.stale: list[int] = []
+        self.reset_s = 0.0
         self.base: list[str] | None = None
         self.template = ""
         self.lanes = 0
         self.restored = self.loaded = 0
 
     def run(self, session, args) -> None:
+        started = time.perf_counter()
+        try:
+            self._run(session, args)
+        finally:
+            self.reset_s += time.perf_counter() - started
+
+    def _run(self, session, args) -> None:
         args = [*args, "--save-state.rng", "true"]
         if (
             self.base is not None
@@ -101,9 +116,27 @@ class Restorer:
             path = STATE_DIR / "episode.xml"
             if self.mode == "load_first":
                 REAL_RUN(session, args)
+            elif self.mode == "load_first_other_seed":
+                other = list(args)
+                other[other.index("--seed") + 1] = str((seed_of(args) + 1) % 2_147_483_647)
+                REAL_RUN(session, other)
             element = rng_element(seed_of(args), self.lanes) if self.mode == "reseed" else self.plain
             path.write_text(self.template.replace("@RNG@", element), encoding="utf-8")
+            if self.unsubscribe:
+                stale = list(session.api.vehicle.getAllSubscriptionResults())
+                self.stale.append(len(stale))
+                for vehicle_id in stale:
+                    session.api.vehicle.unsubscribe(vehicle_id)
+            if self.clear:
+                api = session.api
+                for vehicle_id in api.vehicle.getIDList():
+                    api.vehicle.remove(vehicle_id)
+                for person_id in api.person.getIDList():
+                    api.person.remove(person_id)
+                api.simulation.step()
             session.api.simulation.loadState(str(path))
+            if self.report_stale:
+                self.stale.append(len(session.api.vehicle.getAllSubscriptionResults()))
             self.restored += 1
             return
         REAL_RUN(session, args)
@@ -123,6 +156,7 @@ class Restorer:
 
 
 REAL_RUN = connection.SumoSession.run
+MODES = ("plain", "reseed", "load_first", "load_first_other_seed")
 
 
 def chunks_for(site: str | None, pairs: int, approach: str | None = None):
@@ -268,32 +302,47 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=5, help="pairs per scenario for the identity check")
     parser.add_argument("--calls", type=int, default=40, help="resets timed per way")
     parser.add_argument("--site", help="a site folder (default: the batch's default site)")
+    parser.add_argument("--modes", default=",".join(MODES), help="restore modes to check (Restorer)")
     parser.add_argument("--approach", help="the batch's --approach (N, S: zhixin's one-lane arms)")
     args = parser.parse_args()
     plan, chunks = chunks_for(args.site, args.pairs, args.approach)
 
     captured: list[list[str]] = []
 
+    load_s = [0.0]
+
     def capture(self, sumo_args):
         captured.append(list(sumo_args))
-        return REAL_RUN(self, sumo_args)
+        started = time.perf_counter()
+        try:
+            return REAL_RUN(self, sumo_args)
+        finally:
+            load_s[0] += time.perf_counter() - started
 
     connection.SumoSession.run = capture
     try:
         reference = run_all(plan, chunks)
     finally:
         connection.SumoSession.run = REAL_RUN
+    print(f"load: {1e6 * load_s[0] / len(captured):.0f} us per episode's reset")
     with_files = sum("-a" in a for a in captured)
     print(f"{len(reference)} rows with load; {with_files} of {len(captured)} name an additional file")
 
-    for mode in ("reseed", "load_first"):
+    for mode in args.modes.split(","):
         restorer = Restorer(mode)
         connection.SumoSession.run = lambda self, a, r=restorer: r.run(self, a)
         try:
             restored = run_all(plan, chunks)
         finally:
             connection.SumoSession.run = REAL_RUN
-        print(f"restore ({mode}): {restorer.restored} episodes restored, {restorer.loaded} loaded")
+        print(
+            f"restore ({mode}): {restorer.restored} episodes restored, {restorer.loaded} loaded, "
+            f"{1e6 * restorer.reset_s / (restorer.restored + restorer.loaded):.0f} us per episode's reset"
+        )
+        if restorer.stale:
+            what = "unsubscribed before" if restorer.unsubscribe else "still subscribed after"
+            print(f"  vehicle subscriptions {what} each restore: max {max(restorer.stale)}, "
+                  f"total {sum(restorer.stale)}")  # fmt: skip
         compare(reference, restored)
 
     if with_files:
