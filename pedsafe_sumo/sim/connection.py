@@ -9,10 +9,29 @@ component that needs it").
 One SUMO instance serves a worker for all its episodes: the first episode starts it, later ones
 reload it with `load` (about 7 ms on the Xueqing network, against about 10 ms for a start and much
 more for a new sumo-gui process), which resets the simulation to time 0 with new options.
+
+Headless, an episode whose options differ from the last load's only in `--seed` and that loads no
+additional file is instead restored from the state saved right after that load (`simulation.loadState`,
+about 1.5 ms; docs/engine.md "Restoring a saved state instead of load"): its rows are bit-identical to a
+load's (benchmarks/bench_load_state.py, tools/compare_runs_exact.py). Two things make that so, and one
+limits it:
+- before the restore every vehicle and person is removed through TraCI and SUMO steps once, and every
+  vehicle subscription is dropped: `loadState` alone leaves state behind that changes later episodes
+  (from the second episode on, rows differ without this);
+- a restore keeps SUMO's random number generators where the last episode left them (SUMO 1.28 does not
+  apply generator states written into a state file, and has no call to reseed): the episode's
+  `--seed` is not applied. The staging draws nothing from SUMO that reaches a row (checked: episodes
+  loaded with another `--seed` give the same rows), so the rows do not change; a staging that lets
+  SUMO's own randomness act (driver imperfection, SUMO-drawn departures) must load, `restore_state=False`;
+- a state holds no infrastructure: an episode with an additional file (the kerb parking areas of a
+  one-lane site, sim/kerb.py) loads, and the next one loads too (a restore would keep those parking areas).
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
+import weakref
 from collections.abc import Sequence
 from types import ModuleType
 
@@ -30,10 +49,16 @@ class _NeverRaisedError(Exception):
 class SumoSession:
     """A SUMO instance for one worker: libsumo headless, or traci + sumo-gui when `gui` is set."""
 
-    def __init__(self, gui: bool = False, label: str = "pedsafe") -> None:
+    def __init__(self, gui: bool = False, label: str = "pedsafe", restore_state: bool = True) -> None:
         self.gui = gui
         self.label = label
         self._started = False
+        #: Restore the state saved after the last load instead of loading again, where that gives the same
+        #: episode (module docstring); libsumo only.
+        self.restore_state = restore_state and not gui
+        #: The last load's options without its --seed, when its state is saved in _state_file.
+        self._base_args: list[str] | None = None
+        self._state_file: str | None = None
         self.api: ModuleType
         if gui:
             import traci
@@ -59,7 +84,38 @@ class SumoSession:
         return self._lost
 
     def run(self, args: Sequence[str]) -> None:
-        """Start SUMO with `args` (options only, no binary) or reload the running instance with them."""
+        """Start SUMO with `args` (options only, no binary) or reload the running instance with them (or
+        restore the state saved after the last load, where that is the same: module docstring)."""
+        args = list(args)
+        if self._started and self._base_args is not None and _without_seed(args) == self._base_args:
+            try:
+                self._restore()
+                return
+            except self._exception:
+                self._base_args = None  # load instead, below
+        self._base_args = None
+        self._load(args)
+        if self.restore_state and "--seed" in args and not _loads_additional_files(args):
+            if self._state_file is None:
+                handle, self._state_file = tempfile.mkstemp(prefix="pedsafe_state_", suffix=".xml")
+                os.close(handle)
+                weakref.finalize(self, _remove, self._state_file)
+            self.api.simulation.saveState(self._state_file)
+            self._base_args = _without_seed(args)
+
+    def _restore(self) -> None:
+        api = self.api
+        # In this order (benchmarks/bench_load_state.py): subscriptions, then the road users, one step.
+        for vehicle_id in list(api.vehicle.getAllSubscriptionResults()):
+            api.vehicle.unsubscribe(vehicle_id)
+        for vehicle_id in api.vehicle.getIDList():
+            api.vehicle.remove(vehicle_id)
+        for person_id in api.person.getIDList():
+            api.person.remove(person_id)
+        api.simulation.step()
+        api.simulation.loadState(self._state_file)
+
+    def _load(self, args: list[str]) -> None:
         try:
             if not self._started:
                 try:
@@ -81,6 +137,7 @@ class SumoSession:
             raise SimulatorError(f"SUMO could not start: {exc}") from None
 
     def close(self) -> None:
+        self._base_args = None
         if self._started:
             try:
                 self.api.close()
@@ -92,3 +149,21 @@ class SumoSession:
 
     def __exit__(self, *exc_info) -> None:
         self.close()
+
+
+def _without_seed(args: list[str]) -> list[str]:
+    if "--seed" not in args:
+        return args
+    at = args.index("--seed")
+    return [*args[:at], *args[at + 2 :]]
+
+
+def _loads_additional_files(args: list[str]) -> bool:
+    return any(a in ("-a", "--additional-files") or a.startswith("--additional-files=") for a in args)
+
+
+def _remove(path: str) -> None:
+    try:
+        os.remove(path)
+    except OSError:
+        pass
