@@ -88,6 +88,8 @@ class Restorer:
         self.clear = "+clear" in mode
         #: "+unsubscribe": drop every vehicle subscription before the restore (a load drops them all).
         self.unsubscribe = "+unsubscribe" in mode
+        #: "+norng": no --save-state.rng (the state file without generators, as sim/connection.py saves it).
+        self.norng = "+norng" in mode
         self.mode = mode.split("+")[0]
         self.report_stale = not self.unsubscribe
         self.stale: list[int] = []
@@ -105,7 +107,8 @@ class Restorer:
             self.reset_s += time.perf_counter() - started
 
     def _run(self, session, args) -> None:
-        args = [*args, "--save-state.rng", "true"]
+        if not self.norng:
+            args = [*args, "--save-state.rng", "true"]
         if (
             self.base is not None
             and session._started
@@ -149,7 +152,10 @@ class Restorer:
         base_file = STATE_DIR / "base.xml"
         session.api.simulation.saveState(str(base_file))
         text = base_file.read_text(encoding="utf-8")
-        self.plain = re.search(r"<rngState.*?</rngState>", text, flags=re.S).group(0)
+        found = re.search(r"<rngState.*?</rngState>", text, flags=re.S)
+        self.plain = found.group(0) if found else "<!-- no generators -->"
+        if not found:
+            text = text.replace("<snapshot ", self.plain + "\n<snapshot ", 1)
         self.lanes = len(re.findall(r"<rngLane ", text))
         self.template = text.replace(self.plain, "@RNG@")
         self.base = without_seed(args)

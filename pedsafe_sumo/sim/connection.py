@@ -13,16 +13,16 @@ more for a new sumo-gui process), which resets the simulation to time 0 with new
 Headless, an episode whose options differ from the last load's only in `--seed` and that loads no
 additional file is instead restored from the state saved right after that load (`simulation.loadState`,
 about 1.5 ms; docs/engine.md "Restoring a saved state instead of load"): its rows are bit-identical to a
-load's (benchmarks/bench_load_state.py, tools/compare_runs_exact.py). Two things make that so, and one
-limits it:
-- before the restore every vehicle and person is removed through TraCI and SUMO steps once, and every
-  vehicle subscription is dropped: `loadState` alone leaves state behind that changes later episodes
-  (from the second episode on, rows differ without this);
-- a restore keeps SUMO's random number generators where the last episode left them (SUMO 1.28 does not
-  apply generator states written into a state file, and has no call to reseed): the episode's
-  `--seed` is not applied. The staging draws nothing from SUMO that reaches a row (checked: episodes
-  loaded with another `--seed` give the same rows), so the rows do not change; a staging that lets
-  SUMO's own randomness act (driver imperfection, SUMO-drawn departures) must load, `restore_state=False`;
+load's (benchmarks/bench_load_state.py, tools/compare_runs_exact.py). What makes that so, and its limits:
+- the state is saved without SUMO's random number generators (no --save-state.rng): with them in the
+  file, restored episodes differ from loaded ones from the second on (measured, mechanism not found);
+- a restore keeps SUMO's generators where the last episode left them (SUMO 1.28 does not apply generator
+  states written into a state file, and has no call to reseed): the episode's `--seed` is not applied.
+  The staging draws nothing from SUMO that reaches a row (checked: episodes loaded with another `--seed`
+  give the same rows), so the rows do not change; a staging that lets SUMO's own randomness act (driver
+  imperfection, SUMO-drawn departures) must load: `restore_state=False`;
+- vehicle subscriptions are dropped before `loadState` (their last results stay readable after it until
+  the next step; no test saw them act on a later episode, but a load drops them too);
 - a state holds no infrastructure: an episode with an additional file (the kerb parking areas of a
   one-lane site, sim/kerb.py) loads, and the next one loads too (a restore would keep those parking areas).
 """
@@ -105,14 +105,8 @@ class SumoSession:
 
     def _restore(self) -> None:
         api = self.api
-        # In this order (benchmarks/bench_load_state.py): subscriptions, then the road users, one step.
         for vehicle_id in list(api.vehicle.getAllSubscriptionResults()):
             api.vehicle.unsubscribe(vehicle_id)
-        for vehicle_id in api.vehicle.getIDList():
-            api.vehicle.remove(vehicle_id)
-        for person_id in api.person.getIDList():
-            api.person.remove(person_id)
-        api.simulation.step()
         api.simulation.loadState(self._state_file)
 
     def _load(self, args: list[str]) -> None:
