@@ -16,8 +16,9 @@ about 1.5 ms; docs/engine.md "Restoring a saved state instead of load"): its row
 load's (benchmarks/bench_load_state.py, tools/compare_runs_exact.py). What makes that so, and its limits:
 - the state is saved without SUMO's random number generators (no --save-state.rng): with them in the
   file, restored episodes differ from loaded ones from the second on (measured, mechanism not found);
-- a restore keeps SUMO's generators where the last episode left them (SUMO 1.28 does not apply generator
-  states written into a state file, and has no call to reseed): the episode's `--seed` is not applied.
+- a restore keeps SUMO's generators where the last episode left them (generator states written into a
+  state file did not reach SUMO 1.28's draws, and TraCI has no call to reseed): the episode's `--seed`
+  is not applied.
   The staging draws nothing from SUMO that reaches a row (checked: episodes loaded with another `--seed`
   give the same rows), so the rows do not change; a staging that lets SUMO's own randomness act (driver
   imperfection, SUMO-drawn departures) must load: `restore_state=False`;
