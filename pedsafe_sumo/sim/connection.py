@@ -22,6 +22,10 @@ load's (benchmarks/bench_load_state.py, tools/compare_runs_exact.py). What makes
   The staging draws nothing from SUMO that reaches a row (checked: episodes loaded with another `--seed`
   give the same rows), so the rows do not change; a staging that lets SUMO's own randomness act (driver
   imperfection, SUMO-drawn departures) must load: `restore_state=False`;
+- a state holds no traffic light programs (only which one runs, and its phase): a program that TraCI
+  replaced (setProgramLogic; the staging does not) would stay replaced, so the programs after a restore
+  are checked against those read after the load, and the episode loads when they differ;
+- libsumo is one simulation per process: a session restores only if no other session loaded since;
 - vehicle subscriptions are dropped before `loadState` (their last results stay readable after it until
   the next step; no test saw them act on a later episode, but a load drops them too);
 - a state holds no infrastructure: an episode with an additional file (the kerb parking areas of a
@@ -37,6 +41,11 @@ from collections.abc import Sequence
 from types import ModuleType
 
 from pedsafe_sumo.sumo_binaries import sumo_binary
+
+#: The session that last loaded, started or restored libsumo: libsumo is one simulation per process, so
+#: two sessions in one process (two runners, as in tests) take turns in it, and a session may restore its
+#: saved state only when nobody loaded anything since (another network, other options).
+_libsumo_user: list[object | None] = [None]
 
 
 class SimulatorError(RuntimeError):
@@ -60,6 +69,9 @@ class SumoSession:
         #: The last load's options without its --seed, when its state is saved in _state_file.
         self._base_args: list[str] | None = None
         self._state_file: str | None = None
+        #: Every traffic light's programs right after that load (a restore must give them back).
+        self._signal_programs: tuple = ()
+        self._token = object()  # this session, in _libsumo_user (no reference to the session itself)
         self.api: ModuleType
         if gui:
             import traci
@@ -88,27 +100,63 @@ class SumoSession:
         """Start SUMO with `args` (options only, no binary) or reload the running instance with them (or
         restore the state saved after the last load, where that is the same: module docstring)."""
         args = list(args)
-        if self._started and self._base_args is not None and _without_seed(args) == self._base_args:
+        if (
+            self._started
+            and self._base_args is not None
+            and _without_seed(args) == self._base_args
+            and _libsumo_user[0] is self._token
+        ):
             try:
-                self._restore()
-                return
+                if self._restore():
+                    return
             except self._exception:
-                self._base_args = None  # load instead, below
+                pass  # load instead, below
         self._base_args = None
         self._load(args)
+        if not self.gui:
+            _libsumo_user[0] = self._token
         if self.restore_state and "--seed" in args and not _loads_additional_files(args):
             if self._state_file is None:
                 handle, self._state_file = tempfile.mkstemp(prefix="pedsafe_state_", suffix=".xml")
                 os.close(handle)
                 weakref.finalize(self, _remove, self._state_file)
             self.api.simulation.saveState(self._state_file)
+            self._signal_programs = self._programs()
             self._base_args = _without_seed(args)
 
-    def _restore(self) -> None:
+    def _restore(self) -> bool:
+        """Restore the saved state; False when it does not give the loaded simulation back (a load is due)."""
         api = self.api
         for vehicle_id in list(api.vehicle.getAllSubscriptionResults()):
             api.vehicle.unsubscribe(vehicle_id)
         api.simulation.loadState(self._state_file)
+        # A state holds which program each traffic light runs and where in it, not the programs: one that
+        # TraCI replaced stays replaced.
+        return self._programs() == self._signal_programs
+
+    def _programs(self) -> tuple:
+        tl = self.api.trafficlight
+
+        def phases(logic) -> tuple:
+            return tuple((p.duration, p.state, p.minDur, p.maxDur, p.next, p.name) for p in logic.phases)
+
+        return tuple(
+            (
+                tls,
+                tl.getProgram(tls),
+                tuple(
+                    (
+                        logic.programID,
+                        logic.type,
+                        logic.currentPhaseIndex,
+                        phases(logic),
+                        tuple(sorted(logic.subParameter.items())),
+                    )
+                    for logic in tl.getAllProgramLogics(tls)
+                ),
+            )
+            for tls in tl.getIDList()
+        )
 
     def _load(self, args: list[str]) -> None:
         try:
@@ -133,6 +181,8 @@ class SumoSession:
 
     def close(self) -> None:
         self._base_args = None
+        if _libsumo_user[0] is self._token:
+            _libsumo_user[0] = None
         if self._started:
             try:
                 self.api.close()

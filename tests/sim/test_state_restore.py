@@ -185,3 +185,60 @@ def test_a_batchs_rows_are_the_same_with_restores():
     assert loaded_calls == [] and len(restored_calls) == len(loaded) - 1
     assert (loaded["status"] == "ok").all()
     pd.testing.assert_frame_equal(loaded, restored, check_exact=True)
+
+
+def test_a_signal_program_changed_through_traci_makes_the_next_episode_load():
+    """A state holds which program a traffic light runs and where in it, not the program: one that TraCI
+    replaced (setProgramLogic) would stay replaced after a restore; the session sees it and loads."""
+    session = connection.SumoSession()
+    api = session.api
+    results: list[bool] = []
+    real_restore = session._restore
+    session._restore = lambda: (results.append(real_restore()), results[-1])[1]
+
+    def durations(tls: str) -> list[float]:
+        return [p.duration for p in api.trafficlight.getAllProgramLogics(tls)[0].phases]
+
+    try:
+        session.run(_net_args(1))
+        tls = api.trafficlight.getIDList()[0]
+        pristine = durations(tls)
+        logic = api.trafficlight.getAllProgramLogics(tls)[0]
+        logic.phases[0].duration = logic.phases[0].minDur = logic.phases[0].maxDur = pristine[0] + 7.0
+        api.trafficlight.setProgramLogic(tls, logic)
+        api.simulation.step()
+        assert durations(tls)[0] == pristine[0] + 7.0
+        session.run(_net_args(2))
+        assert results == [False]  # restored, found changed, loaded
+        assert durations(tls) == pristine
+        session.run(_net_args(3))
+        assert results == [False, True]
+        assert durations(tls) == pristine
+    finally:
+        session.close()
+
+
+def test_two_sessions_in_one_process_take_turns_in_libsumo():
+    """libsumo is one simulation per process: after another session loaded (here another network), a
+    session's saved state is not restored into it; it loads its own network."""
+    first, second = connection.SumoSession(), connection.SumoSession()
+    api = first.api
+    restores: list[str] = []
+    for name, session in (("first", first), ("second", second)):
+        real = session._restore
+        session._restore = lambda real=real, name=name: (restores.append(name), real())[1]
+    other = get_site("xueqing_two_phase").file("net.xml")
+    try:
+        first.run(_net_args(1))
+        second.run(["-n", str(other), "--seed", "1", "--no-step-log", "true"])
+        assert api.simulation.getNetBoundary() != ()  # the other network runs now
+        net_files = []
+        first.run(_net_args(2))
+        net_files.append(api.simulation.getOption("net-file"))
+        first.run(_net_args(3))
+        net_files.append(api.simulation.getOption("net-file"))
+        assert restores == ["first"]  # the second run of `first` loaded, its third restored
+        assert net_files == [str(SITE.file("net.xml"))] * 2
+    finally:
+        second.close()
+        first.close()
