@@ -341,8 +341,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--protocol",
         type=Path,
         metavar="FILE.toml",
-        help="run a protocol file (protocols/): it fixes every value; only --episodes and --workers may "
-        "override it (docs/protocols.md)",
+        help="run a protocol file (protocols/): it fixes every value of the model; beside it only --episodes,"
+        " how the run is carried out (--workers, --recycle-chunks, --keep-logs, --out) and how it samples "
+        "(--sampler, --is-*) may be given (docs/protocols.md)",
     )
     return parser.parse_args(argv)
 
@@ -663,7 +664,8 @@ def _with_protocol(
     if args.protocol is not None and given:
         flags = ", ".join(f"--{name.replace('_', '-')}" for name in given)
         raise UsageError(
-            f"--protocol fixes every value: {flags} cannot be given with it (only --episodes, --workers)"
+            f"--protocol fixes every value: {flags} cannot be given with it (only --episodes, --workers, "
+            "--recycle-chunks, --keep-logs, --out, --sampler and --is-*)"
         )
     protocol = load_protocol(Path(arguments["protocol"]))
     if recorded is not None and recorded.get("protocol", {}).get("sha256") != protocol.sha256:

@@ -26,6 +26,7 @@ import pytest
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.network.sites import resolve_site
+from pedsafe_sumo.sumo_net import read_net
 
 DATA = Path(__file__).parent / "data" / "osm"
 TOOL = REPO_ROOT / "tools" / "build_network.py"
@@ -85,7 +86,7 @@ def test_sumo_reports_the_parked_cars_at_the_kerb(zhixin, runner, arm):
     import sumolib
 
     site = resolve_site(str(zhixin))
-    net = sumolib.net.readNet(str(site.file("net.xml")))
+    net = read_net(site.file("net.xml"))
     seen: dict[str, tuple] = {}
 
     def first_step(api, row) -> None:
@@ -140,6 +141,7 @@ def test_sumo_fcd_output_puts_a_parked_car_where_getposition_does(zhixin, tmp_pa
         import sys
         import libsumo as api
         from pedsafe_sumo.network.sites import resolve_site
+from pedsafe_sumo.sumo_net import read_net
         from pedsafe_sumo.scenarios.geometry import load_approach
         from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES, VehicleSetup, kerb_parking_offset_m
         from pedsafe_sumo.sim.kerb import check_parked, park_at_kerb, parking_xml, space_pose
