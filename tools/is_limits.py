@@ -40,6 +40,7 @@ from scipy import optimize, special
 
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL, Categorical, Product
+from pedsafe_sumo.sampling.joint import JointProposal, is_joint_json
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 #: Ridge penalty of the logistic fit (on standardised inputs); small against 10,000 rows.
@@ -83,6 +84,16 @@ def proposal_efficiency(
     variance = float(np.mean(w * f**2)) - p_hat**2
     efficiency = p_hat * (1 - p_hat) / variance if variance > 0 else math.inf
     return efficiency, float(np.mean(1.0 / w))  # E_p[q_mix / p] = 1: a check of the proposal's density
+
+
+def joint_efficiency(f: np.ndarray, inputs: pd.DataFrame, joint: JointProposal) -> tuple[float, float]:
+    """Item 1 for a joint proposal (sampling/joint.py): w = 1 / (q/p), q/p = lambda + (1 - lambda)
+    sqrt(pi_hat) / c, the defensive mixture being part of q."""
+    ratio = joint.q_over_p({name: inputs[name].to_numpy(dtype=float) for name in joint.names})
+    w = 1.0 / ratio
+    p_hat = float(np.mean(f))
+    variance = float(np.mean(w * f**2)) - p_hat**2
+    return (p_hat * (1 - p_hat) / variance if variance > 0 else math.inf), float(np.mean(ratio))
 
 
 def product_fit_efficiency(
@@ -206,6 +217,12 @@ def main(argv: list[str] | None = None) -> int:
         row.update(r2=r2, sqrt_pi=sqrt_pi, sqrt_pi_halves_differ=spread)
         if args.proposal:
             final = proposals[scenario][args.stage]
+            if is_joint_json(final):  # --is-family joint: q/p from the stored coefficients
+                joint = JointProposal.from_json(final)
+                row["proposed"] = "joint:" + ",".join(joint.names)
+                row["proposal_efficiency"], row["mean_q_over_p"] = joint_efficiency(y, inputs, joint)
+                out.append(row)
+                continue
             proposal = product_from_json(final) if final else Product({})
             row["proposed"] = ",".join(sorted(proposal.families)) or "-"
             row["proposal_efficiency"], row["mean_q_over_p"] = proposal_efficiency(

@@ -76,6 +76,18 @@ def compare(is_rows: pd.DataFrame, mc_rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def markdown_table(table: pd.DataFrame) -> str:
+    """The table as a Markdown pipe table, floats to 4 places (pandas' to_markdown needs tabulate, which the
+    project does not install)."""
+
+    def cell(value) -> str:
+        return f"{value:.4f}" if isinstance(value, float) else str(value)
+
+    lines = ["| " + " | ".join(map(str, table.columns)) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in table.itertuples(index=False)]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("is_run", type=Path)
@@ -88,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.markdown:
-        print(table.to_markdown(index=False, floatfmt=".4f"))
+        print(markdown_table(table))
     else:
         with pd.option_context("display.width", 250, "display.max_columns", 30):
             print(table.to_string(index=False, float_format=lambda v: f"{v:.4f}"))

@@ -45,6 +45,8 @@ from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.batch.sampled import (
+    FAMILIES,
+    FAMILY_PRODUCT,
     SAMPLER_IS,
     SAMPLER_MC,
     SamplerError,
@@ -119,6 +121,7 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     # TTC since session 6: the clearance score drove the proposal away from collisions on Xueqing's
     # crossing; the TTC score agreed with plain MC on all four scenarios (docs/sampling.md).
     "is_score": SCORE_TTC,
+    "is_family": FAMILY_PRODUCT,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a
 #: key missing from an older run.json with this, not with today's default, so the run stays the same run.
@@ -319,6 +322,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         f"[{SCORE_TTC}]",
     )
     parser.add_argument(
+        "--is-family",
+        choices=FAMILIES,
+        dest="is_family",
+        help="--sampler is: the proposal's shape: 'product' = one family per input, refitted by the "
+        "cross-entropy method; 'joint' = p sqrt(pi_hat) with pi_hat a logistic fit of the collision on "
+        f"every pilot row so far, drawn by rejection (docs/sampling.md) [{FAMILY_PRODUCT}]",
+    )
+    parser.add_argument(
         "--is-proposal",
         dest="is_proposal",
         metavar="RUN",
@@ -492,6 +503,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "is_inputs",
         "is_min_spread",
         "is_score",
+        "is_family",
         "is_proposal",
     )
     if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
@@ -499,7 +511,14 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(f"{given}: need --sampler is")
     if arguments.get("is_proposal") and any(
         name in explicit
-        for name in ("is_pilot_stages", "is_pilot_episodes", "is_inputs", "is_min_spread", "is_score")
+        for name in (
+            "is_pilot_stages",
+            "is_pilot_episodes",
+            "is_inputs",
+            "is_min_spread",
+            "is_score",
+            "is_family",
+        )
     ):
         raise UsageError(
             "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"

@@ -249,9 +249,9 @@ def sampler_proposal(text: str) -> Any:
     if not text:
         return None
     if text not in _PROPOSALS:
-        from pedsafe_sumo.sampling.draws import product_from_json
+        from pedsafe_sumo.sampling.joint import proposal_of_json
 
-        _PROPOSALS[text] = product_from_json(text).families
+        _PROPOSALS[text] = proposal_of_json(text)
     return _PROPOSALS[text]
 
 

@@ -19,6 +19,8 @@ from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
 from pedsafe_sumo.io.run_store import read_parts
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
+from pedsafe_sumo.sampling.joint import NORM_DRAWS, joint_update
+from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
     COLLISION_SCORE,
@@ -33,6 +35,10 @@ from pedsafe_sumo.sampling.stages import (
     stage_layout,
 )
 
+#: --is-family: the cross-entropy product of one family per input, or the joint sqrt(pi_hat) proposal.
+FAMILY_PRODUCT = "product"
+FAMILY_JOINT = "joint"
+FAMILIES = (FAMILY_PRODUCT, FAMILY_JOINT)
 SAMPLER_MC = "mc"
 SAMPLER_IS = "is"
 PROPOSALS_KEY = "sampler_proposals"
@@ -70,6 +76,9 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
         "screen_p_value": SCREEN_P_VALUE,
         "min_spread_of_nominal": float(arguments["is_min_spread"]),
     }
+    if arguments.get("is_family", FAMILY_PRODUCT) != FAMILY_PRODUCT:
+        # Only when not the product, so that product runs keep their identity.
+        identity.update(family=arguments["is_family"], ridge=JOINT_RIDGE, norm_draws=NORM_DRAWS)
     if arguments.get("is_score", SCORE_CLEARANCE) != SCORE_CLEARANCE:
         # Only when not the first score, so that runs made before --is-score keep their identity.
         identity.update(score="collision: 1 + impact_speed_mps; otherwise -min_ttc_s", score_kind=SCORE_TTC)
@@ -141,6 +150,40 @@ def _stage_of(chunk: Chunk) -> int:
     return chunk.tasks[0].stage
 
 
+def _joint_stage(
+    plan: Any,
+    identity: dict[str, Any],
+    proposals: dict[str, list[str]],
+    run_dir: Any,
+    scenario: str,
+    stage: int,
+    levels: dict[str, list[dict[str, Any]]],
+) -> str:
+    """`--is-family joint`: the proposal of `stage`, fitted on the SV rows of every pilot stage before it
+    (sampling/joint.py); "" (the nominal) while those rows hold no collision."""
+    earlier = [
+        c
+        for c in plan_sampled_chunks([scenario], plan.conditions, identity, proposals)
+        if _stage_of(c) < stage
+    ]
+    rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in earlier])
+    proposal, n_collisions = joint_update(
+        rows, ADAPT_CONDITION, float(identity["sampler"]["defensive_share"])
+    )
+    levels.setdefault(scenario, []).append(
+        {
+            "after_stage": stage - 1,
+            "family": FAMILY_JOINT,
+            "n_rows_sv": int(((rows["condition"] == ADAPT_CONDITION) & (rows["status"] == "ok")).sum()),
+            "n_collisions_sv": n_collisions,
+            "proposed": proposal.names if proposal else [],
+            "norm": proposal.norm if proposal else None,
+            "mean_tries": proposal.bound if proposal else None,
+        }
+    )
+    return proposal.to_json() if proposal else ""
+
+
 def run_sampled(
     plan: Any, backend: Any, run_dir: Any, run_info: dict[str, Any], on_chunk_done: Any
 ) -> list[Chunk]:
@@ -160,6 +203,9 @@ def run_sampled(
             shared = identity["sampler"].get(SHARED_KEY)
             if shared is not None:  # --is-proposal: the other run's proposal, not refitted
                 known.append(shared[scenario][stage])
+                continue
+            if identity["sampler"].get("family", FAMILY_PRODUCT) == FAMILY_JOINT:
+                known.append(_joint_stage(plan, identity, proposals, run_dir, scenario, stage, levels))
                 continue
             previous = [
                 c

@@ -63,10 +63,18 @@ class Draws:
     def __init__(
         self,
         rng: np.random.Generator,
-        proposal: Mapping[str, Family] | None = None,
+        proposal: Mapping[str, Family] | Any | None = None,
         defensive_share: float = 0.0,
     ) -> None:
         self.rng = rng
+        #: A joint proposal (sampling/joint.py): every input it names is drawn up front, jointly, by
+        #: rejection from the nominal with this Generator; it carries its own defensive share and weight.
+        self.joint = proposal if getattr(proposal, "is_joint", False) else None
+        self._joint_inputs: dict[str, float] = {}
+        self._joint_log_weight = 0.0
+        if self.joint is not None:
+            self._joint_inputs, self._joint_log_weight = self.joint.sample(rng)
+            proposal, defensive_share = None, 0.0
         self.proposal: Mapping[str, Family] = proposal or {}
         #: name -> the input on its nominal family's scale, in the order drawn.
         self.inputs: dict[str, float] = {}
@@ -81,6 +89,8 @@ class Draws:
     @property
     def log_weight(self) -> float:
         """ln of the likelihood ratio of the episode's inputs (0 without a proposal)."""
+        if self.joint is not None:
+            return self._joint_log_weight
         if self.defensive_share <= 0:
             return self.log_ratio
         lam = self.defensive_share
@@ -104,6 +114,13 @@ class Draws:
         names it; `encode` maps a native value onto the family's scale, `decode` back."""
         if name in self.inputs:
             raise ValueError(f"input '{name}' drawn twice in one episode")
+        if self.joint is not None and nominal is not None and name in self._joint_inputs:
+            if family_to_json(nominal) != family_to_json(self.joint.nominal[name]):
+                raise ValueError(f"input '{name}': its nominal law differs from the joint proposal's")
+            x = self._joint_inputs[name]
+            self.inputs[name] = x
+            self.nominals[name] = nominal
+            return decode(x)
         q = self.proposal.get(name) if nominal is not None else None
         if q is None or self.nominal_branch:
             value = native(self.rng)

@@ -29,6 +29,8 @@ CROSSING = ["--scenario", "crossing", "--episodes", "2"]
         (["--sampler", "is", "--is-pilot-episodes", "1000000000000"], "--is-pilot-episodes must lie in"),
         (["--is-pilot-stages", "2"], "need --sampler is"),
         (["--is-inputs", "all"], "--is-inputs: need --sampler is"),
+        (["--is-family", "joint"], "--is-family: need --sampler is"),
+        (["--sampler", "is", "--is-family", "mixture"], "invalid choice"),
         (["--sampler", "is", "--is-inputs", "some"], "invalid choice"),
         (["--sampler", "is", "--is-min-spread", "0.01"], "--is-min-spread must lie in 0.05..1"),
         (["--sampler", "is", "--is-min-spread", "1000000000000"], "--is-min-spread must lie in 0.05..1"),

@@ -141,7 +141,6 @@ def test_sumo_fcd_output_puts_a_parked_car_where_getposition_does(zhixin, tmp_pa
         import sys
         import libsumo as api
         from pedsafe_sumo.network.sites import resolve_site
-from pedsafe_sumo.sumo_net import read_net
         from pedsafe_sumo.scenarios.geometry import load_approach
         from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES, VehicleSetup, kerb_parking_offset_m
         from pedsafe_sumo.sim.kerb import check_parked, park_at_kerb, parking_xml, space_pose

@@ -1,0 +1,226 @@
+"""A joint proposal over the episode's proposable inputs, learned from the pilot stages (`--is-family joint`).
+
+The cross-entropy stages fit a product of one family per input; a collision is a joint condition (a fast
+ego with an early, fast pedestrian), and the product puts mass on combinations that do not collide
+(EXPERIMENTS.md, "Importance sampling, session 6"). For an event that stays random given the inputs x,
+with pi(x) = P(collision | x), the proposal of least variance is q ∝ p sqrt(pi) (Owen, Monte Carlo theory,
+methods and examples, 2013, section 9.1). Here
+
+    q(x) = lambda p(x) + (1 - lambda) p(x) sqrt(pi_hat(x)) / c,     c = E_p[sqrt(pi_hat)],
+
+with pi_hat a ridge logistic regression of the SV collision on the pilots' inputs (each continuous input
+standardised by its nominal's mean and sd, its square and the pairwise products; categories as
+indicators), lambda the defensive share. pi is a conditional probability, so the rows of every pilot stage
+pool unweighted, whatever proposal drew them.
+
+Drawing: by rejection from the nominal, with the episode's own Generator: a block of candidate vectors is
+drawn from the nominal families (in the order of the sorted input names), each kept with probability
+(q/p)(x) / B where B = lambda + (1 - lambda) / c >= q/p (sqrt(pi_hat) <= 1); the first kept one is the
+episode's. Its weight is p/q = 1 / (lambda + (1 - lambda) sqrt(pi_hat(x)) / c), at most 1/lambda.
+
+c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
+stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
+Dask rebuild the very proposal. The estimate's relative error (stored as `norm_rel_se`) is the relative
+bias it leaves in the estimates and the mean weight: the sampled density is q / Z with Z = E_p[q/p] =
+lambda + (1 - lambda) E_p[sqrt(pi_hat)] / c, equal to 1 up to that error.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import optimize, special
+
+from pedsafe_sumo.sampling.importance import Beta, Categorical, Family, Normal
+
+KIND = "joint"
+#: Ridge penalty on the standardised features: tools/is_limits.py's value, chosen before the pilot-sized
+#: measurement (EXPERIMENTS.md, "joint proposal"); not tuned on it.
+RIDGE = 1.0
+#: Nominal draws that estimate c = E_p[sqrt(pi_hat)]: relative standard error about 1e-3 for the four
+#: Xueqing scenarios (stored per proposal).
+NORM_DRAWS = 1_000_000
+#: Any fixed seed: the estimate of c must not depend on the run, worker or resume.
+NORM_SEED = 17_2026
+#: Candidates drawn per block of the rejection step (the episode's Generator draws whole blocks).
+REJECTION_BLOCK = 64
+#: A proposal whose bound B needs more candidates than this per episode on average is refused.
+MAX_MEAN_TRIES = 100_000
+
+
+def _moments(family: Family) -> tuple[float, float]:
+    """(mean, sd) of a continuous nominal family: the features' standardisation."""
+    if isinstance(family, Normal):
+        return family.mean, family.sd
+    if isinstance(family, Beta):
+        s = family.a + family.b
+        width = family.high - family.low
+        return family.low + width * family.a / s, width * math.sqrt(family.a * family.b / (s * s * (s + 1)))
+    raise TypeError(f"no moments for {family!r}")
+
+
+@dataclass(frozen=True)
+class JointProposal:
+    """q ∝ lambda p + (1 - lambda) p sqrt(pi_hat) / c over the inputs of `nominal` (module docstring)."""
+
+    nominal: Mapping[str, Family]
+    coefficients: tuple[float, ...]
+    norm: float
+    defensive_share: float
+    norm_rel_se: float = 0.0
+
+    is_joint = True
+
+    @property
+    def names(self) -> list[str]:
+        return sorted(self.nominal)
+
+    @property
+    def bound(self) -> float:
+        """B >= (q/p)(x) for every x: the rejection step's envelope."""
+        return self.defensive_share + (1 - self.defensive_share) / self.norm
+
+    def features(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        n = len(np.atleast_1d(x[self.names[0]]))
+        columns, continuous = [np.ones(n)], []
+        for name in self.names:
+            family = self.nominal[name]
+            v = np.atleast_1d(np.asarray(x[name], dtype=float))
+            if isinstance(family, Categorical):
+                columns += [(v == k).astype(float) for k in range(1, len(family.probabilities))]
+            else:
+                mean, sd = _moments(family)
+                z = (v - mean) / sd
+                continuous.append(z)
+                columns += [z, z * z]
+        for i in range(len(continuous)):
+            for j in range(i + 1, len(continuous)):
+                columns.append(continuous[i] * continuous[j])
+        return np.column_stack(columns)
+
+    def root_pi(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        return np.sqrt(special.expit(self.features(x) @ np.asarray(self.coefficients)))
+
+    def q_over_p(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        lam = self.defensive_share
+        return lam + (1 - lam) * self.root_pi(x) / self.norm
+
+    def sample_nominal(self, rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+        return {name: self.nominal[name].sample(rng, n) for name in self.names}
+
+    def sample(self, rng: np.random.Generator) -> tuple[dict[str, float], float]:
+        """One episode's inputs drawn from q by rejection, and ln of their weight p/q."""
+        bound = self.bound
+        while True:
+            x = self.sample_nominal(rng, REJECTION_BLOCK)
+            u = rng.random(REJECTION_BLOCK)
+            ratio = self.q_over_p(x)
+            kept = np.flatnonzero(u * bound < ratio)
+            if kept.size:
+                k = int(kept[0])
+                return {name: float(x[name][k]) for name in self.names}, -math.log(float(ratio[k]))
+
+    def to_json(self) -> str:
+        from pedsafe_sumo.sampling.draws import family_to_json
+
+        return json.dumps(
+            {
+                "kind": KIND,
+                "nominal": {name: family_to_json(self.nominal[name]) for name in self.names},
+                "coefficients": list(self.coefficients),
+                "norm": self.norm,
+                "norm_rel_se": self.norm_rel_se,
+                "defensive_share": self.defensive_share,
+                "ridge": RIDGE,
+            },
+            sort_keys=True,
+        )
+
+    @staticmethod
+    def from_json(text: str) -> JointProposal:
+        from pedsafe_sumo.sampling.draws import family_from_json
+
+        data = json.loads(text)
+        if data.get("kind") != KIND:
+            raise ValueError("not a joint proposal")
+        return JointProposal(
+            {name: family_from_json(f) for name, f in data["nominal"].items()},
+            tuple(float(v) for v in data["coefficients"]),
+            float(data["norm"]),
+            float(data["defensive_share"]),
+            float(data.get("norm_rel_se", 0.0)),
+        )
+
+
+def is_joint_json(text: str) -> bool:
+    return bool(text) and text.lstrip().startswith("{") and json.loads(text).get("kind") == KIND
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE) -> np.ndarray:
+    """Ridge logistic regression (the intercept unpenalised)."""
+
+    def loss(b: np.ndarray) -> tuple[float, np.ndarray]:
+        eta = x @ b
+        grad = x.T @ (special.expit(eta) - y)
+        grad[1:] += ridge * b[1:]
+        return float(np.sum(np.logaddexp(0, eta) - y * eta) + 0.5 * ridge * np.sum(b[1:] ** 2)), grad
+
+    return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
+
+
+def fit_joint(
+    inputs: Mapping[str, np.ndarray],
+    collision: np.ndarray,
+    nominal: Mapping[str, Family],
+    defensive_share: float,
+    ridge: float = RIDGE,
+) -> JointProposal | None:
+    """The joint proposal fitted on pilot rows (`inputs` name -> values, `collision` 0/1); None when the
+    rows hold no collision (the next stage then stays nominal) or the envelope would be too loose."""
+    y = np.asarray(collision, dtype=float)
+    if not y.any():
+        return None
+    shell = JointProposal(dict(nominal), (), 1.0, defensive_share)
+    proposal = normalised(nominal, fit_logistic(shell.features(inputs), y, ridge), defensive_share)
+    if not proposal.norm > 0 or proposal.bound > MAX_MEAN_TRIES:
+        return None
+    return proposal
+
+
+def normalised(nominal: Mapping[str, Family], coefficients: Any, defensive_share: float) -> JointProposal:
+    """The proposal of these coefficients with c = E_p[sqrt(pi_hat)] estimated on NORM_DRAWS nominal
+    draws of NORM_SEED."""
+    shell = JointProposal(dict(nominal), tuple(float(v) for v in coefficients), 1.0, defensive_share)
+    root = shell.root_pi(shell.sample_nominal(np.random.default_rng(NORM_SEED), NORM_DRAWS))
+    norm = float(np.mean(root))
+    rel_se = float(np.std(root) / math.sqrt(len(root)) / norm) if norm > 0 else math.inf
+    return JointProposal(dict(nominal), shell.coefficients, norm, defensive_share, rel_se)
+
+
+def joint_update(
+    rows: pd.DataFrame, condition: str, defensive_share: float
+) -> tuple[JointProposal | None, int]:
+    """The joint proposal from every pilot row so far of `condition` (status ok), and its collisions."""
+    from pedsafe_sumo.sampling.stages import _inputs_and_nominal
+
+    rows = rows[(rows["condition"] == condition) & (rows["status"] == "ok")]
+    inputs, nominal = _inputs_and_nominal(rows)
+    y = rows["collision"].astype(float).to_numpy()
+    return fit_joint(inputs, y, nominal.families, defensive_share), int(y.sum())
+
+
+def proposal_of_json(text: str) -> Any:
+    """A task's proposal: None (nominal), a JointProposal, or the product's families."""
+    if not text:
+        return None
+    if is_joint_json(text):
+        return JointProposal.from_json(text)
+    from pedsafe_sumo.sampling.draws import product_from_json
+
+    return product_from_json(text).families

@@ -1,0 +1,176 @@
+"""Would a joint proposal learned from the pilots beat the product family? Measured on a plain Monte Carlo
+run's own rows (issue 17, session 6 joint17, item 1), no SUMO.
+
+The proposal over the scenario's proposable inputs x (the `nominal` families recorded in sampler_inputs)
+is q = lambda p + (1 - lambda) p sqrt(pi_hat(x)) / E_p[sqrt(pi_hat)] (lambda = 0.1, the sampler's
+defensive share), with pi_hat(x) a ridge logistic regression of the SV collision on x (continuous inputs
+standardised by the nominal's moments, their squares and pairwise products; categories as indicators),
+fitted on PILOT-SIZED samples only:
+
+- `nominal N`: the first pilot stage alone, N nominal episodes (rows of the MC run);
+- `2-stage`: a stage 0 of 200 nominal episodes, pi_hat fitted on it, then a stage 1 of 200 episodes drawn
+  from that stage's joint proposal, simulated exactly by rejection from further MC rows (a row is kept
+  with probability (q/p) / max(q/p); q/p <= lambda + (1 - lambda) / E_p[sqrt(pi_hat)]), and pi_hat refitted
+  on the 400 pooled rows (pi is a conditional probability, so rows from any proposal pool unweighted);
+- `near`: as `nominal N`, but pi_hat fitted to the pilot's elite (the top 10% by the sampler's TTC score,
+  1 + impact speed for a collision, -min_ttc_s otherwise, -1000 without a TTC) rather than to its few
+  collisions: a shape that sees more events, at the price of aiming at near misses.
+
+Each is evaluated, as tools/is_limits.py does, on the MC rows neither the pilot nor the rejection step used:
+efficiency per final episode P(1 - P) / (E_p[w f] - P^2), w = p / q. Repeated on `--replicates` disjoint
+blocks of rows (pilot sets that do not overlap), the median and range reported.
+
+    .venv/bin/python tools/experiments/is_joint_pilot.py /work/results/v5_full [--ridge 1 3 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import optimize, special
+
+from pedsafe_sumo.sampling.draws import family_from_json
+from pedsafe_sumo.sampling.importance import Categorical
+
+DEFENSIVE_SHARE = 0.1
+ELITE_FRACTION = 0.1
+NO_TTC_SCORE = -1000.0
+
+
+def design(inputs: pd.DataFrame, spec: dict) -> np.ndarray:
+    """Features of `inputs` under a fixed `spec` (the nominal's moments and categories), the same for the
+    pilot and the rows it is evaluated on."""
+    columns, continuous = [np.ones(len(inputs))], []
+    for name, (kind, a, b) in spec.items():
+        v = inputs[name].to_numpy(dtype=float)
+        if kind == "cat":
+            columns += [(v == k).astype(float) for k in range(1, int(a))]
+        else:
+            z = (v - a) / b
+            continuous.append(z)
+            columns += [z, z * z]
+    for i in range(len(continuous)):
+        for j in range(i + 1, len(continuous)):
+            columns.append(continuous[i] * continuous[j])
+    return np.column_stack(columns)
+
+
+def logistic(x: np.ndarray, y: np.ndarray, ridge: float) -> np.ndarray:
+    def loss(b: np.ndarray) -> tuple[float, np.ndarray]:
+        eta = x @ b
+        grad = x.T @ (special.expit(eta) - y)
+        grad[1:] += ridge * b[1:]
+        return float(np.sum(np.logaddexp(0, eta) - y * eta) + 0.5 * ridge * np.sum(b[1:] ** 2)), grad
+
+    return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
+
+
+def efficiency(y: np.ndarray, root_pi: np.ndarray, norm: float) -> float:
+    w = 1.0 / (DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) * root_pi / norm)
+    p = float(np.mean(y))
+    variance = float(np.mean(w * y)) - p * p
+    return p * (1 - p) / variance if variance > 0 else math.inf
+
+
+def evaluate(beta: np.ndarray, x_eval: np.ndarray, y_eval: np.ndarray) -> float:
+    root_pi = np.sqrt(special.expit(x_eval @ beta))
+    # E_p[sqrt(pi_hat)]: the eval rows are nominal draws (the implementation would use nominal draws of a
+    # fixed seed, no SUMO).
+    return efficiency(y_eval, root_pi, float(np.mean(root_pi)))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("mc_run", type=Path)
+    parser.add_argument("--ridge", type=float, nargs="+", default=[1.0, 3.0, 10.0])
+    parser.add_argument("--replicates", type=int, default=5)
+    parser.add_argument("--condition", default="sv")
+    args = parser.parse_args(argv)
+    rows = pd.read_parquet(args.mc_run / "episodes.parquet")
+    rows = rows[(rows["status"] == "ok") & (rows["condition"] == args.condition)]
+    out = []
+    for scenario, sc in rows.groupby("scenario"):
+        sc = sc.sort_values("episode")
+        records = [json.loads(t) for t in sc["sampler_inputs"]]
+        nominal = {n: family_from_json(f) for n, f in records[0]["nominal"].items()}
+        inputs = pd.DataFrame([r["inputs"] for r in records])[sorted(nominal)].fillna(0.0)
+        spec = {}
+        for name, fam in nominal.items():
+            if isinstance(fam, Categorical):
+                spec[name] = ("cat", len(fam.probabilities), 0)
+            else:
+                v = inputs[name].to_numpy(dtype=float)  # nominal draws: their moments are the nominal's
+                spec[name] = ("cont", float(v.mean()), float(v.std()))
+        x = design(inputs, spec)
+        y = sc["collision"].astype(float).to_numpy()
+        ttc = sc["min_ttc_s"].to_numpy(dtype=float)
+        impact = sc["impact_speed_mps"].fillna(0.0).to_numpy(dtype=float)
+        score = np.where(y > 0, 1 + impact, np.where(np.isnan(ttc), NO_TTC_SCORE, -ttc))
+        n = len(y)
+        block = n // args.replicates
+        for ridge in args.ridge:
+            kinds = ("nominal 200", "nominal 400", "2-stage", "near 200", "near 400", "all-but-block (8,000)")
+            res: dict[str, list[float]] = {kind: [] for kind in kinds}
+            for r in range(args.replicates):
+                start = r * block
+                order = np.r_[np.arange(start, n), np.arange(0, start)]  # this replicate's rows first
+                for size in (200, 400):
+                    pilot, held = order[:size], order[size:]
+                    if y[pilot].sum() > 0:
+                        beta = logistic(x[pilot], y[pilot], ridge)
+                        res[f"nominal {size}"].append(evaluate(beta, x[held], y[held]))
+                    else:
+                        res[f"nominal {size}"].append(1.0)  # no collision: the sampler would stay nominal
+                    level = min(1.0, float(np.quantile(score[pilot], 1 - ELITE_FRACTION)))
+                    elite = (score[pilot] >= level).astype(float)
+                    res[f"near {size}"].append(evaluate(logistic(x[pilot], elite, ridge), x[held], y[held]))
+                # 2-stage: stage 0 on 200 nominal rows, stage 1 by rejection from the next rows.
+                s0 = order[:200]
+                beta0 = logistic(x[s0], y[s0], ridge) if y[s0].sum() > 0 else None
+                rest = order[200:]
+                if beta0 is None:
+                    s1, used = rest[:200], 200
+                else:
+                    root = np.sqrt(special.expit(x[rest] @ beta0))
+                    norm = float(np.mean(root))  # on nominal rows: E_p[sqrt(pi_hat)]
+                    ratio = DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) * root / norm
+                    bound = DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) / norm
+                    u = np.random.default_rng(r).random(len(rest))
+                    kept = np.flatnonzero(u < ratio / bound)[:200]
+                    s1, used = rest[kept], int(kept[-1]) + 1
+                pooled = np.r_[s0, s1]
+                held = rest[used:]
+                beta1 = logistic(x[pooled], y[pooled], ridge)
+                res["2-stage"].append(evaluate(beta1, x[held], y[held]))
+                # reference: pi_hat from the 8,000 rows outside this replicate's block
+                inside = order[:block]
+                outside = order[block:]
+                res["all-but-block (8,000)"].append(
+                    evaluate(logistic(x[outside], y[outside], ridge), x[inside], y[inside])
+                )
+            for kind, values in res.items():
+                v = np.array(values)
+                out.append(
+                    {
+                        "scenario": scenario,
+                        "ridge": ridge,
+                        "pi_hat from": kind,
+                        "median": float(np.median(v)),
+                        "min": float(v.min()),
+                        "max": float(v.max()),
+                    }
+                )
+    table = pd.DataFrame(out)
+    with pd.option_context("display.width", 200, "display.max_rows", 500):
+        print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
