@@ -9,14 +9,43 @@ component that needs it").
 One SUMO instance serves a worker for all its episodes: the first episode starts it, later ones
 reload it with `load` (about 7 ms on the Xueqing network, against about 10 ms for a start and much
 more for a new sumo-gui process), which resets the simulation to time 0 with new options.
+
+Headless, an episode whose options differ from the last load's only in `--seed` and that loads no
+additional file is instead restored from the state saved right after that load (`simulation.loadState`,
+about 1.5 ms; docs/engine.md "Restoring a saved state instead of load"): its rows are bit-identical to a
+load's (benchmarks/bench_load_state.py, tools/compare_runs_exact.py). What makes that so, and its limits:
+- the state is saved without SUMO's random number generators (no --save-state.rng): with them in the
+  file, restored episodes differ from loaded ones from the second on (measured, mechanism not found);
+- a restore keeps SUMO's generators where the last episode left them (generator states written into a
+  state file did not reach SUMO 1.28's draws, and TraCI has no call to reseed): the episode's `--seed`
+  is not applied.
+  The staging draws nothing from SUMO that reaches a row (checked: episodes loaded with another `--seed`
+  give the same rows), so the rows do not change; a staging that lets SUMO's own randomness act (driver
+  imperfection, SUMO-drawn departures) must load: `restore_state=False`;
+- a state holds no traffic light programs (only which one runs, and its phase): a program that TraCI
+  replaced (setProgramLogic; the staging does not) would stay replaced, so the programs after a restore
+  are checked against those read after the load, and the episode loads when they differ;
+- libsumo is one simulation per process: a session restores only if no other session loaded since;
+- vehicle subscriptions are dropped before `loadState` (their last results stay readable after it until
+  the next step; no test saw them act on a later episode, but a load drops them too);
+- a state holds no infrastructure: an episode with an additional file (the kerb parking areas of a
+  one-lane site, sim/kerb.py) loads, and the next one loads too (a restore would keep those parking areas).
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
+import weakref
 from collections.abc import Sequence
 from types import ModuleType
 
 from pedsafe_sumo.sumo_binaries import sumo_binary
+
+#: The session that last loaded, started or restored libsumo: libsumo is one simulation per process, so
+#: two sessions in one process (two runners, as in tests) take turns in it, and a session may restore its
+#: saved state only when nobody loaded anything since (another network, other options).
+_libsumo_user: list[object | None] = [None]
 
 
 class SimulatorError(RuntimeError):
@@ -30,10 +59,19 @@ class _NeverRaisedError(Exception):
 class SumoSession:
     """A SUMO instance for one worker: libsumo headless, or traci + sumo-gui when `gui` is set."""
 
-    def __init__(self, gui: bool = False, label: str = "pedsafe") -> None:
+    def __init__(self, gui: bool = False, label: str = "pedsafe", restore_state: bool = True) -> None:
         self.gui = gui
         self.label = label
         self._started = False
+        #: Restore the state saved after the last load instead of loading again, where that gives the same
+        #: episode (module docstring); libsumo only.
+        self.restore_state = restore_state and not gui
+        #: The last load's options without its --seed, when its state is saved in _state_file.
+        self._base_args: list[str] | None = None
+        self._state_file: str | None = None
+        #: Every traffic light's programs right after that load (a restore must give them back).
+        self._signal_programs: tuple = ()
+        self._token = object()  # this session, in _libsumo_user (no reference to the session itself)
         self.api: ModuleType
         if gui:
             import traci
@@ -59,7 +97,68 @@ class SumoSession:
         return self._lost
 
     def run(self, args: Sequence[str]) -> None:
-        """Start SUMO with `args` (options only, no binary) or reload the running instance with them."""
+        """Start SUMO with `args` (options only, no binary) or reload the running instance with them (or
+        restore the state saved after the last load, where that is the same: module docstring)."""
+        args = list(args)
+        if (
+            self._started
+            and self._base_args is not None
+            and _without_seed(args) == self._base_args
+            and _libsumo_user[0] is self._token
+        ):
+            try:
+                if self._restore():
+                    return
+            except self._exception:
+                pass  # load instead, below
+        self._base_args = None
+        self._load(args)
+        if not self.gui:
+            _libsumo_user[0] = self._token
+        if self.restore_state and "--seed" in args and not _loads_additional_files(args):
+            if self._state_file is None:
+                handle, self._state_file = tempfile.mkstemp(prefix="pedsafe_state_", suffix=".xml")
+                os.close(handle)
+                weakref.finalize(self, _remove, self._state_file)
+            self.api.simulation.saveState(self._state_file)
+            self._signal_programs = self._programs()
+            self._base_args = _without_seed(args)
+
+    def _restore(self) -> bool:
+        """Restore the saved state; False when it does not give the loaded simulation back (a load is due)."""
+        api = self.api
+        for vehicle_id in list(api.vehicle.getAllSubscriptionResults()):
+            api.vehicle.unsubscribe(vehicle_id)
+        api.simulation.loadState(self._state_file)
+        # A state holds which program each traffic light runs and where in it, not the programs: one that
+        # TraCI replaced stays replaced.
+        return self._programs() == self._signal_programs
+
+    def _programs(self) -> tuple:
+        tl = self.api.trafficlight
+
+        def phases(logic) -> tuple:
+            return tuple((p.duration, p.state, p.minDur, p.maxDur, p.next, p.name) for p in logic.phases)
+
+        return tuple(
+            (
+                tls,
+                tl.getProgram(tls),
+                tuple(
+                    (
+                        logic.programID,
+                        logic.type,
+                        logic.currentPhaseIndex,
+                        phases(logic),
+                        tuple(sorted(logic.subParameter.items())),
+                    )
+                    for logic in tl.getAllProgramLogics(tls)
+                ),
+            )
+            for tls in tl.getIDList()
+        )
+
+    def _load(self, args: list[str]) -> None:
         try:
             if not self._started:
                 try:
@@ -81,6 +180,9 @@ class SumoSession:
             raise SimulatorError(f"SUMO could not start: {exc}") from None
 
     def close(self) -> None:
+        self._base_args = None
+        if _libsumo_user[0] is self._token:
+            _libsumo_user[0] = None
         if self._started:
             try:
                 self.api.close()
@@ -92,3 +194,21 @@ class SumoSession:
 
     def __exit__(self, *exc_info) -> None:
         self.close()
+
+
+def _without_seed(args: list[str]) -> list[str]:
+    if "--seed" not in args:
+        return args
+    at = args.index("--seed")
+    return [*args[:at], *args[at + 2 :]]
+
+
+def _loads_additional_files(args: list[str]) -> bool:
+    return any(a in ("-a", "--additional-files") or a.startswith("--additional-files=") for a in args)
+
+
+def _remove(path: str) -> None:
+    try:
+        os.remove(path)
+    except OSError:
+        pass
