@@ -36,11 +36,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import optimize, special
+from scipy import special
 
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL, Categorical, Product
-from pedsafe_sumo.sampling.joint import JointProposal, is_joint_json
+from pedsafe_sumo.sampling.joint import Block, JointProposal, fit_logistic, is_joint_json, quadratic_design
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 #: Ridge penalty of the logistic fit (on standardised inputs); small against 10,000 rows.
@@ -129,30 +129,15 @@ def product_fit_efficiency(
 
 
 def _design(inputs: pd.DataFrame, categorical: set[str]) -> np.ndarray:
-    columns, continuous = [np.ones(len(inputs))], []
+    """sampling.joint's features, standardised by the rows' own moments (categories by the values seen)."""
+    blocks: list[Block] = []
     for name in inputs.columns:
         v = inputs[name].to_numpy(dtype=float)
         if name in categorical:
-            columns += [(v == k).astype(float) for k in np.unique(v)[1:]]
+            blocks.append([(v == k).astype(float) for k in np.unique(v)[1:]])
         elif np.std(v) > 0:
-            z = (v - v.mean()) / v.std()
-            continuous.append(z)
-            columns += [z, z * z]
-    for i in range(len(continuous)):
-        for j in range(i + 1, len(continuous)):
-            columns.append(continuous[i] * continuous[j])
-    return np.column_stack(columns)
-
-
-def _logistic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    def loss(b: np.ndarray) -> tuple[float, np.ndarray]:
-        eta = x @ b
-        p = special.expit(eta)
-        grad = x.T @ (p - y)
-        grad[1:] += RIDGE * b[1:]
-        return float(np.sum(np.logaddexp(0, eta) - y * eta) + 0.5 * RIDGE * np.sum(b[1:] ** 2)), grad
-
-    return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
+            blocks.append((v - v.mean()) / v.std())
+    return quadratic_design(len(inputs), blocks)
 
 
 def sqrt_pi_efficiency(
@@ -167,7 +152,7 @@ def sqrt_pi_efficiency(
     fold = np.random.default_rng(seed).integers(2, size=len(y))
     efficiencies, r2 = [], []
     for k in (0, 1):
-        beta = _logistic(x[fold != k], y[fold != k])
+        beta = fit_logistic(x[fold != k], y[fold != k], RIDGE)
         pi = special.expit(x[fold == k] @ beta)
         held = y[fold == k]
         w = 1.0 / (defensive_share + (1 - defensive_share) * np.sqrt(pi) / np.mean(np.sqrt(pi)))

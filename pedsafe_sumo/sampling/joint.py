@@ -54,6 +54,28 @@ REJECTION_BLOCK = 64
 MAX_MEAN_TRIES = 100_000
 
 
+#: One input's part of the design: a standardised continuous input (an array) or a category's indicator
+#: columns (a list of arrays, the first category left out).
+Block = np.ndarray | list[np.ndarray]
+
+
+def quadratic_design(n_rows: int, blocks: list[Block]) -> np.ndarray:
+    """The logistic model's features: an intercept; per input in order, its indicators or its z and z^2;
+    then the products of every pair of continuous inputs. Shared with tools/is_limits.py and
+    tools/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler does."""
+    columns, continuous = [np.ones(n_rows)], []
+    for block in blocks:
+        if isinstance(block, list):
+            columns += block
+        else:
+            continuous.append(block)
+            columns += [block, block * block]
+    for i in range(len(continuous)):
+        for j in range(i + 1, len(continuous)):
+            columns.append(continuous[i] * continuous[j])
+    return np.column_stack(columns)
+
+
 def _moments(family: Family) -> tuple[float, float]:
     """(mean, sd) of a continuous nominal family: the features' standardisation."""
     if isinstance(family, Normal):
@@ -87,22 +109,16 @@ class JointProposal:
         return self.defensive_share + (1 - self.defensive_share) / self.norm
 
     def features(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        n = len(np.atleast_1d(x[self.names[0]]))
-        columns, continuous = [np.ones(n)], []
+        blocks: list[Block] = []
         for name in self.names:
             family = self.nominal[name]
             v = np.atleast_1d(np.asarray(x[name], dtype=float))
             if isinstance(family, Categorical):
-                columns += [(v == k).astype(float) for k in range(1, len(family.probabilities))]
+                blocks.append([(v == k).astype(float) for k in range(1, len(family.probabilities))])
             else:
                 mean, sd = _moments(family)
-                z = (v - mean) / sd
-                continuous.append(z)
-                columns += [z, z * z]
-        for i in range(len(continuous)):
-            for j in range(i + 1, len(continuous)):
-                columns.append(continuous[i] * continuous[j])
-        return np.column_stack(columns)
+                blocks.append((v - mean) / sd)
+        return quadratic_design(len(np.atleast_1d(x[self.names[0]])), blocks)
 
     def root_pi(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
         return np.sqrt(special.expit(self.features(x) @ np.asarray(self.coefficients)))

@@ -33,10 +33,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import optimize, special
+from scipy import special
 
 from pedsafe_sumo.sampling.draws import family_from_json
 from pedsafe_sumo.sampling.importance import Categorical
+from pedsafe_sumo.sampling.joint import Block, fit_logistic, quadratic_design
 
 DEFENSIVE_SHARE = 0.1
 ELITE_FRACTION = 0.1
@@ -45,30 +46,12 @@ NO_TTC_SCORE = -1000.0
 
 def design(inputs: pd.DataFrame, spec: dict) -> np.ndarray:
     """Features of `inputs` under a fixed `spec` (the nominal's moments and categories), the same for the
-    pilot and the rows it is evaluated on."""
-    columns, continuous = [np.ones(len(inputs))], []
+    pilot and the rows it is evaluated on: sampling.joint's model."""
+    blocks: list[Block] = []
     for name, (kind, a, b) in spec.items():
         v = inputs[name].to_numpy(dtype=float)
-        if kind == "cat":
-            columns += [(v == k).astype(float) for k in range(1, int(a))]
-        else:
-            z = (v - a) / b
-            continuous.append(z)
-            columns += [z, z * z]
-    for i in range(len(continuous)):
-        for j in range(i + 1, len(continuous)):
-            columns.append(continuous[i] * continuous[j])
-    return np.column_stack(columns)
-
-
-def logistic(x: np.ndarray, y: np.ndarray, ridge: float) -> np.ndarray:
-    def loss(b: np.ndarray) -> tuple[float, np.ndarray]:
-        eta = x @ b
-        grad = x.T @ (special.expit(eta) - y)
-        grad[1:] += ridge * b[1:]
-        return float(np.sum(np.logaddexp(0, eta) - y * eta) + 0.5 * ridge * np.sum(b[1:] ** 2)), grad
-
-    return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
+        blocks.append([(v == k).astype(float) for k in range(1, int(a))] if kind == "cat" else (v - a) / b)
+    return quadratic_design(len(inputs), blocks)
 
 
 def efficiency(y: np.ndarray, root_pi: np.ndarray, norm: float) -> float:
@@ -123,16 +106,18 @@ def main(argv: list[str] | None = None) -> int:
                 for size in (200, 400):
                     pilot, held = order[:size], order[size:]
                     if y[pilot].sum() > 0:
-                        beta = logistic(x[pilot], y[pilot], ridge)
+                        beta = fit_logistic(x[pilot], y[pilot], ridge)
                         res[f"nominal {size}"].append(evaluate(beta, x[held], y[held]))
                     else:
                         res[f"nominal {size}"].append(1.0)  # no collision: the sampler would stay nominal
                     level = min(1.0, float(np.quantile(score[pilot], 1 - ELITE_FRACTION)))
                     elite = (score[pilot] >= level).astype(float)
-                    res[f"near {size}"].append(evaluate(logistic(x[pilot], elite, ridge), x[held], y[held]))
+                    res[f"near {size}"].append(
+                        evaluate(fit_logistic(x[pilot], elite, ridge), x[held], y[held])
+                    )
                 # 2-stage: stage 0 on 200 nominal rows, stage 1 by rejection from the next rows.
                 s0 = order[:200]
-                beta0 = logistic(x[s0], y[s0], ridge) if y[s0].sum() > 0 else None
+                beta0 = fit_logistic(x[s0], y[s0], ridge) if y[s0].sum() > 0 else None
                 rest = order[200:]
                 if beta0 is None:
                     s1, used = rest[:200], 200
@@ -146,13 +131,13 @@ def main(argv: list[str] | None = None) -> int:
                     s1, used = rest[kept], int(kept[-1]) + 1
                 pooled = np.r_[s0, s1]
                 held = rest[used:]
-                beta1 = logistic(x[pooled], y[pooled], ridge)
+                beta1 = fit_logistic(x[pooled], y[pooled], ridge)
                 res["2-stage"].append(evaluate(beta1, x[held], y[held]))
                 # reference: pi_hat from the 8,000 rows outside this replicate's block
                 inside = order[:block]
                 outside = order[block:]
                 res["all-but-block (8,000)"].append(
-                    evaluate(logistic(x[outside], y[outside], ridge), x[inside], y[inside])
+                    evaluate(fit_logistic(x[outside], y[outside], ridge), x[inside], y[inside])
                 )
             for kind, values in res.items():
                 v = np.array(values)
