@@ -497,29 +497,20 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(
             f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
         )
-    is_flags = (
+    # The proposal's settings: --is-proposal takes them from the run it names.
+    pilot_flags = (
         "is_pilot_stages",
         "is_pilot_episodes",
         "is_inputs",
         "is_min_spread",
         "is_score",
         "is_family",
-        "is_proposal",
     )
+    is_flags = (*pilot_flags, "is_proposal")
     if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
         given = ", ".join(f"--{name.replace('_', '-')}" for name in is_flags if name in explicit)
         raise UsageError(f"{given}: need --sampler is")
-    if arguments.get("is_proposal") and any(
-        name in explicit
-        for name in (
-            "is_pilot_stages",
-            "is_pilot_episodes",
-            "is_inputs",
-            "is_min_spread",
-            "is_score",
-            "is_family",
-        )
-    ):
+    if arguments.get("is_proposal") and any(name in explicit for name in pilot_flags):
         raise UsageError(
             "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"
         )
