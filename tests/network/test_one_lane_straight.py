@@ -18,7 +18,6 @@ import subprocess
 import sys
 import textwrap
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -28,21 +27,7 @@ from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.network.sites import resolve_site
 from pedsafe_sumo.sumo_net import read_net
 
-DATA = Path(__file__).parent / "data" / "osm"
-TOOL = REPO_ROOT / "tools" / "build_network.py"
 STRAIGHT = ("crossing", "jaywalking", "background_blending")
-
-
-@pytest.fixture(scope="module")
-def zhixin(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("sites") / "zhixin"
-    proc = subprocess.run(
-        [sys.executable, str(TOOL), "--osm", str(DATA / "zhixin.osm"), "--no-clip", "--center",
-         "40.00001,116.35857", "--radius", "130", "--name", "zhixin", "--out", str(folder)],
-        capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    return folder
 
 
 @pytest.fixture(scope="module")

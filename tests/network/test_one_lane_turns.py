@@ -25,22 +25,6 @@ import pytest
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.network.sites import resolve_site
 
-DATA = Path(__file__).parent / "data" / "osm"
-TOOL = REPO_ROOT / "tools" / "build_network.py"
-
-
-@pytest.fixture(scope="module")
-def zhixin(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("sites") / "zhixin"
-    proc = subprocess.run(
-        [sys.executable, str(TOOL), "--osm", str(DATA / "zhixin.osm"), "--no-clip", "--center",
-         "40.00001,116.35857", "--radius", "130", "--name", "zhixin", "--out", str(folder)],
-        capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    return folder
-
-
 #: Moves the engine's pedestrian (sim.episode.add_pedestrian) along the north approach's right-turn
 #: crosswalk and 2 m beyond its far end, as the behaviour model does (moveToXY, keepRoute=2, one step
 #: each), and prints the edge it ends on.
