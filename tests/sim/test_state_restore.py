@@ -70,16 +70,26 @@ def _net_args(seed: int, extra: tuple[str, ...] = ()) -> list[str]:
     return ["-n", str(SITE.file("net.xml")), "--seed", str(seed), "--no-step-log", "true", *extra]
 
 
-def test_a_restore_leaves_an_empty_simulation_at_time_zero():
+def _session_counting_restores() -> tuple[connection.SumoSession, list[str]]:
+    """A session whose every state restore appends "restore" to the returned list."""
     session = connection.SumoSession()
-    api = session.api
     calls: list[str] = []
     real_restore = session._restore
     session._restore = lambda: (calls.append("restore"), real_restore())[1]
+    return session, calls
+
+
+def _longest_passenger_lane(api) -> str:
+    lanes = [lane for lane in api.lane.getIDList() if "passenger" in api.lane.getAllowed(lane)]
+    return max(lanes, key=api.lane.getLength)
+
+
+def test_a_restore_leaves_an_empty_simulation_at_time_zero():
+    session, calls = _session_counting_restores()
+    api = session.api
     try:
         session.run(_net_args(1))
-        lanes = [lane for lane in api.lane.getIDList() if "passenger" in api.lane.getAllowed(lane)]
-        lane = max(lanes, key=api.lane.getLength)
+        lane = _longest_passenger_lane(api)
         edge = api.lane.getEdgeID(lane)
         api.route.add("r", [edge])
         for i in range(3):
@@ -113,15 +123,11 @@ def test_a_restore_leaves_an_empty_simulation_at_time_zero():
 
 
 def test_an_episode_with_an_additional_file_loads_and_so_does_the_next(tmp_path):
-    session = connection.SumoSession()
+    session, calls = _session_counting_restores()
     api = session.api
-    calls: list[str] = []
-    real_restore = session._restore
-    session._restore = lambda: (calls.append("restore"), real_restore())[1]
     try:
         session.run(_net_args(1))
-        lanes = [lane for lane in api.lane.getIDList() if "passenger" in api.lane.getAllowed(lane)]
-        edge_lane = max(lanes, key=api.lane.getLength)
+        edge_lane = _longest_passenger_lane(api)
         parking = tmp_path / "parking.add.xml"
         parking.write_text(
             f'<additional><parkingArea id="pa" lane="{edge_lane}" startPos="5" endPos="25"/></additional>',
@@ -141,10 +147,7 @@ def test_an_episode_with_an_additional_file_loads_and_so_does_the_next(tmp_path)
 
 
 def test_options_that_differ_in_more_than_the_seed_load():
-    session = connection.SumoSession()
-    calls: list[str] = []
-    real_restore = session._restore
-    session._restore = lambda: (calls.append("restore"), real_restore())[1]
+    session, calls = _session_counting_restores()
     try:
         session.run(_net_args(1))
         session.run(_net_args(1, ("--step-length", "0.05")))
