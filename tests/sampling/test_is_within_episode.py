@@ -1,5 +1,5 @@
 """tools/experiments/is_within_episode.py: the ceiling and the share of variance left, from repeat outcomes
-whose pi(x) is known (no SUMO)."""
+whose pi(x) is known, and the collision-stratum identity against a direct integral (no SUMO)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import importlib.util
 import math
 import sys
 
+import numpy as np
 import pandas as pd
 
 from pedsafe_sumo import REPO_ROOT
@@ -30,31 +31,28 @@ def _outcomes(per_episode: dict[tuple[int, int], list[int]], mode: str = "fresh"
 
 
 def test_a_collision_decided_by_the_inputs_leaves_no_variance_and_no_ceiling() -> None:
-    rate = 0.03
     outcomes = _outcomes({(1, 1): [1] * 10, (1, 2): [1] * 10, (0, 3): [0] * 10, (0, 4): [0] * 10})
+    row = tool.summarise(outcomes, 0.03).iloc[0]
+    assert row["ceiling"] == math.inf  # pi in {0, 1}: the zero-variance proposal exists
+    assert row["share of Var(Y) left"] == 0.0
+    assert row["collision episodes with pi < 1"] == "0/2"
+
+
+def test_half_chance_collisions_by_hand() -> None:
+    # Both collision episodes collide in 5 of 10 repeats: pi taken as (5 + 1) / (10 + 1), E[pi^(-1/2) | Y=1]
+    # = sqrt(11/6); ceiling (1 - P) / (P (11/6 - 1)); share left (1 - 1/2) / (1 - P).
+    rate = 0.05
+    outcomes = _outcomes({(1, 1): [1, 0] * 5, (1, 2): [0, 1] * 5, (0, 3): [0] * 10})
     row = tool.summarise(outcomes, rate).iloc[0]
-    assert math.isclose(row["E_p[sqrt(pi)]"], rate)  # pi in {0, 1}: E sqrt(pi) = E pi = P
-    assert row["ceiling (efficiency per episode)"] == math.inf  # the zero-variance proposal exists
-    assert math.isclose(row["share of Var(Y) left"], 0.0, abs_tol=1e-12)
+    assert math.isclose(row["ceiling"], (1 - rate) / (rate * 5 / 6))
+    assert math.isclose(row["share of Var(Y) left"], 0.5 / (1 - rate))
+    assert math.isclose(row["E[pi | Y=1]"], 0.5)
 
 
-def test_a_collision_the_inputs_do_not_touch_gives_plain_monte_carlo() -> None:
-    # pi(x) = 1/2 for every x, 5 of 10 repeats: E_p[sqrt(pi)] = sqrt(1/2); with P = 1/2 the ceiling is
-    # P (1 - P) / (1/2 - P^2) = 1, and the unbiased E[pi^2] = 5 * 4 / (10 * 9) = 2/9 leaves
-    # (1/2 - 2/9) / (1/4) = 10/9 of Var(Y) (the estimator's own noise: 1 in expectation).
-    outcomes = _outcomes({(1, 1): [1, 0] * 5, (0, 2): [0, 1] * 5})
-    row = tool.summarise(outcomes, 0.5).iloc[0]
-    assert math.isclose(row["E_p[sqrt(pi)]"], math.sqrt(0.5))
-    assert math.isclose(row["ceiling (efficiency per episode)"], 1.0)
-    assert math.isclose(row["share of Var(Y) left"], 10 / 9)
-
-
-def test_the_strata_are_recombined_with_the_run_rate() -> None:
-    # Collision stratum pi = 0.8 (8 of 10), other stratum pi = 0.1 (1 of 10), P = 0.2:
-    # E_p[sqrt(pi)] = 0.2 sqrt(0.8) + 0.8 sqrt(0.1).
-    outcomes = _outcomes({(1, 1): [1] * 8 + [0] * 2, (0, 2): [1] + [0] * 9})
-    row = tool.summarise(outcomes, 0.2).iloc[0]
-    root = 0.2 * math.sqrt(0.8) + 0.8 * math.sqrt(0.1)
-    assert math.isclose(row["E_p[sqrt(pi)]"], root)
-    assert math.isclose(row["ceiling (efficiency per episode)"], 0.2 * 0.8 / (root * root - 0.04))
-    assert math.isclose(row["E_p[pi] (check: P)"], 0.2 * 0.8 + 0.8 * 0.1)
+def test_the_ceiling_from_the_collision_stratum_equals_the_one_over_the_nominal() -> None:
+    # x ~ U(0, 1), pi(x) = x^2: P = 1/3, E_p[sqrt(pi)] = E[x] = 1/2, so the ceiling over x is
+    # P (1 - P) / (1/4 - P^2) = 1.6. The tool sees only collision episodes (x given Y = 1) and 1/sqrt(pi).
+    rng = np.random.default_rng(3)
+    x = rng.random(400_000)
+    hit = x[rng.random(x.size) < x * x]
+    assert math.isclose(tool.ceiling(1 / 3, 1 / hit), 1.6, rel_tol=0.02)

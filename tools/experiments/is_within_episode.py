@@ -31,11 +31,10 @@ seed is fresh in every mode but `reproduce`):
 - `reproduce` (once per episode): every source kept; must give the recorded outcome (a check).
 
 Sampling of the episodes: `--collisions` SV collision episodes and `--others` other SV episodes of the MC
-run (ok rows), each set drawn at random (Generator of `--seed`); the strata are recombined with the run's
-collision rate P: E_p[g] = P E[g | Y = 1] + (1 - P) E[g | Y = 0]. Per episode, k collisions in m repeats:
-sqrt(pi) is estimated by sqrt(k / m), biased low (Jensen), which biases the ceiling high: the figure stays
-a ceiling. E[pi^2] by k (k - 1) / (m (m - 1)) (unbiased); the share of Var(Y) = P (1 - P) left given x is
-E[pi (1 - pi)] / (P (1 - P)) = (P - E[pi^2]) / (P (1 - P)).
+run (ok rows), each set drawn at random (Generator of `--seed`). The collision stratum alone gives the
+figures: x given Y = 1 has the law pi(x) p(x) / P, so E_p[sqrt(pi)] = P E[pi^(-1/2) | Y = 1] and E_p[pi^2]
+= P E[pi | Y = 1] (a sample of nominal episodes would need thousands to see the rare x where pi is small
+but not 0, which weigh most in E_p[sqrt(pi)]). The other stratum is a check (`summarise`).
 
     OMP_NUM_THREADS=1 nice -n 10 .venv/bin/python tools/experiments/is_within_episode.py \\
         /work/results/v5_full --scenario jaywalking --collisions 20 --others 20 --repeats 12 \\
@@ -210,37 +209,50 @@ def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+#: Bootstrap resamples of the collision episodes for the ceiling's interval (any fixed seed).
+BOOTSTRAP = 2000
+BOOTSTRAP_SEED = 7
+
+
+def ceiling(rate: float, inverse_root: np.ndarray) -> float:
+    """P (1 - P) / (E_p[sqrt(pi)]^2 - P^2) with E_p[sqrt(pi)] = P E[pi^(-1/2) | Y = 1] (module docstring):
+    (1 - P) / (P (E[pi^(-1/2) | Y = 1]^2 - 1))."""
+    excess = float(np.mean(inverse_root)) ** 2 - 1.0
+    return (1 - rate) / (rate * excess) if excess > 0 else math.inf
+
+
 def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
-    """Per mode: the ceiling of a proposal over what the mode keeps, and the share of Var(Y) left."""
+    """Per mode, from the collision stratum (p(x | Y = 1) = pi(x) p(x) / P, so E_p[g(pi)] = P E[g(pi) / pi |
+    Y = 1] for any g): the ceiling of a proposal over what the mode keeps, with pi per episode taken as
+    (k + 1) / (m + 1) (its m repeats and its own recorded collision: never 0, and biased up, which biases
+    the ceiling up: it stays a ceiling) and a bootstrap 90% interval over the collision episodes; the
+    share of Var(Y) = P (1 - P) left given what is kept, E_p[pi (1 - pi)] / (P (1 - P)) = (1 - E[pi | Y =
+    1]) / (1 - P), E[pi | Y = 1] by k / m (unbiased); and the other stratum as a check: its mean pi
+    should be P (1 - E[pi | Y = 1]) / (1 - P)."""
     table = []
     for mode, by_mode in outcomes[outcomes["mode"] != "reproduce"].groupby("mode", sort=False):
         per = by_mode.groupby(["stratum", "episode"])["collision"].agg(["sum", "count"]).reset_index()
-        k, m = per["sum"].to_numpy(float), per["count"].to_numpy(float)
-        per["root_pi"] = np.sqrt(k / m)
-        per["pi2"] = k * (k - 1) / (m * (m - 1))
-        per["pi"] = k / m
-
-        def stratified(column: str, per: pd.DataFrame = per) -> float:
-            means = per.groupby("stratum")[column].mean()
-            return rate * float(means.get(1, 0.0)) + (1 - rate) * float(means.get(0, 0.0))
-
-        root = stratified("root_pi")
-        denominator = root * root - rate * rate
         hit, other = per[per["stratum"] == 1], per[per["stratum"] == 0]
+        k, m = hit["sum"].to_numpy(float), hit["count"].to_numpy(float)
+        inverse_root = np.sqrt((m + 1) / (k + 1))
+        rng = np.random.default_rng(BOOTSTRAP_SEED)
+        # Sorted, not np.quantile: resamples of pi = 1 alone give inf, which np.quantile turns into NaN.
+        boot = np.sort([ceiling(rate, rng.choice(inverse_root, len(inverse_root))) for _ in range(BOOTSTRAP)])
+        pi_hit = float(np.mean(k / m))
         table.append(
             {
                 "mode": mode,
-                "episodes": len(per),
+                "collision episodes": len(hit),
                 "repeats": int(m.min()),
-                "P(Y|x) mean, collision stratum": float(hit["pi"].mean()),
-                "P(Y|x) mean, other stratum": float(other["pi"].mean()),
+                "E[pi | Y=1]": pi_hit,
+                "collision episodes with pi < 1": f"{int((k < m).sum())}/{len(hit)}",
+                "E[pi | Y=0] (implied)": f"{float(np.mean(other['sum'] / other['count'])):.4f} "
+                f"({rate * (1 - pi_hit) / (1 - rate):.4f})",
                 "other episodes with pi > 0": f"{int((other['sum'] > 0).sum())}/{len(other)}",
-                "E_p[pi] (check: P)": stratified("pi"),
-                "E_p[sqrt(pi)]": root,
-                "ceiling (efficiency per episode)": rate * (1 - rate) / denominator
-                if denominator > 0
-                else math.inf,
-                "share of Var(Y) left": (rate - stratified("pi2")) / (rate * (1 - rate)),
+                "share of Var(Y) left": (1 - pi_hit) / (1 - rate),
+                "ceiling": ceiling(rate, inverse_root),
+                "ceiling 5%": float(boot[int(0.05 * BOOTSTRAP)]),
+                "ceiling 95%": float(boot[int(0.95 * BOOTSTRAP)]),
             }
         )
     return pd.DataFrame(table)
