@@ -4,11 +4,13 @@ whose pi(x) is known, and the collision-stratum identity against a direct integr
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import sys
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from pedsafe_sumo import REPO_ROOT
 
@@ -56,3 +58,47 @@ def test_the_ceiling_from_the_collision_stratum_equals_the_one_over_the_nominal(
     x = rng.random(400_000)
     hit = x[rng.random(x.size) < x * x]
     assert math.isclose(tool.ceiling(1 / 3, 1 / hit), 1.6, rel_tol=0.02)
+
+
+@pytest.mark.slow
+def test_on_sumo_an_episode_reproduces_and_fresh_draws_keep_only_its_inputs(tmp_path):
+    """A real 3-pair MC run of jaywalking (SV): re-run with all its own draws, each episode gives its
+    recorded row; with fresh draws its proposable inputs stay (setup_for checks each against the row)
+    while the unproposed ones change (the signal point, here)."""
+    from pedsafe_sumo.batch.__main__ import main as batch_main
+    from pedsafe_sumo.batch.runner import scenario_spec
+    from pedsafe_sumo.control.agent import load_agent_class
+    from pedsafe_sumo.network.sites import get_site
+    from pedsafe_sumo.settings import configure
+    from pedsafe_sumo.sim.episode import EpisodeRunner
+
+    run = tmp_path / "mc"
+    argv = [
+        "--scenario",
+        "jaywalking",
+        "--condition",
+        "sv",
+        "--episodes",
+        "3",
+        "--seed",
+        "3",
+        "--workers",
+        "1",
+    ]
+    assert batch_main([*argv, "--out", str(run)]) == 0
+    rows = pd.read_parquet(run / "episodes.parquet").sort_values("episode")
+    info = json.loads((run / "run.json").read_text())
+    _, params = configure(["jaywalking"], None, [])
+    spec = scenario_spec("jaywalking", {})
+    runner = EpisodeRunner(get_site(info["site"]), params, load_agent_class(info["algorithm"]))
+    try:
+        for _, row in rows.iterrows():
+            own = tool.setup_for(runner, spec, row, "reproduce", 0)
+            outcome = runner.run(spec, "sv", int(row["seed"]), setup=own).outcome
+            assert outcome["collision"] == row["collision"]
+            assert outcome["min_ttc_s"] == pytest.approx(row["min_ttc_s"], rel=0, abs=0, nan_ok=True)
+            fresh = tool.setup_for(runner, spec, row, "fresh", tool.fresh_seed(1, int(row["episode"]), 0))
+            assert fresh.pedestrian.walking_speed_mps == own.pedestrian.walking_speed_mps
+            assert fresh.signals.cycle_start_s != own.signals.cycle_start_s
+    finally:
+        runner.close()
