@@ -57,8 +57,9 @@ def measure(seed: int, args: argparse.Namespace, traffic: dict) -> tuple[float, 
         (d / "n.nod.xml").write_text(NODES)
         (d / "n.edg.xml").write_text(EDGES.format(v=limit))
         (d / "n.tll.xml").write_text(TLL.format(g=args.green, y=args.yellow, r=args.red))
+        netconvert = [sumo_binary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-i", "n.tll.xml"]
         subprocess.run(
-            [sumo_binary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-i", "n.tll.xml", "-o", "n.net.xml"],
+            [*netconvert, "-o", "n.net.xml"],
             cwd=d,
             check=True,
             capture_output=True,

@@ -52,7 +52,10 @@ def signal():
                 following = [link[0] for link in libsumo.lane.getLinks(lane)]
                 lane = following[0] if following else ""
             links[index] = (from_lane, to_lane, chain)
-        foes = {i: set().union(*(libsumo.lane.getInternalFoes(x) for x in chain)) for i, (_, _, chain) in links.items()}
+        foes = {
+            i: set().union(*(libsumo.lane.getInternalFoes(x) for x in chain))
+            for i, (_, _, chain) in links.items()
+        }
     finally:
         libsumo.close()
     return phases, links, foes
@@ -86,8 +89,8 @@ def test_the_patches_rebuild_the_committed_network(tmp_path):
     """The folder's network is what tools/build_network.py makes from the OSM clip and patches/ now."""
     out = tmp_path / NAME
     proc = subprocess.run(
-        [sys.executable, str(TOOL), "--site", NAME, "--out", str(out), "--osm-out", str(tmp_path / "clip.osm"),
-         "--patches", str(FOLDER / "patches")],
+        [sys.executable, str(TOOL), "--site", NAME, "--out", str(out),
+         "--osm-out", str(tmp_path / "clip.osm"), "--patches", str(FOLDER / "patches")],
         capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
