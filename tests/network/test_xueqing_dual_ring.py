@@ -218,7 +218,10 @@ def _batch(*args: str, out: Path) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("scenario", "approach"), [("right_turn", "N"), ("crossing", "E")])
+@pytest.mark.parametrize(
+    ("scenario", "approach"),
+    [("right_turn", "N"), ("crossing", "E"), ("jaywalking", "W"), ("background_blending", "E")],
+)
 def test_hosted_scenarios_pass_the_checks_at_batch_start_and_run(tmp_path, scenario, approach):
     proc = _batch("--scenario", scenario, "--approach", approach, out=tmp_path / "run")
     assert proc.returncode == 0, proc.stderr
