@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 from scipy import special
 
+from pedsafe_sumo.params import load_params
 from pedsafe_sumo.sampling.draws import family_from_json
 from pedsafe_sumo.sampling.importance import Categorical
 from pedsafe_sumo.sampling.joint import Block, fit_logistic, quadratic_design
@@ -130,6 +131,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ridge", nargs="+", default=["1", "3", "10"], help="penalties, or cv")
     parser.add_argument("--replicates", type=int, default=5)
     parser.add_argument("--condition", default="sv")
+    parser.add_argument(
+        "--with-sex",
+        action="store_true",
+        help="add the pedestrian's sex (ped_female, drawn but not proposed by the sampler; its nominal "
+        "from defaults.toml) to the inputs the proposal and pi_hat cover (session 7 item 4's lead)",
+    )
     args = parser.parse_args(argv)
     rows = pd.read_parquet(args.mc_run / "episodes.parquet")
     rows = rows[(rows["status"] == "ok") & (rows["condition"] == args.condition)]
@@ -138,6 +145,9 @@ def main(argv: list[str] | None = None) -> int:
         sc = sc.sort_values("episode")
         records = [json.loads(t) for t in sc["sampler_inputs"]]
         nominal = {n: family_from_json(f) for n, f in records[0]["nominal"].items()}
+        if args.with_sex:
+            share = float(load_params()["pedestrians"]["gender_female_share"])
+            nominal["ped_female"] = Categorical((1.0 - share, share))
         inputs = pd.DataFrame([r["inputs"] for r in records])[sorted(nominal)].fillna(0.0)
         spec = {}
         for name, fam in nominal.items():
