@@ -40,8 +40,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.demand.generate import generate_demand
 from pedsafe_sumo.demand.site import Site, SiteError, load_site
@@ -204,7 +202,7 @@ def parse_args(argv: list[str] | None):
         prog="python -m pedsafe_sumo.demand.calibrate", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--net", type=Path, default=DEFAULT_NET, help="open road to calibrate on (.net.xml)")
-    parser.add_argument("--site", default="straight", help="name of the route files written (default straight)")
+    parser.add_argument("--site", default="straight", help="name of the route files (default straight)")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(DEFAULT_SEEDS))
     parser.add_argument("--duration", type=float, default=DEFAULT_DURATION_S, help="simulated s per seed")
     parser.add_argument("--warmup", type=float, default=DEFAULT_WARMUP_S, help="s of records ignored")
@@ -214,7 +212,7 @@ def parse_args(argv: list[str] | None):
     parser.add_argument("--first-step", type=float, default=FIRST_STEP)
     parser.add_argument("--min-step", type=float, default=MIN_STEP)
     parser.add_argument("--write-params", type=Path, help="write the calibrated [traffic] keys to this TOML")
-    parser.add_argument("--work", type=Path, help="keep the routes and SUMO output of the last candidate here")
+    parser.add_argument("--work", type=Path, help="keep the last candidate's files here")
     args = parser.parse_args(argv)
     if not args.duration > args.warmup >= 0:
         parser.exit(2, f"{parser.prog}: error: need --duration > --warmup >= 0\n")

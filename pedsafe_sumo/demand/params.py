@@ -15,8 +15,8 @@ from pedsafe_sumo.params import Bounds, ParameterError, check_upper_bounds, regi
 SHARE_SUM_TOLERANCE = 1e-6
 
 TURN_MOVEMENTS = ("left", "straight", "right")
-#: Values of traffic.desired_speed_law: the background's desired speeds drawn from the non-intersection fit, or
-#: from the calibrated lognormal (pedsafe_sumo.demand.vehicles.desired_speed_distribution).
+#: Values of traffic.desired_speed_law: the background's desired speeds drawn from the non-intersection fit,
+#: or from the calibrated lognormal (pedsafe_sumo.demand.vehicles.desired_speed_distribution).
 DESIRED_SPEED_LAWS = ("fit", "calibrated")
 RISK_TYPES = ("unaware", "hasten", "yield")
 AGE_GROUP_KEYS = ("age_min_years", "age_max_years", "weight_share", "speed_mean_mps", "speed_p15_mps")
@@ -114,7 +114,8 @@ def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
     law = section.get("desired_speed_law")
     if law not in DESIRED_SPEED_LAWS:
         raise ParameterError(
-            f"parameter '{where}.desired_speed_law' must be one of {', '.join(DESIRED_SPEED_LAWS)}, got {law!r}"
+            f"parameter '{where}.desired_speed_law' must be one of {', '.join(DESIRED_SPEED_LAWS)}, "
+            f"got {law!r}"
         )
     _number(section, "desired_speed_calibrated_log_mu", where)
     _positive(section, "desired_speed_calibrated_log_sigma", where)
