@@ -25,6 +25,8 @@ downstream follow the fit. Everything below is fixed before the search and does 
   step when none improves, stop below MIN_STEP. Ties keep the earlier point. Nothing here looks at any
   safety result.
 
+`--check LOG_MU LOG_SIGMA` measures one law on the seeds without searching (the out-of-sample check: other
+seeds, the mid-lane loops halfway along the road; the fit's own values give exactly the "fit" law's draws).
 The result is printed as a table of every evaluation and optionally written as a parameter file
 (`--write-params`) holding `traffic.desired_speed_law = "calibrated"` and the two calibrated values. Bad input
 ends in one line on stderr and exit status 2.
@@ -185,6 +187,19 @@ class Calibration:
         return best
 
 
+def check(cal: Calibration, log_mu: float, log_sigma: float) -> int:
+    """Print the validation's comparisons (mid-block, mid-lane, headways) of one law on the seeds: the
+    out-of-sample check of a calibrated law (other seeds, the mid-lane loops)."""
+    print(f"law Lognormal({log_mu:g}, {log_sigma:g}) of desired speeds at the fits' limit:")
+    for c in cal.comparisons(log_mu, log_sigma):
+        if c.n:
+            print(
+                f"  {c.name:38s} vs {c.reference:56s} n={c.n:6d}  KS D={c.ks_distance:.3f}  "
+                f"median {c.measured_median:.2f} (fit {c.fitted_median:.2f})"
+            )
+    return 0
+
+
 def write_params_file(path: Path, best: Evaluation, command: str) -> None:
     path.write_text(
         f"# Written by {command}\n"
@@ -212,6 +227,13 @@ def parse_args(argv: list[str] | None):
     parser.add_argument("--first-step", type=float, default=FIRST_STEP)
     parser.add_argument("--min-step", type=float, default=MIN_STEP)
     parser.add_argument("--write-params", type=Path, help="write the calibrated [traffic] keys to this TOML")
+    parser.add_argument(
+        "--check",
+        type=float,
+        nargs=2,
+        metavar=("LOG_MU", "LOG_SIGMA"),
+        help="no search: measure this desired-speed law on the seeds and print every loop's comparison",
+    )
     parser.add_argument("--work", type=Path, help="keep the last candidate's files here")
     args = parser.parse_args(argv)
     if not args.duration > args.warmup >= 0:
@@ -239,6 +261,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"seeds {' '.join(map(str, args.seeds))}, {args.duration:g} s each",
                 flush=True,
             )
+            if args.check is not None:
+                return check(cal, *args.check)
             best = cal.run()
     except (SiteError, ParameterError, OSError, RuntimeError, ValueError) as exc:
         print(f"pedsafe_sumo.demand.calibrate: error: {exc}", file=sys.stderr)
