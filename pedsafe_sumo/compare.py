@@ -1,6 +1,6 @@
 """Build against build: is stack B at least as safe as stack A on the same episodes?
 
-    python -m pedsafe_sumo.compare RUN_A RUN_B [--margin collision=0.01 ...] [--out DIR]
+    python -m pedsafe_sumo.compare RUN_A RUN_B [--margin collision=0.01 ...] [--approach ARM] [--out DIR]
 
 RUN_A and RUN_B are batch run directories made with the same seed, scenarios and sites (e.g. the
 same `batch` command with `--algorithm` set to the two builds), so that episode i of a scenario and
@@ -23,7 +23,8 @@ Intervals, per index:
   the difference is bounded by the rule-of-three bound on the share of differing pairs.
 
 The episodes where B did worse than A (a collision or conflict that A avoided, or a higher injury
-probability) are listed with the command that replays each in sumo-gui. Exit status: 0 when every
+probability) are listed with the command that replays each in sumo-gui. A run made with `batch --approach
+all` is compared arm by arm (or one arm, `--approach`). Exit status: 0 when every
 comparison passes, 1 when any fails, 2 on bad input.
 """
 
@@ -41,7 +42,7 @@ import pandas as pd
 from scipy import optimize, special
 
 from pedsafe_sumo.report.html import replay_commands
-from pedsafe_sumo.report.rundir import ReportError, load_run
+from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, load_run_per_approach
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.sampling.importance import is_estimate
 
@@ -223,17 +224,44 @@ def _parse_margins(pairs: Sequence[str]) -> dict[str, float]:
 
 
 def _format(table: pd.DataFrame) -> str:
+    # A run of several approaches (batch --approach all) gets the arm beside the scenario.
+    arm_of = (
+        table["approach"].tolist() if "approach" in table and table["approach"].any() else [""] * len(table)
+    )
+    width = 20 + (3 if any(arm_of) else 0)
     lines = [
-        f"{'scenario':<20} {'cond':<4} {'index':<18} {'pairs':>6} {'A':>8} {'B':>8} "
+        f"{'scenario':<{width}} {'cond':<4} {'index':<18} {'pairs':>6} {'A':>8} {'B':>8} "
         f"{'B - A [95% interval]':>30} {'margin':>7}  verdict"
     ]
-    for row in table.itertuples():
+    for arm, row in zip(arm_of, table.itertuples(), strict=True):
         interval = f"{row.difference:+.4f} [{row.low:+.4f}, {row.high:+.4f}]"
+        where = f"{row.scenario} {arm}" if arm else str(row.scenario)
         lines.append(
-            f"{row.scenario:<20} {row.condition:<4} {row.index:<18} {row.n_pairs:>6} {row.a:>8.4f} "
+            f"{where:<{width}} {row.condition:<4} {row.index:<18} {row.n_pairs:>6} {row.a:>8.4f} "
             f"{row.b:>8.4f} {interval:>30} {row.margin:>7.4f}  {row.verdict}"
         )
     return "\n".join(lines)
+
+
+def runs_by_approach(
+    path_a: Path, path_b: Path, approach: str | None
+) -> list[tuple[str, RunDirectory, RunDirectory]]:
+    """(arm, A, B) for the approach named, or for every approach the two runs hold (a run made with batch
+    --approach all holds the same episodes on several arms; each arm is compared on its own). Runs on
+    different arms are refused in one line."""
+    if approach is not None:
+        return [(approach, load_run(path_a, approach=approach), load_run(path_b, approach=approach))]
+    arms_a, arms_b = load_run_per_approach(path_a), load_run_per_approach(path_b)
+    if len(arms_a) == 1 and len(arms_b) == 1:
+        # One arm each (or runs from before --approach): compared as they are, as before.
+        (arm, run_a), (_, run_b) = next(iter(arms_a.items())), next(iter(arms_b.items()))
+        return [(arm, run_a, run_b)]
+    if set(arms_a) != set(arms_b):
+        raise CompareError(
+            f"the runs hold different approaches (A: {', '.join(arms_a) or 'none'}, B: "
+            f"{', '.join(arms_b) or 'none'}): compare one with --approach"
+        )
+    return [(arm, arms_a[arm], arms_b[arm]) for arm in arms_a]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -255,13 +283,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--confidence", type=float, default=0.95, help="two-sided level [0.95]")
     parser.add_argument("--out", type=Path, help="also write compare.csv and worse_episodes.csv here")
+    parser.add_argument(
+        "--approach",
+        choices=list("NESW"),
+        help="compare the episodes on this approach only (default: every approach the runs hold, each on "
+        "its own)",
+    )
     args = parser.parse_args(argv)
     try:
         if not 0.5 <= args.confidence < 1:
             raise CompareError(f"--confidence must lie in [0.5, 1), got {args.confidence}")
         margins = _parse_margins(args.margin)
-        runs = [load_run(path) for path in (args.run_a, args.run_b)]
-        table, worse = compare_runs(runs[0].episodes, runs[1].episodes, margins, args.confidence)
+        tables, worse_lists, run_b_of = [], [], {}
+        for arm, run_a, run_b in runs_by_approach(args.run_a, args.run_b, args.approach):
+            arm_table, arm_worse = compare_runs(run_a.episodes, run_b.episodes, margins, args.confidence)
+            tables.append(arm_table.assign(approach=arm))
+            worse_lists.append(arm_worse.assign(approach=arm))
+            run_b_of[arm] = run_b
+        table, worse = pd.concat(tables, ignore_index=True), pd.concat(worse_lists, ignore_index=True)
         if args.out is not None:
             if args.out.exists() and not args.out.is_dir():
                 raise CompareError(f"--out {args.out} is a file, not a directory")
@@ -279,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(worse)} episode(s) where B did worse than A; replay each under B with:")
         for _, row in worse.iterrows():
             # The report's own command (scenario, and the approach of a batch run with --approach).
-            print(f"  {replay_commands(runs[1], row)[0]}")
+            print(f"  {replay_commands(run_b_of[row['approach']], row)[0]}")
         print()
     verdict = "PASS" if failed.empty else "FAIL"
     print(

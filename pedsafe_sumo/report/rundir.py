@@ -117,12 +117,9 @@ def _finished_parts(path: Path, run_info: dict[str, Any], partial: bool) -> tupl
     return read_parts(path, records), f"INCOMPLETE RUN: {done}; every number covers these episodes only"
 
 
-def load_run(path: Path, partial: bool = False, approach: str | None = None) -> RunDirectory:
-    """Read and check a run directory; raises ReportError with a one-line message on bad input.
-
-    An unfinished batch is refused, or with `partial` read from its finished chunks (module docstring).
-    A run of several approaches (batch --approach all) is reported one approach at a time (`approach`).
-    """
+def _read_run(path: Path, partial: bool) -> tuple[pd.DataFrame, dict[str, Any] | None, str, str, Path]:
+    """The run's episode rows, run.json, its problem line, the incomplete line and the rows' source file;
+    raises ReportError with a one-line message on bad input."""
     path = Path(path)
     if not path.exists():
         raise ReportError(f"run directory {path} does not exist")
@@ -149,7 +146,23 @@ def load_run(path: Path, partial: bool = False, approach: str | None = None) -> 
         raise ReportError(f"{source} lacks required column(s): {', '.join(missing)}")
     if episodes.empty:
         raise ReportError(f"{source} has no rows")
-    arms = [str(a) for a in episodes["approach"].unique() if a] if "approach" in episodes.columns else []
+    return episodes, run_info, problem, incomplete, source
+
+
+def _approaches(episodes: pd.DataFrame) -> list[str]:
+    """The arms a run's rows are on, in the order first met ([] for runs from before --approach)."""
+    return [str(a) for a in episodes["approach"].unique() if a] if "approach" in episodes.columns else []
+
+
+def load_run(path: Path, partial: bool = False, approach: str | None = None) -> RunDirectory:
+    """Read and check a run directory; raises ReportError with a one-line message on bad input.
+
+    An unfinished batch is refused, or with `partial` read from its finished chunks (module docstring).
+    A run of several approaches (batch --approach all) is reported one approach at a time (`approach`).
+    """
+    path = Path(path)
+    episodes, run_info, problem, incomplete, source = _read_run(path, partial)
+    arms = _approaches(episodes)
     if approach is not None:
         if approach not in arms:
             raise ReportError(
@@ -164,6 +177,29 @@ def load_run(path: Path, partial: bool = False, approach: str | None = None) -> 
     return RunDirectory(
         path, episodes, run_info, problem, incomplete, approach or (arms[0] if arms else ""), approach or ""
     )
+
+
+def load_run_per_approach(path: Path, partial: bool = False) -> dict[str, RunDirectory]:
+    """Every approach of a run as its own RunDirectory, as `load_run(path, approach=arm)` reads it, keyed by
+    the arm ("" for a run from before --approach); the rows are read once."""
+    path = Path(path)
+    episodes, run_info, problem, incomplete, _ = _read_run(path, partial)
+    arms = _approaches(episodes)
+    if len(arms) <= 1:
+        arm = arms[0] if arms else ""
+        return {arm: RunDirectory(path, episodes, run_info, problem, incomplete, arm, "")}
+    return {
+        arm: RunDirectory(
+            path,
+            episodes[episodes["approach"] == arm].reset_index(drop=True),
+            run_info,
+            problem,
+            incomplete,
+            arm,
+            arm,
+        )
+        for arm in arms
+    }
 
 
 def _find(info: dict[str, Any], *names: str) -> Any:
