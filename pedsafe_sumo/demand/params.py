@@ -31,7 +31,7 @@ TRAFFIC_UPPER_BOUNDS: Bounds = {
     "speed_nonintersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
     "speed_intersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
     "desired_speed_calibrated_log_mu": (4.0, "a median speed of exp(4) = 55 m/s (197 km/h)"),
-    "desired_speed_calibrated_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
+    "desired_speed_calibrated_log_sigma": (2.0, "four times the calibrated 0.53"),
     "fit_speed_limit_mps": (70.0, "252 km/h, above any posted speed limit"),
     "vehicle_length_m": (30.0, "longer than a truck with trailer (25 m)"),
     "vehicle_min_gap_m": (20.0, "four car lengths at standstill"),
