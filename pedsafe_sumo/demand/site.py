@@ -154,6 +154,11 @@ def _lane_reaches(lane, edge) -> bool:
     return any(c.getTo().getID() == edge.getID() for c in lane.getOutgoing())
 
 
+def _revisits_a_node(path) -> bool:
+    nodes = [path[0].getFromNode().getID()] + [edge.getToNode().getID() for edge in path]
+    return len(nodes) != len(set(nodes))
+
+
 def find_entering_lanes(net) -> list[EnteringLane]:
     """Every vehicle lane on an edge that starts at a fringe node, with its routes to every exiting edge.
 
@@ -172,6 +177,11 @@ def find_entering_lanes(net) -> list[EnteringLane]:
                 continue
             path, _cost = net.getShortestPath(entry, exit_edge, vClass=VEHICLE_CLASS)
             if path is None:
+                continue
+            if _revisits_a_node(path):
+                # A loop (e.g. through the junction, round a dead end's turnaround and back, where the
+                # junction has no u-turn): nobody drives it, and its first turn would be counted as a
+                # left or right turn.
                 continue
             movement = route_movement(path)
             if movement == "uturn":

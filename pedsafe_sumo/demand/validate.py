@@ -412,9 +412,20 @@ MEASURED_BEGIN = "<!-- measured:begin (written by python -m pedsafe_sumo.demand.
 MEASURED_END = "<!-- measured:end -->"
 
 
+def measured_markers(site: str) -> tuple[str, str]:
+    """The comments around a site's measured part of the validation page. Each site has its own, so that
+    validating one site never overwrites another's numbers (before, any site replaced the page's one
+    block, Xueqing's, when run without --docs)."""
+    return (
+        MEASURED_BEGIN.replace("measured:begin", f"measured:begin site={site}"),
+        MEASURED_END.replace("measured:end", f"measured:end site={site}"),
+    )
+
+
 def measured_markdown(args, runs: list[Run], n_loops: dict[str, int]) -> str:
+    begin, end = measured_markers(args.site)
     lines = [
-        MEASURED_BEGIN,
+        begin,
         f"Command: `python -m pedsafe_sumo.demand.validate --site {args.site} --duration {args.duration:g} "
         f"--seed {args.seed}" + (f" --params {args.params}" if args.params else "") + "`",
         "",
@@ -448,21 +459,26 @@ def measured_markdown(args, runs: list[Run], n_loops: dict[str, int]) -> str:
         lines.append("")
         lines += [f"![{fig.stem}](figures/{fig.name})" for fig in run.figures]
         lines.append("")
-    lines.append(MEASURED_END)
+    lines.append(end)
     return "\n".join(lines)
 
 
-def write_report(path: Path, measured: str) -> None:
-    """Replace the measured part of the validation page, keeping its hand-written explanation."""
+def write_report(path: Path, measured: str, site: str) -> None:
+    """Replace `site`'s measured part of the validation page, keeping its hand-written explanation and
+    every other site's part; a site measured for the first time gets a section at the end."""
+    begin, end = measured_markers(site)
     if path.is_file():
         text = path.read_text(encoding="utf-8")
-        if MEASURED_BEGIN in text and MEASURED_END in text:
-            head, rest = text.split(MEASURED_BEGIN, 1)
-            tail = rest.split(MEASURED_END, 1)[1]
+        if begin in text and end in text:
+            head, rest = text.split(begin, 1)
+            tail = rest.split(end, 1)[1]
             path.write_text(head + measured + tail, encoding="utf-8")
             return
+        section = f"\n\n## Measured: {site}\n\n{measured}\n"
+        path.write_text(text.rstrip("\n") + section, encoding="utf-8")
+        return
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("# Demand validation\n\n## Measured\n\n" + measured + "\n", encoding="utf-8")
+    path.write_text(f"# Demand validation\n\n## Measured: {site}\n\n" + measured + "\n", encoding="utf-8")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -490,7 +506,7 @@ def main(argv: list[str] | None = None) -> int:
         n_loops = {
             k: sum(d.kind == k for d in place_detectors(site)) for k in ("midblock", "midlane", "junction")
         }
-        write_report(args.docs / "demand_validation.md", measured_markdown(args, runs, n_loops))
+        write_report(args.docs / "demand_validation.md", measured_markdown(args, runs, n_loops), args.site)
     except (SiteError, ParameterError, OSError, RuntimeError, ValueError) as exc:
         print(f"pedsafe_sumo.demand.validate: error: {exc}", file=sys.stderr)
         return 2

@@ -112,6 +112,6 @@ def test_validation_pipeline_on_the_test_cross(tmp_path):
     )  # fmt: skip
     assert code == 0
     page = (docs / "demand_validation.md").read_text()
-    assert validate.MEASURED_BEGIN in page and "speed, mid-block approach" in page
+    assert validate.measured_markers("cross")[0] in page and "speed, mid-block approach" in page
     figures = sorted(p.name for p in (docs / "figures").glob("*.png"))
     assert "demand_cross_configured_speed_midblock.png" in figures and len(figures) == 4
