@@ -134,7 +134,8 @@ class Calibration:
     def comparisons(self, log_mu: float, log_sigma: float, kinds=("midblock",)) -> list:
         """validate.measure's comparisons of the pooled records of the seeds under this desired-speed law."""
         cand = candidate_params(self.params, log_mu, log_sigma)
-        per_seed, detectors = [], []
+        per_seed: list[dict[str, list[tuple[float, float]]]] = []
+        detectors: list[Detector] = []
         for seed in self.args.seeds:
             records, detectors = simulate_loops(
                 self.site, self.args.site, self.args.net, cand, seed, self.args.duration,
