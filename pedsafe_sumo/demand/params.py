@@ -15,6 +15,9 @@ from pedsafe_sumo.params import Bounds, ParameterError, check_upper_bounds, regi
 SHARE_SUM_TOLERANCE = 1e-6
 
 TURN_MOVEMENTS = ("left", "straight", "right")
+#: Values of traffic.desired_speed_law: the background's desired speeds drawn from the non-intersection fit,
+#: or from the calibrated lognormal (pedsafe_sumo.demand.vehicles.desired_speed_distribution).
+DESIRED_SPEED_LAWS = ("fit", "calibrated")
 RISK_TYPES = ("unaware", "hasten", "yield")
 AGE_GROUP_KEYS = ("age_min_years", "age_max_years", "weight_share", "speed_mean_mps", "speed_p15_mps")
 
@@ -27,6 +30,8 @@ TRAFFIC_UPPER_BOUNDS: Bounds = {
     "speed_intersection_log_mu": (4.0, "a median speed of exp(4) = 55 m/s (197 km/h)"),
     "speed_nonintersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
     "speed_intersection_log_sigma": (2.0, "the site's fits are 0.38-0.49"),
+    "desired_speed_calibrated_log_mu": (4.0, "a median speed of exp(4) = 55 m/s (197 km/h)"),
+    "desired_speed_calibrated_log_sigma": (2.0, "four times the calibrated 0.53"),
     "fit_speed_limit_mps": (70.0, "252 km/h, above any posted speed limit"),
     "vehicle_length_m": (30.0, "longer than a truck with trailer (25 m)"),
     "vehicle_min_gap_m": (20.0, "four car lengths at standstill"),
@@ -106,6 +111,14 @@ def validate_traffic(section: dict[str, Any], where: str = "traffic") -> None:
             f"parameter '{where}.background_speed_limit_scaled' must be true or false, "
             f"got {section.get('background_speed_limit_scaled')!r}"
         )
+    law = section.get("desired_speed_law")
+    if law not in DESIRED_SPEED_LAWS:
+        raise ParameterError(
+            f"parameter '{where}.desired_speed_law' must be one of {', '.join(DESIRED_SPEED_LAWS)}, "
+            f"got {law!r}"
+        )
+    _number(section, "desired_speed_calibrated_log_mu", where)
+    _positive(section, "desired_speed_calibrated_log_sigma", where)
     _shares_sum_to_one(section, [f"turn_share_{m}" for m in TURN_MOVEMENTS], where)
     sigma = _number(section, "driver_imperfection_sigma", where)
     if not 0.0 <= sigma <= 1.0:

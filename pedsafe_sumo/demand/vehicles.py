@@ -79,6 +79,18 @@ def background_speed_scale(speed_limit_mps: float, traffic: dict[str, Any]) -> f
     return speed_limit_scale(speed_limit_mps, traffic) if traffic["background_speed_limit_scaled"] else 1.0
 
 
+def desired_speed_distribution(traffic: dict[str, Any]) -> Lognormal:
+    """The law of a background vehicle's desired speed at the fits' speed limit (before the limit scaling):
+    the non-intersection fit itself (the literal reading of the paper), or under traffic.desired_speed_law =
+    "calibrated" the lognormal calibrated so that the speeds SUMO measures on the approach follow the fit
+    (python -m pedsafe_sumo.demand.calibrate, docs/demand.md)."""
+    if traffic["desired_speed_law"] == "calibrated":
+        return Lognormal(
+            traffic["desired_speed_calibrated_log_mu"], traffic["desired_speed_calibrated_log_sigma"]
+        )
+    return Lognormal(traffic["speed_nonintersection_log_mu"], traffic["speed_nonintersection_log_sigma"])
+
+
 def generate_vehicles(
     lanes: list[EnteringLane], traffic: dict[str, Any], duration_s: float, seed_seq: np.random.SeedSequence
 ) -> list[Vehicle]:
@@ -87,7 +99,7 @@ def generate_vehicles(
     Each lane draws from its own child of `seed_seq` (lanes in id order), so lanes are independent and adding
     a lane elsewhere does not change this lane's vehicles.
     """
-    speeds = Lognormal(traffic["speed_nonintersection_log_mu"], traffic["speed_nonintersection_log_sigma"])
+    speeds = desired_speed_distribution(traffic)
     ids = route_ids(lanes)
     ordered = sorted(lanes, key=lambda lane: lane.lane_id)
     vehicles: list[Vehicle] = []

@@ -80,3 +80,11 @@ def test_a_bounded_field_is_accepted_at_its_bound_and_refused_just_above(field):
 def test_conflict_offset_has_a_lower_bound_too():
     with pytest.raises(ScenarioError, match="conflict_offset_min_s must be at least -10"):
         SCENARIOS["crossing"].with_overrides({"conflict_offset_min_s": -11})
+
+
+def test_the_calibrated_desired_speed_law_is_bounded_like_the_fit():
+    """traffic.desired_speed_calibrated_* (issue 14 item 6) are among the checked keys, bounded as the fit."""
+    for key in ("traffic.desired_speed_calibrated_log_mu", "traffic.desired_speed_calibrated_log_sigma"):
+        assert key in PARAM_KEYS
+    with pytest.raises(ParameterError, match="desired_speed_calibrated_log_sigma' must be at most 2"):
+        with_overrides(load_params(), {"traffic.desired_speed_calibrated_log_sigma": 2.5})
