@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 from scipy import special
 
+from pedsafe_sumo.params import load_params
 from pedsafe_sumo.sampling.draws import family_from_json
 from pedsafe_sumo.sampling.importance import Categorical
 from pedsafe_sumo.sampling.joint import Block, fit_logistic, quadratic_design
@@ -42,6 +43,47 @@ from pedsafe_sumo.sampling.joint import Block, fit_logistic, quadratic_design
 DEFENSIVE_SHARE = 0.1
 ELITE_FRACTION = 0.1
 NO_TTC_SCORE = -1000.0
+
+
+#: `--ridge cv`: the penalties it chooses from (a log grid around the sampler's 1, spanning the values the
+#: session-6 table looked at), fixed before the measurement, and its folds.
+RIDGE_GRID = (0.1, 0.3, 1.0, 3.0, 10.0)
+CV_FOLDS = 5
+
+
+def cv_folds(y: np.ndarray, folds: int, rng: np.random.Generator) -> np.ndarray:
+    """Each row's fold, 0..folds-1: the collisions and the other rows each shuffled by `rng` and dealt
+    round-robin (stratified, so that every fold holds about as many of the pilot's few collisions)."""
+    fold = np.empty(len(y), dtype=int)
+    for members in (np.flatnonzero(y > 0), np.flatnonzero(y <= 0)):
+        fold[rng.permutation(members)] = np.arange(len(members)) % folds
+    return fold
+
+
+def cv_log_likelihood(x: np.ndarray, y: np.ndarray, ridge: float, fold: np.ndarray) -> float:
+    """The held-out Bernoulli log-likelihood of the fits with penalty `ridge`, summed over the folds."""
+    total = 0.0
+    for k in np.unique(fold):
+        held = fold == k
+        eta = x[held] @ fit_logistic(x[~held], y[~held], ridge)
+        total -= float(np.sum(np.logaddexp(0, eta) - y[held] * eta))
+    return total
+
+
+def cv_ridge(
+    x: np.ndarray,
+    y: np.ndarray,
+    rng: np.random.Generator,
+    grid: tuple[float, ...] = RIDGE_GRID,
+    folds: int = CV_FOLDS,
+) -> tuple[float, dict[float, float]]:
+    """The penalty of `grid` with the largest K-fold cross-validated log-likelihood on (x, y) (the first of
+    equals: the smallest), and every penalty's score. With fewer collisions than folds some folds hold
+    none; the score is still the held-out likelihood of every row."""
+    fold = cv_folds(np.asarray(y, dtype=float), min(folds, len(y)), rng)
+    scores = {float(r): cv_log_likelihood(x, np.asarray(y, dtype=float), float(r), fold) for r in grid}
+    best = max(scores, key=lambda r: (scores[r], -r))
+    return best, scores
 
 
 def design(inputs: pd.DataFrame, spec: dict) -> np.ndarray:
@@ -68,12 +110,33 @@ def evaluate(beta: np.ndarray, x_eval: np.ndarray, y_eval: np.ndarray) -> float:
     return efficiency(y_eval, root_pi, float(np.mean(root_pi)))
 
 
+def fitter(ridge: str, replicate: int, chosen: list[float]):
+    """fit(x, y) with a fixed penalty, or with the penalty chosen by sampling.joint.cv_ridge on the very
+    rows it fits (folds from a Generator of the replicate, as the sampler's come from the run seed)."""
+    if ridge != "cv":
+        return lambda x, y: fit_logistic(x, y, float(ridge))
+    rng = np.random.default_rng(replicate)
+
+    def fit(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        best, _ = cv_ridge(x, y, rng)
+        chosen.append(best)
+        return fit_logistic(x, y, best)
+
+    return fit
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mc_run", type=Path)
-    parser.add_argument("--ridge", type=float, nargs="+", default=[1.0, 3.0, 10.0])
+    parser.add_argument("--ridge", nargs="+", default=["1", "3", "10"], help="penalties, or cv")
     parser.add_argument("--replicates", type=int, default=5)
     parser.add_argument("--condition", default="sv")
+    parser.add_argument(
+        "--with-sex",
+        action="store_true",
+        help="add the pedestrian's sex (ped_female, drawn but not proposed by the sampler; its nominal "
+        "from defaults.toml) to the inputs the proposal and pi_hat cover (session 7 item 4's lead)",
+    )
     args = parser.parse_args(argv)
     rows = pd.read_parquet(args.mc_run / "episodes.parquet")
     rows = rows[(rows["status"] == "ok") & (rows["condition"] == args.condition)]
@@ -82,6 +145,9 @@ def main(argv: list[str] | None = None) -> int:
         sc = sc.sort_values("episode")
         records = [json.loads(t) for t in sc["sampler_inputs"]]
         nominal = {n: family_from_json(f) for n, f in records[0]["nominal"].items()}
+        if args.with_sex:
+            share = float(load_params()["pedestrians"]["gender_female_share"])
+            nominal["ped_female"] = Categorical((1.0 - share, share))
         inputs = pd.DataFrame([r["inputs"] for r in records])[sorted(nominal)].fillna(0.0)
         spec = {}
         for name, fam in nominal.items():
@@ -100,24 +166,26 @@ def main(argv: list[str] | None = None) -> int:
         for ridge in args.ridge:
             kinds = ("nominal 200", "nominal 400", "2-stage", "near 200", "near 400", "all-but-block (8,000)")
             res: dict[str, list[float]] = {kind: [] for kind in kinds}
+            chosen: dict[str, list[float]] = {kind: [] for kind in kinds}
             for r in range(args.replicates):
+                fits = {kind: fitter(ridge, r, chosen[kind]) for kind in kinds}
                 start = r * block
                 order = np.r_[np.arange(start, n), np.arange(0, start)]  # this replicate's rows first
                 for size in (200, 400):
                     pilot, held = order[:size], order[size:]
                     if y[pilot].sum() > 0:
-                        beta = fit_logistic(x[pilot], y[pilot], ridge)
+                        beta = fits[f"nominal {size}"](x[pilot], y[pilot])
                         res[f"nominal {size}"].append(evaluate(beta, x[held], y[held]))
                     else:
                         res[f"nominal {size}"].append(1.0)  # no collision: the sampler would stay nominal
                     level = min(1.0, float(np.quantile(score[pilot], 1 - ELITE_FRACTION)))
                     elite = (score[pilot] >= level).astype(float)
                     res[f"near {size}"].append(
-                        evaluate(fit_logistic(x[pilot], elite, ridge), x[held], y[held])
+                        evaluate(fits[f"near {size}"](x[pilot], elite), x[held], y[held])
                     )
                 # 2-stage: stage 0 on 200 nominal rows, stage 1 by rejection from the next rows.
                 s0 = order[:200]
-                beta0 = fit_logistic(x[s0], y[s0], ridge) if y[s0].sum() > 0 else None
+                beta0 = fits["2-stage"](x[s0], y[s0]) if y[s0].sum() > 0 else None
                 rest = order[200:]
                 if beta0 is None:
                     s1, used = rest[:200], 200
@@ -131,13 +199,13 @@ def main(argv: list[str] | None = None) -> int:
                     s1, used = rest[kept], int(kept[-1]) + 1
                 pooled = np.r_[s0, s1]
                 held = rest[used:]
-                beta1 = fit_logistic(x[pooled], y[pooled], ridge)
+                beta1 = fits["2-stage"](x[pooled], y[pooled])
                 res["2-stage"].append(evaluate(beta1, x[held], y[held]))
                 # reference: pi_hat from the 8,000 rows outside this replicate's block
                 inside = order[:block]
                 outside = order[block:]
                 res["all-but-block (8,000)"].append(
-                    evaluate(fit_logistic(x[outside], y[outside], ridge), x[inside], y[inside])
+                    evaluate(fits["all-but-block (8,000)"](x[outside], y[outside]), x[inside], y[inside])
                 )
             for kind, values in res.items():
                 v = np.array(values)
@@ -149,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
                         "median": float(np.median(v)),
                         "min": float(v.min()),
                         "max": float(v.max()),
+                        "replicates": " ".join(f"{e:.3g}" for e in v),
+                        "cv chose": " ".join(f"{c:g}" for c in chosen[kind]),
                     }
                 )
     table = pd.DataFrame(out)
