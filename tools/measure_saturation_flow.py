@@ -7,7 +7,8 @@ A straight two-lane road (400 m to a signal, 300 m beyond, the fit's 16.67 m/s l
 (green, yellow, red), and an oversaturating stream on both lanes (one vehicle per lane every
 --insert-interval s, far above capacity, so a queue stands at every red). Each vehicle is the generator's:
 the vType of pedsafe_sumo/demand/vehicles.py (length, minGap, sigma of defaults.toml [traffic], speedDev 0)
-and its own speed factor = a draw from the non-intersection lognormal / the limit. The time each vehicle
+and its own speed factor = a draw from the generator's desired-speed law (traffic.desired_speed_law: the
+non-intersection lognormal, or the calibrated one) / the limit. The time each vehicle
 enters the downstream edge is recorded per lane; per green, the headways after the 4th vehicle (HCM: the
 start-up lost time is in the first four) give the saturation headway, and 3600 / its mean the saturation
 flow per lane. Greens of the first three cycles are ignored (the queue builds up).
@@ -27,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from pedsafe_sumo.demand.vehicles import desired_speed_distribution  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
 from pedsafe_sumo.sumo_binaries import sumo_binary  # noqa: E402
 
@@ -51,6 +53,7 @@ def measure(seed: int, args: argparse.Namespace, traffic: dict) -> tuple[float, 
     import libsumo as ts
 
     limit = float(traffic["fit_speed_limit_mps"])
+    speed_law = desired_speed_distribution(traffic)
     cycle = args.green + args.yellow + args.red
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -84,14 +87,7 @@ def measure(seed: int, args: argparse.Namespace, traffic: dict) -> tuple[float, 
                 if ts.simulation.getTime() >= next_insert - 1e-9:
                     next_insert += args.insert_interval
                     for lane in (0, 1):
-                        desired = float(
-                            np.exp(
-                                rng.normal(
-                                    traffic["speed_nonintersection_log_mu"],
-                                    traffic["speed_nonintersection_log_sigma"],
-                                )
-                            )
-                        )
+                        desired = float(speed_law.sample(rng, 1)[0])
                         vid = f"v{n}"
                         n += 1
                         ts.vehicle.add(vid, "r", typeID="bg", departLane=str(lane), departSpeed="desired")

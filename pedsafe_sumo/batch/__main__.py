@@ -46,6 +46,7 @@ from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.batch.sampled import (
     FAMILIES,
+    FAMILY_JOINT,
     FAMILY_PRODUCT,
     SAMPLER_IS,
     SAMPLER_MC,
@@ -514,6 +515,12 @@ def prepare(args: argparse.Namespace) -> Plan:
         raise UsageError(
             "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"
         )
+    unused_by_joint = [name for name in ("is_inputs", "is_min_spread", "is_score") if name in explicit]
+    if arguments["is_family"] == FAMILY_JOINT and unused_by_joint:
+        # The joint proposal moves every proposable input at once, fitted on the pilots' collisions: no
+        # input screen, spread floor or score for the pilots' elite (docs/sampling.md).
+        given = ", ".join(f"--{name.replace('_', '-')}" for name in unused_by_joint)
+        raise UsageError(f"{given}: not used by --is-family joint (only by the product family)")
     if not MIN_SPREAD_FLAG <= arguments["is_min_spread"] <= 1.0:
         raise UsageError(
             f"--is-min-spread must lie in {MIN_SPREAD_FLAG}..1, got {arguments['is_min_spread']}"

@@ -37,6 +37,11 @@ CROSSING = ["--scenario", "crossing", "--episodes", "2"]
         (["--sampler", "is", "--is-proposal", "/nonexistent/run"], "--is-proposal: cannot read"),
         (["--sampler", "is", "--is-proposal", "X", "--is-pilot-stages", "2"], "leave out the other --is-*"),
         (["--sampler", "is", "--condition", "v2i"], "adapts its proposal on the SV condition"),
+        (["--sampler", "is", "--is-family", "joint", "--is-score", "ttc"], "--is-score: not used by"),
+        (
+            ["--sampler", "is", "--is-family", "joint", "--is-inputs", "all", "--is-min-spread", "0.5"],
+            "--is-inputs, --is-min-spread: not used by --is-family joint",
+        ),
         (["--sampler", "xyz"], "invalid choice"),
     ],
 )
