@@ -58,7 +58,7 @@ def rss_mib() -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--protocol", default="protocols/paper-v6.toml")
+    parser.add_argument("--protocol", default="protocols/paper-v7.toml")
     parser.add_argument("--mode", choices=("full", "sumo"), default="full")
     parser.add_argument("--pairs", type=int, default=100, help="pairs in all (both conditions each)")
     parser.add_argument("--every", type=int, default=10, help="print every N pairs")

@@ -1,7 +1,7 @@
 """Protocols: every value of a study fixed in one dated file before it runs (issue 13 item 4).
 
-    python -m pedsafe_sumo.batch --protocol protocols/paper-v6.toml --out DIR [--episodes N] [--workers K]
-    python -m pedsafe_sumo.protocol write paper-v6 --date 2026-12-01 --out protocols/paper-v6.toml
+    python -m pedsafe_sumo.batch --protocol protocols/paper-v7.toml --out DIR [--episodes N] [--workers K]
+    python -m pedsafe_sumo.protocol write paper-v8 --date 2026-12-01 --out protocols/paper-v8.toml
 
 A protocol file (TOML) holds:
 - [protocol]: name, date, description, scenarios (list), conditions, episodes, seed, site, algorithm;

@@ -19,7 +19,7 @@ from pedsafe_sumo.scenarios.registry import get_scenario
 
 #: The newest protocol: the one that runs on this code (older ones predate parameters added since, and
 #: are refused, as a protocol must name every value).
-PROTOCOL = REPO_ROOT / "protocols" / "paper-v6.toml"
+PROTOCOL = REPO_ROOT / "protocols" / "paper-v7.toml"
 
 
 def _leaves(tree, prefix=""):
