@@ -46,6 +46,15 @@ Variants, fixed before any score was looked at:
   refitted on the pooled rows. Pilot cost: stage 0's rows + 200, counted per replicate.
 - `physics+adaptive`: both.
 
+Printed, not a variant: the efficiency on all rows of the proposal that puts the non-defensive mass on
+{margin_s < 0} (post hoc as below; it needs no pilot: P_p(margin_s < 0) by nominal draws, no SUMO).
+
+Added AFTER the first table (post hoc, so not a fair competitor: chosen with the margin's split of all
+10,000 rows in view, see the printed P(collision | margin < 0); it needs a fresh reference to be judged):
+
+- `margin-only`: the `ridge1` pilot, pi_hat on the physical features alone (v, 1/w, margin_s: the
+  quadratic design of these three, 10 columns) instead of the inputs' design.
+
 With pilots: efficiency per final episode x n / (n + pilot cost), n final pairs (300, 1,000, 2,000). The
 goal of issue 17 is 10x with pilots on every SV collision rate.
 
@@ -56,6 +65,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -88,7 +98,7 @@ ADAPTIVE_CHUNK = 50
 ADAPTIVE_MIN_COLLISIONS = 5
 ADAPTIVE_MAX = 1_000
 FINAL_PAIRS = (300, 1_000, 2_000)
-VARIANTS = ("ridge1", "physics", "hybrid", "adaptive", "physics+adaptive")
+VARIANTS = ("ridge1", "physics", "hybrid", "adaptive", "physics+adaptive", "margin-only")
 
 
 def braking_margin_s(
@@ -154,6 +164,13 @@ def product_ratio(proposal: Product, nominal: dict, inputs: pd.DataFrame) -> np.
     return DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) * np.exp(log_ratio)
 
 
+def efficiency(y: np.ndarray, ratio: np.ndarray) -> float:
+    """P(1 - P) / (E_p[w f] - P^2) on nominal rows, w = 1 / (q/p)."""
+    p = float(np.mean(y))
+    variance = float(np.mean(y / ratio)) - p * p
+    return p * (1 - p) / variance if variance > 0 else math.inf
+
+
 def reject(
     ratio: np.ndarray, bound: float, rest: np.ndarray, rng: np.random.Generator
 ) -> tuple[np.ndarray, int]:
@@ -163,9 +180,10 @@ def reject(
     return rest[kept], int(kept[-1]) + 1
 
 
-def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int]:
-    """(efficiency per final episode, pilot cost in episodes, pooled pilot collisions) of one replicate."""
-    x = data["x_physics"] if variant.startswith("physics") else data["x"]
+def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int, int, int]:
+    """(efficiency per final episode, pilot cost in episodes, pooled pilot collisions, held-out rows, their
+    collisions) of one replicate."""
+    x = {"physics": data["x_physics"], "margin-only": data["x_margin"]}.get(variant.split("+")[0], data["x"])
     y, n = data["y"], len(data["y"])
     order = np.r_[np.arange(r * data["block"], n), np.arange(0, r * data["block"])]
     rng = np.random.default_rng(r)
@@ -195,7 +213,7 @@ def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int]:
             eff, _ = proposal_efficiency(
                 y[held], data["inputs"].iloc[held], data["nominal"], final, DEFENSIVE_SHARE
             )
-            return eff, size + STAGE_ROWS, int(y[pooled].sum())
+            return eff, size + STAGE_ROWS, int(y[pooled].sum()), len(held), int(y[held].sum())
     elif y[s0].sum() > 0:
         beta0 = fit_logistic(x[s0], y[s0], RIDGE)
         ratio, bound = joint_ratio(beta0, x[rest], x[rest])
@@ -204,9 +222,10 @@ def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int]:
     else:  # no collision in stage 0: the joint sampler stays nominal
         s1, pooled, held = rest[:STAGE_ROWS], np.r_[s0, rest[:STAGE_ROWS]], rest[STAGE_ROWS:]
     if y[pooled].sum() == 0:
-        return 1.0, size + STAGE_ROWS, 0
+        return 1.0, size + STAGE_ROWS, 0, len(held), int(y[held].sum())
     beta = fit_logistic(x[pooled], y[pooled], RIDGE)
-    return evaluate(beta, x[held], y[held]), size + STAGE_ROWS, int(y[pooled].sum())
+    held_out = len(held), int(y[held].sum())
+    return evaluate(beta, x[held], y[held]), size + STAGE_ROWS, int(y[pooled].sum()), *held_out
 
 
 def scenario_data(sc: pd.DataFrame, scenario: str, params: dict, replicates: int) -> dict:
@@ -238,6 +257,7 @@ def scenario_data(sc: pd.DataFrame, scenario: str, params: dict, replicates: int
     return {
         "x": x,
         "x_physics": physics_design(inputs, spec, physics),
+        "x_margin": quadratic_design(len(inputs), list(physics)),
         "y": sc["collision"].astype(float).to_numpy(),
         "frame": sc.reset_index(drop=True),
         "inputs": inputs,
@@ -267,17 +287,26 @@ def main(argv: list[str] | None = None) -> int:
             f"({int((margin < 0).sum())} rows), P(collision | margin >= 0) {y[margin >= 0].mean():.4f}",
             file=sys.stderr,
         )
+        region = margin < 0
+        ratio = DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) * region / region.mean()
+        print(
+            f"  (post hoc, no pilot) q = 0.1 p + 0.9 p 1{{margin < 0}} / P(margin < 0): {int(y[region].sum())} of "
+            f"{int(y.sum())} collisions inside, efficiency per episode on all rows "
+            f"{efficiency(y, ratio):.3g}",
+            file=sys.stderr,
+        )
         for variant in args.variants:
             results = [run_replicate(variant, r, data) for r in range(args.replicates)]
-            eff = np.array([e for e, _, _ in results])
-            cost = np.array([c for _, c, _ in results])
+            eff = np.array([res[0] for res in results])
+            cost = np.array([res[1] for res in results])
             row = {
                 "scenario": scenario,
                 "variant": variant,
                 "per final episode": f"{np.median(eff):.3g} [{eff.min():.3g}, {eff.max():.3g}]",
                 "replicates": " ".join(f"{e:.3g}" for e in eff),
                 "pilot cost": " ".join(str(c) for c in cost),
-                "pilot collisions": " ".join(str(k) for _, _, k in results),
+                "pilot collisions": " ".join(str(res[2]) for res in results),
+                "held-out rows (collisions)": " ".join(f"{res[3]} ({res[4]})" for res in results),
             }
             for n_final in FINAL_PAIRS:
                 with_pilots = eff * n_final / (n_final + cost)
