@@ -228,7 +228,9 @@ def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int, in
     return evaluate(beta, x[held], y[held]), size + STAGE_ROWS, int(y[pooled].sum()), *held_out
 
 
-def scenario_data(sc: pd.DataFrame, scenario: str, params: dict, replicates: int) -> dict:
+def scenario_data(
+    sc: pd.DataFrame, scenario: str, params: dict, replicates: int, visible_m: float = D_VISIBLE_M
+) -> dict:
     records = [json.loads(t) for t in sc["sampler_inputs"]]
     nominal = {name: family_from_json(f) for name, f in records[0]["nominal"].items()}
     inputs = pd.DataFrame([rec["inputs"] for rec in records])[sorted(nominal)].fillna(0.0)
@@ -252,6 +254,7 @@ def scenario_data(sc: pd.DataFrame, scenario: str, params: dict, replicates: int
         w,
         float(algorithm["reaction_time_s"]),
         float(algorithm["max_decel_mps2"]),
+        visible_m,
     )
     physics = [standardised(v), standardised(1.0 / w), standardised(margin)]
     return {
@@ -272,6 +275,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mc_run", type=Path)
     parser.add_argument("--replicates", type=int, default=5)
+    parser.add_argument(
+        "--visible-m",
+        type=float,
+        default=D_VISIBLE_M,
+        help="D of the braking margin (a sensitivity check of the stated assumption, not a choice)",
+    )
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     args = parser.parse_args(argv)
     params = load_params()
@@ -279,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = rows[(rows["status"] == "ok") & (rows["condition"] == "sv")]
     out = []
     for scenario, sc in rows.groupby("scenario"):
-        data = scenario_data(sc.sort_values("episode"), scenario, params, args.replicates)
+        data = scenario_data(sc.sort_values("episode"), scenario, params, args.replicates, args.visible_m)
         y, margin = data["y"], data["margin"]
         print(
             f"{scenario}: |v - ego_initial_speed_mps| max {data['check'][0]:.2g}, |w - ped_speed_mps| max "
@@ -290,7 +299,8 @@ def main(argv: list[str] | None = None) -> int:
         region = margin < 0
         ratio = DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) * region / region.mean()
         print(
-            f"  (post hoc, no pilot) q = 0.1 p + 0.9 p 1{{margin < 0}} / P(margin < 0): {int(y[region].sum())} of "
+            f"  (post hoc, no pilot) q = 0.1 p + 0.9 p 1{{margin < 0}} / P(margin < 0): "
+            f"{int(y[region].sum())} of "
             f"{int(y.sum())} collisions inside, efficiency per episode on all rows "
             f"{efficiency(y, ratio):.3g}",
             file=sys.stderr,
