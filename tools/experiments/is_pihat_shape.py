@@ -99,6 +99,9 @@ ADAPTIVE_MIN_COLLISIONS = 5
 ADAPTIVE_MAX = 1_000
 FINAL_PAIRS = (300, 1_000, 2_000)
 VARIANTS = ("ridge1", "physics", "hybrid", "adaptive", "physics+adaptive", "margin-only")
+#: References, not pilots: pi_hat fitted on the 8,000 rows outside the replicate's block, evaluated on the
+#: block (is_joint_pilot's `all-but-block`): what the model class reaches with far more data than a pilot.
+REFERENCES = ("ridge1 8000", "physics 8000", "margin-only 8000")
 
 
 def braking_margin_s(
@@ -183,10 +186,22 @@ def reject(
 def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int, int, int]:
     """(efficiency per final episode, pilot cost in episodes, pooled pilot collisions, held-out rows, their
     collisions) of one replicate."""
-    x = {"physics": data["x_physics"], "margin-only": data["x_margin"]}.get(variant.split("+")[0], data["x"])
+    x = {"physics": data["x_physics"], "margin-only": data["x_margin"]}.get(
+        variant.split("+")[0].split(" ")[0], data["x"]
+    )
     y, n = data["y"], len(data["y"])
     order = np.r_[np.arange(r * data["block"], n), np.arange(0, r * data["block"])]
     rng = np.random.default_rng(r)
+    if variant in REFERENCES:
+        inside, outside = order[: data["block"]], order[data["block"] :]
+        beta = fit_logistic(x[outside], y[outside], RIDGE)
+        return (
+            evaluate(beta, x[inside], y[inside]),
+            0,
+            int(y[outside].sum()),
+            len(inside),
+            int(y[inside].sum()),
+        )
     if variant.endswith("adaptive"):
         size = ADAPTIVE_CHUNK
         while y[order[:size]].sum() < ADAPTIVE_MIN_COLLISIONS and size < ADAPTIVE_MAX:
@@ -281,7 +296,9 @@ def main(argv: list[str] | None = None) -> int:
         default=D_VISIBLE_M,
         help="D of the braking margin (a sensitivity check of the stated assumption, not a choice)",
     )
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument(
+        "--variants", nargs="+", default=list(VARIANTS + REFERENCES), choices=VARIANTS + REFERENCES
+    )
     args = parser.parse_args(argv)
     params = load_params()
     rows = pd.read_parquet(args.mc_run / "episodes.parquet")
@@ -318,7 +335,7 @@ def main(argv: list[str] | None = None) -> int:
                 "pilot collisions": " ".join(str(res[2]) for res in results),
                 "held-out rows (collisions)": " ".join(f"{res[3]} ({res[4]})" for res in results),
             }
-            for n_final in FINAL_PAIRS:
+            for n_final in FINAL_PAIRS if variant not in REFERENCES else ():
                 with_pilots = eff * n_final / (n_final + cost)
                 row[f"with pilots n={n_final}"] = (
                     f"{np.median(with_pilots):.3g} [{with_pilots.min():.3g}, {with_pilots.max():.3g}]"
