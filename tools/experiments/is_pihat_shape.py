@@ -54,6 +54,10 @@ Added AFTER the first table (post hoc, so not a fair competitor: chosen with the
 
 - `margin-only`: the `ridge1` pilot, pi_hat on the physical features alone (v, 1/w, margin_s: the
   quadratic design of these three, 10 columns) instead of the inputs' design.
+- `region0+physics` (added after the region's figures were printed, post hoc as well): stage 0 of 200
+  rows drawn from the region proposal with D = GUARD_VISIBLE_M (the D whose region held every v5_full
+  collision of the four scenarios but two: read off these rows), then the `physics` joint stage and refit.
+  A guard against an empty first pilot that costs no episode. Cost 400.
 
 With pilots: efficiency per final episode x n / (n + pilot cost), n final pairs (300, 1,000, 2,000). The
 goal of issue 17 is 10x with pilots on every SV collision rate.
@@ -91,6 +95,8 @@ RIDGE = 1.0
 STAGE_ROWS = 200
 #: Assumption (module docstring): SUMO's default lane width 3.2 m less half a car's width 0.9 m.
 D_VISIBLE_M = 2.3
+#: `region0+physics` (post hoc): the D of its stage-0 region.
+GUARD_VISIBLE_M = 1.6
 #: `hybrid`: collisions the pooled pilot must hold before the joint family takes over (fixed in advance).
 K_COLLISIONS = 10
 #: `adaptive`: stage 0 grows by this many nominal rows until it holds this many collisions, or the cap.
@@ -98,7 +104,7 @@ ADAPTIVE_CHUNK = 50
 ADAPTIVE_MIN_COLLISIONS = 5
 ADAPTIVE_MAX = 1_000
 FINAL_PAIRS = (300, 1_000, 2_000)
-VARIANTS = ("ridge1", "physics", "hybrid", "adaptive", "physics+adaptive", "margin-only")
+VARIANTS = ("ridge1", "physics", "hybrid", "adaptive", "physics+adaptive", "margin-only", "region0+physics")
 #: References, not pilots: pi_hat fitted on the 8,000 rows outside the replicate's block, evaluated on the
 #: block (is_joint_pilot's `all-but-block`): what the model class reaches with far more data than a pilot.
 REFERENCES = ("ridge1 8000", "physics 8000", "margin-only 8000")
@@ -202,6 +208,19 @@ def run_replicate(variant: str, r: int, data: dict) -> tuple[float, int, int, in
             len(inside),
             int(y[inside].sum()),
         )
+    if variant == "region0+physics":
+        x = data["x_physics"]
+        region = data["guard_region"]
+        ratio0 = DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) * region / region.mean()
+        s0, used0 = reject(ratio0[order], float(ratio0.max()), order, rng)
+        rest = order[used0:]
+        beta0 = fit_logistic(x[s0], y[s0], RIDGE)
+        ratio, bound = joint_ratio(beta0, x[rest], x[rest])
+        s1, used = reject(ratio, bound, rest, rng)
+        pooled, held = np.r_[s0, s1], rest[used:]
+        beta = fit_logistic(x[pooled], y[pooled], RIDGE)
+        held_out = len(held), int(y[held].sum())
+        return evaluate(beta, x[held], y[held]), 2 * STAGE_ROWS, int(y[pooled].sum()), *held_out
     if variant.endswith("adaptive"):
         size = ADAPTIVE_CHUNK
         while y[order[:size]].sum() < ADAPTIVE_MIN_COLLISIONS and size < ADAPTIVE_MAX:
@@ -271,6 +290,14 @@ def scenario_data(
         float(algorithm["max_decel_mps2"]),
         visible_m,
     )
+    guard_margin = braking_margin_s(
+        inputs["conflict_offset_s"].to_numpy(float),
+        v,
+        w,
+        float(algorithm["reaction_time_s"]),
+        float(algorithm["max_decel_mps2"]),
+        GUARD_VISIBLE_M,
+    )
     physics = [standardised(v), standardised(1.0 / w), standardised(margin)]
     return {
         "x": x,
@@ -283,6 +310,7 @@ def scenario_data(
         "block": len(sc) // replicates,
         "check": check,
         "margin": margin,
+        "guard_region": guard_margin < 0,
     }
 
 
