@@ -125,6 +125,19 @@ def fitter(ridge: str, replicate: int, chosen: list[float]):
     return fit
 
 
+def design_spec(nominal: dict, inputs: pd.DataFrame) -> dict:
+    """`design`'s description of each input: a category's number of levels, or a continuous input's mean
+    and sd over these rows (nominal draws: their moments are the nominal's)."""
+    spec = {}
+    for name, fam in nominal.items():
+        if isinstance(fam, Categorical):
+            spec[name] = ("cat", len(fam.probabilities), 0)
+        else:
+            v = inputs[name].to_numpy(dtype=float)
+            spec[name] = ("cont", float(v.mean()), float(v.std()))
+    return spec
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mc_run", type=Path)
@@ -149,14 +162,7 @@ def main(argv: list[str] | None = None) -> int:
             share = float(load_params()["pedestrians"]["gender_female_share"])
             nominal["ped_female"] = Categorical((1.0 - share, share))
         inputs = pd.DataFrame([r["inputs"] for r in records])[sorted(nominal)].fillna(0.0)
-        spec = {}
-        for name, fam in nominal.items():
-            if isinstance(fam, Categorical):
-                spec[name] = ("cat", len(fam.probabilities), 0)
-            else:
-                v = inputs[name].to_numpy(dtype=float)  # nominal draws: their moments are the nominal's
-                spec[name] = ("cont", float(v.mean()), float(v.std()))
-        x = design(inputs, spec)
+        x = design(inputs, design_spec(nominal, inputs))
         y = sc["collision"].astype(float).to_numpy()
         ttc = sc["min_ttc_s"].to_numpy(dtype=float)
         impact = sc["impact_speed_mps"].fillna(0.0).to_numpy(dtype=float)

@@ -80,13 +80,13 @@ from scipy import special
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from is_joint_pilot import DEFENSIVE_SHARE, design, evaluate  # noqa: E402
+from is_joint_pilot import DEFENSIVE_SHARE, design, design_spec, evaluate  # noqa: E402
 from is_limits import proposal_efficiency  # noqa: E402
 
 from pedsafe_sumo.demand.sampling import age_group_speed_distributions  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
 from pedsafe_sumo.sampling.draws import family_from_json  # noqa: E402
-from pedsafe_sumo.sampling.importance import SQRT_HALF, Categorical, Product  # noqa: E402
+from pedsafe_sumo.sampling.importance import SQRT_HALF, Product  # noqa: E402
 from pedsafe_sumo.sampling.joint import fit_logistic, quadratic_design  # noqa: E402
 from pedsafe_sumo.sampling.stages import INPUTS_SCREENED, SCORE_TTC, cross_entropy_update  # noqa: E402
 from pedsafe_sumo.scenarios.registry import get_scenario  # noqa: E402
@@ -268,13 +268,7 @@ def scenario_data(
     records = [json.loads(t) for t in sc["sampler_inputs"]]
     nominal = {name: family_from_json(f) for name, f in records[0]["nominal"].items()}
     inputs = pd.DataFrame([rec["inputs"] for rec in records])[sorted(nominal)].fillna(0.0)
-    spec = {}
-    for name, fam in nominal.items():
-        if isinstance(fam, Categorical):
-            spec[name] = ("cat", len(fam.probabilities), 0)
-        else:
-            v = inputs[name].to_numpy(dtype=float)
-            spec[name] = ("cont", float(v.mean()), float(v.std()))
+    spec = design_spec(nominal, inputs)
     x = design(inputs, spec)
     v, w = speeds_of(inputs, scenario, params)
     check = (
