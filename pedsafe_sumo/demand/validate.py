@@ -37,7 +37,7 @@ import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -155,7 +155,12 @@ FALLBACK_OPTIONS = [
 
 
 def run_sumo(
-    site: Site, route_files: list[Path], detector_file: Path, end_s: float, log_file: Path
+    site: Site,
+    route_files: list[Path],
+    detector_file: Path,
+    end_s: float,
+    log_file: Path,
+    tripinfo_file: Path | None = None,
 ) -> subprocess.CompletedProcess:
     """Run the sumo binary headless over the site with the demand and the detectors.
 
@@ -174,6 +179,9 @@ def run_sumo(
         "--seed", "1",
         "--log", str(log_file),
     ]  # fmt: skip
+    if tripinfo_file is not None:
+        # Every inserted vehicle, the ones still driving at the end included: which lanes stopped inserting.
+        cmd += ["--tripinfo-output", str(tripinfo_file), "--tripinfo-output.write-unfinished", "true"]
     return subprocess.run(cmd, capture_output=True, text=True, check=False)
 
 
@@ -331,6 +339,62 @@ def backlog_share(sim_stats: dict[str, str], n_vehicles: int) -> float:
     return waiting / n_vehicles if n_vehicles else 0.0
 
 
+#: A lane that inserted nothing in the last STALL_S of the run while a vehicle due before that waited is
+#: stalled. A lane at capacity inserts whenever its queue moves (every signal cycle); one stalled this long
+#: is usually blocked by a single vehicle SUMO cannot insert (the route files insert at
+#: departSpeed="desired": a very fast draw never finds the gap its speed needs), and every vehicle behind it
+#: counts as backlog although the road could take them.
+STALL_S = 600.0
+
+
+@dataclass(frozen=True)
+class StalledLane:
+    lane_id: str
+    last_insertion_s: float  # -1 when the lane inserted nothing at all
+    waiting: int
+    head_id: str
+    head_due_s: float
+    head_desired_mps: float
+
+    def line(self) -> str:
+        since = f"after {self.last_insertion_s:.0f} s" if self.last_insertion_s >= 0 else "at all"
+        return (
+            f"insertion stalled on lane {self.lane_id}: nothing inserted {since} while {self.waiting} "
+            f"vehicles waited; the first of them, {self.head_id} (due at {self.head_due_s:.0f} s), wants "
+            f"{self.head_desired_mps:.1f} m/s"
+        )
+
+
+def stalled_lanes(
+    route_file: Path, tripinfo_file: Path, end_s: float, lane_speed_mps: dict[str, float]
+) -> list[StalledLane]:
+    """The entering lanes that stopped inserting (STALL_S) while vehicles due on them waited: from the route
+    file (each vehicle's due time, departure lane and speed factor) and SUMO's tripinfo output (which
+    vehicles it inserted, and when)."""
+    routes = ET.parse(route_file).getroot()
+    first_edge = {r.get("id"): r.get("edges", "").split()[0] for r in routes.iter("route")}
+    inserted = {
+        t.get("id"): float(t.get("depart", "nan")) for t in ET.parse(tripinfo_file).getroot().iter("tripinfo")
+    }
+    by_lane: dict[str, list[tuple[float, str, float]]] = {}
+    last: dict[str, float] = {}
+    for vehicle in routes.iter("vehicle"):
+        lane = f"{first_edge[vehicle.get('route')]}_{vehicle.get('departLane')}"
+        vid, due_s = vehicle.get("id"), float(vehicle.get("depart"))
+        if vid in inserted:
+            last[lane] = max(last.get(lane, -1.0), inserted[vid])
+        elif due_s < end_s:
+            by_lane.setdefault(lane, []).append((due_s, vid, float(vehicle.get("speedFactor", "1"))))
+    stalled = []
+    for lane, waiting in sorted(by_lane.items()):
+        due_s, vid, factor = min(waiting)
+        last_s = last.get(lane, -1.0)
+        if due_s < end_s - STALL_S and last_s < end_s - STALL_S:
+            speed = factor * lane_speed_mps.get(lane, float("nan"))
+            stalled.append(StalledLane(lane, last_s, len(waiting), vid, due_s, speed))
+    return stalled
+
+
 @dataclass
 class Run:
     label: str  # "paper" or "sustainable"
@@ -341,6 +405,7 @@ class Run:
     backlog: float
     comparisons: list[Comparison]
     figures: list[Path]
+    stalled: list[StalledLane] = field(default_factory=list)
 
     @property
     def oversaturated(self) -> bool:
@@ -360,8 +425,14 @@ def run_once(args, site: Site, params: dict, rate_per_s: float, label: str, work
     det_out = work / "detectors.out.xml"
     det_file.write_text("\n".join(detector_lines(detectors, det_out.name)) + "\n", encoding="utf-8")
     log_file = work / "sumo.log"
+    tripinfo_file = work / "tripinfo.xml"
     result = run_sumo(
-        site, [demand.vehicles_file, demand.pedestrians_file], det_file, args.duration, log_file
+        site,
+        [demand.vehicles_file, demand.pedestrians_file],
+        det_file,
+        args.duration,
+        log_file,
+        tripinfo_file,
     )
     log_text = log_file.read_text(encoding="utf-8") if log_file.is_file() else ""
     if result.returncode != 0:
@@ -370,9 +441,11 @@ def run_once(args, site: Site, params: dict, rate_per_s: float, label: str, work
     records = read_instant_output(det_out)
     comparisons = measure(records, detectors, params["traffic"], args.warmup)
     sim_stats = sumo_statistics(result.stdout + "\n" + log_text)
+    lane_speed_mps = {lane.lane_id: lane.speed_limit_mps for lane in site.entering_lanes}
+    stalled = stalled_lanes(demand.vehicles_file, tripinfo_file, args.duration, lane_speed_mps)
     return Run(
         label, rate_per_s, demand.n_vehicles, demand.n_persons, sim_stats,
-        backlog_share(sim_stats, demand.n_vehicles), comparisons, [],
+        backlog_share(sim_stats, demand.n_vehicles), comparisons, [], stalled,
     )  # fmt: skip
 
 
@@ -447,6 +520,7 @@ def measured_markdown(args, runs: list[Run], n_loops: dict[str, int]) -> str:
             f"{run.n_vehicles} vehicles and {run.n_persons} pedestrians generated; {verdict} "
             f"(backlog {100 * run.backlog:.1f}% of the vehicles).",
             "SUMO: " + "; ".join(f"{k} {v}" for k, v in run.sim_stats.items()),
+            *(f"\n**Not capacity:** {lane.line()}." for lane in run.stalled),
             "",
             "| measured | fit | n | KS distance | measured median | fit median |",
             "|---|---|---:|---:|---:|---:|",
@@ -517,6 +591,8 @@ def main(argv: list[str] | None = None) -> int:
             f"[{run.label}: {run.headway_rate_per_s:.4g} veh/s/lane, {state}, "
             f"backlog {100 * run.backlog:.1f}%]"
         )
+        for lane in run.stalled:
+            print(f"  warning: {lane.line()}")
         for c in run.comparisons:
             print(f"  {c.name:38s} vs {c.reference:27s} n={c.n:6d}  KS D={c.ks_distance:.3f}  "
                   f"median {c.measured_median:.2f} (fit {c.fitted_median:.2f})")  # fmt: skip
