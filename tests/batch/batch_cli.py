@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -33,3 +34,17 @@ def tree_digest(path: Path) -> dict[str, str]:
         for p in sorted(path.rglob("*"))
         if p.is_file()
     }
+
+
+def resume_after_a_stop_in_the_final_stage(
+    out: Path, scenario: str
+) -> tuple[dict, subprocess.CompletedProcess]:
+    """A sampled run stopped in its final stage: run.json back to "running", episodes.parquet and the final
+    stage's parts (chunks 2-9 of `scenario`) gone; then `batch --resume`. Returns run.json as it was before
+    the stop, and the resume's process."""
+    run_info = json.loads((out / "run.json").read_text())
+    (out / "run.json").write_text(json.dumps({**run_info, "state": "running"}))
+    (out / "episodes.parquet").unlink()
+    for part in (out / "parts").glob(f"{scenario}-0000[2-9]*.parquet"):
+        part.unlink()
+    return run_info, batch("--resume", "--out", str(out))

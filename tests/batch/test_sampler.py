@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from batch_cli import batch
+from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 
 from pedsafe_sumo.batch.__main__ import main, parse_args, prepare, resumed_arguments
 from pedsafe_sumo.batch.chunks import episode_seed
@@ -161,14 +161,8 @@ def test_importance_sampled_run_stages_weights_and_workers(tmp_path):
     assert proc.returncode == 0, proc.stderr
     pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))
     # Same rows after a stop in the final stage: its parts lost, the run resumed from run.json's proposals.
-    run1 = json.loads((out1 / "run.json").read_text())
+    run1, proc = resume_after_a_stop_in_the_final_stage(out1, "right_turn")
     assert run1["sampler_proposals"] == run["sampler_proposals"]
-    run1["state"] = "running"
-    (out1 / "run.json").write_text(json.dumps(run1))
-    (out1 / "episodes.parquet").unlink()
-    for part in (out1 / "parts").glob("right_turn-0000[2-9]*.parquet"):
-        part.unlink()
-    proc = batch("--resume", "--out", str(out1))
     assert proc.returncode == 0, proc.stderr
     assert "runs again" in proc.stderr
     pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))

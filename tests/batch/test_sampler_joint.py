@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from batch_cli import batch
+from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 from scipy import stats
 
 from pedsafe_sumo.batch.chunks import episode_seed
@@ -73,13 +73,7 @@ def test_joint_run_weights_recomputed_and_same_rows_on_one_and_two_workers(tmp_p
     assert json.loads((out1 / "run.json").read_text())["sampler_proposals"] == run["sampler_proposals"]
     pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))
     # Same rows after a stop in the final stage: its parts lost, the run resumed from run.json's proposal.
-    run1 = json.loads((out1 / "run.json").read_text())
-    run1["state"] = "running"
-    (out1 / "run.json").write_text(json.dumps(run1))
-    (out1 / "episodes.parquet").unlink()
-    for part in (out1 / "parts").glob("background_blending-0000[2-9]*.parquet"):
-        part.unlink()
-    proc = batch("--resume", "--out", str(out1))
+    _, proc = resume_after_a_stop_in_the_final_stage(out1, "background_blending")
     assert proc.returncode == 0, proc.stderr
     assert "runs again" in proc.stderr
     pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))
