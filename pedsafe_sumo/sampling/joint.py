@@ -48,6 +48,8 @@ RIDGE = 1.0
 NORM_DRAWS = 1_000_000
 #: Any fixed seed: the estimate of c must not depend on the run, worker or resume.
 NORM_SEED = 17_2026
+#: Nominal draws per block of that estimate.
+NORM_BLOCK = 100_000
 #: Candidates drawn per block of the rejection step (the episode's Generator draws whole blocks).
 REJECTION_BLOCK = 64
 #: A proposal whose bound B needs more candidates than this per episode on average is refused.
@@ -96,6 +98,10 @@ class JointProposal:
     norm: float
     defensive_share: float
     norm_rel_se: float = 0.0
+    #: E_p[pi_hat] and its standard error, on the very NORM_DRAWS nominal draws that give c: the known mean
+    #: of the control variate pi_hat (report/tables.py). NaN in proposals stored before it.
+    mean_pi_hat: float = math.nan
+    mean_pi_hat_se: float = math.nan
 
     is_joint = True
 
@@ -120,8 +126,12 @@ class JointProposal:
                 blocks.append((v - mean) / sd)
         return quadratic_design(len(np.atleast_1d(x[self.names[0]])), blocks)
 
+    def pi_hat(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The fitted P(SV collision | x) at the inputs `x` (name -> values on the drawn scales)."""
+        return special.expit(self.features(x) @ np.asarray(self.coefficients))
+
     def root_pi(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        return np.sqrt(special.expit(self.features(x) @ np.asarray(self.coefficients)))
+        return np.sqrt(self.pi_hat(x))
 
     def q_over_p(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
         lam = self.defensive_share
@@ -152,6 +162,8 @@ class JointProposal:
                 "coefficients": list(self.coefficients),
                 "norm": self.norm,
                 "norm_rel_se": self.norm_rel_se,
+                "mean_pi_hat": self.mean_pi_hat,
+                "mean_pi_hat_se": self.mean_pi_hat_se,
                 "defensive_share": self.defensive_share,
                 "ridge": RIDGE,
             },
@@ -171,6 +183,8 @@ class JointProposal:
             float(data["norm"]),
             float(data["defensive_share"]),
             float(data.get("norm_rel_se", 0.0)),
+            float(data.get("mean_pi_hat", math.nan)),
+            float(data.get("mean_pi_hat_se", math.nan)),
         )
 
 
@@ -210,13 +224,29 @@ def fit_joint(
 
 
 def normalised(nominal: Mapping[str, Family], coefficients: Any, defensive_share: float) -> JointProposal:
-    """The proposal of these coefficients with c = E_p[sqrt(pi_hat)] estimated on NORM_DRAWS nominal
-    draws of NORM_SEED."""
+    """The proposal of these coefficients with c = E_p[sqrt(pi_hat)] and E_p[pi_hat] estimated on
+    NORM_DRAWS nominal draws of NORM_SEED (in blocks, so that the design matrix of a million draws is
+    never held at once)."""
     shell = JointProposal(dict(nominal), tuple(float(v) for v in coefficients), 1.0, defensive_share)
-    root = shell.root_pi(shell.sample_nominal(np.random.default_rng(NORM_SEED), NORM_DRAWS))
+    draws = shell.sample_nominal(np.random.default_rng(NORM_SEED), NORM_DRAWS)
+    pi = np.concatenate(
+        [
+            shell.pi_hat({name: values[start : start + NORM_BLOCK] for name, values in draws.items()})
+            for start in range(0, NORM_DRAWS, NORM_BLOCK)
+        ]
+    )
+    root = np.sqrt(pi)
     norm = float(np.mean(root))
     rel_se = float(np.std(root) / math.sqrt(len(root)) / norm) if norm > 0 else math.inf
-    return JointProposal(dict(nominal), shell.coefficients, norm, defensive_share, rel_se)
+    return JointProposal(
+        dict(nominal),
+        shell.coefficients,
+        norm,
+        defensive_share,
+        rel_se,
+        float(np.mean(pi)),
+        float(np.std(pi) / math.sqrt(len(pi))),
+    )
 
 
 def joint_update(

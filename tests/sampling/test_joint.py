@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import special, stats
 
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
@@ -102,3 +102,25 @@ def test_pilots_then_joint_final_stage_recover_the_toy_probability(pilot_stages)
     if pilot_stages == 2:
         n_total = 1000 * pilot_stages + 2000
         assert (est.high - est.low) / 2 < 1.96 * math.sqrt(TOY_P * (1 - TOY_P) / n_total)
+
+
+def test_mean_pi_hat_is_the_nominal_mean_of_the_fitted_probability():
+    """E_p[pi_hat] stored with the proposal (the control variate's known mean) against a 2-D quadrature of
+    the nominal density times expit(features . coefficients), features written out here by hand."""
+    proposal = normalised(NOMINAL, COEFFICIENTS, DEFENSIVE_SHARE)
+    e = np.linspace(LOG_MU - 8 * LOG_SIGMA, LOG_MU + 8 * LOG_SIGMA, 1601)
+    o = np.linspace(-1.0, 1.5, 501)
+    ee, oo = np.meshgrid(e, o)
+    z_e = (ee - LOG_MU) / LOG_SIGMA
+    z_o = (oo - 0.25) / (2.5 / math.sqrt(12.0))  # the uniform's mean and sd
+    b = COEFFICIENTS
+    pi = special.expit(b[0] + b[1] * z_o + b[2] * z_o**2 + b[3] * z_e + b[4] * z_e**2 + b[5] * z_o * z_e)
+    density = stats.norm.pdf(ee, LOG_MU, LOG_SIGMA) / 2.5
+    expected = np.trapezoid(np.trapezoid(density * pi, e, axis=1), o)
+    assert 0 < proposal.mean_pi_hat_se < 1e-2 * expected  # 10^6 draws
+    assert abs(proposal.mean_pi_hat - expected) < 4 * proposal.mean_pi_hat_se, (
+        proposal.mean_pi_hat,
+        expected,
+    )
+    again = proposal_of_json(proposal.to_json())
+    assert again.mean_pi_hat == proposal.mean_pi_hat and again.mean_pi_hat_se == proposal.mean_pi_hat_se
