@@ -202,7 +202,7 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
     try:
-        table = table_one_of_run(run.episodes)
+        table = table_one_of_run(run.episodes, proposals=(run.run_info or {}).get("sampler_proposals"))
         paired = paired_of_run(run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
