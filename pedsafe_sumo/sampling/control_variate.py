@@ -33,8 +33,14 @@ from pedsafe_sumo.sampling.joint import JointProposal, is_joint_json
 #: The label of Table I's `estimator` column for a row whose indexes use the control variate.
 ESTIMATOR_CV = "is+cv"
 ESTIMATOR_IS = "is"
-#: Fewer rows than this leave no residual degree of freedom (n - 2 >= 1).
-MIN_ROWS = 3
+#: Below this many final-stage rows the plain estimate stands: the regression's slope, fitted on a handful
+#: of draws, extrapolates mean(C) to 0 on noise. Measured on the toy of tests/sampling/test_joint.py (a
+#: joint proposal fitted on 2,000 nominal draws, 1,000 replicates; docs/sampling.md): at n = 3 the
+#: estimate's variance was 8.2x plain IS's and its 95% interval held the truth in 66% of replicates (plain
+#: 96%), at n = 10 1.25x and 80% (plain 91%), at n = 30 0.79x and 90% (plain 92%), at n = 100 0.5x and
+#: 91.5% (plain 94.5%). 30 is also the usual large-sample threshold of ratio and regression estimators
+#: (Cochran, Sampling Techniques, 1977, chapter 6).
+MIN_ROWS = 30
 
 
 def control_of(proposal_json: str) -> JointProposal | None:
@@ -89,7 +95,8 @@ def cv_estimate(
     n = len(f)
     y = w * f
     c = w * g - control_mean
-    if n < MIN_ROWS or not np.any(y != 0):
+    # A constant C (var(C) = 0) is tested on the values: its centred sum of squares need not be exactly 0.
+    if n < MIN_ROWS or not np.any(y != 0) or np.all(c == c[0]):
         return None
     c_centred = c - np.mean(c)
     var_c = float(np.sum(c_centred * c_centred))
