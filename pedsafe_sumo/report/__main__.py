@@ -35,6 +35,7 @@ from pedsafe_sumo.report.tables import (
     PAIRED_TITLE,
     TABLE_ONE_TITLE,
     condition_label,
+    estimator_note,
     markdown_table,
     paired_of_run,
     paired_rows,
@@ -215,6 +216,8 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say("")
     say(TABLE_ONE_TITLE)
     say(text_table(*table_one_rows(table)))
+    if estimator_note(table):
+        say(estimator_note(table))
     say("")
     say(PAIRED_TITLE)
     say(text_table(*paired_rows(paired)))

@@ -22,6 +22,7 @@ from pedsafe_sumo.sampling.control_variate import (
     final_stage_control,
     pi_hat_of_inputs,
 )
+from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate, is_estimate
 from pedsafe_sumo.sampling.joint import JointProposal
 
@@ -322,6 +323,20 @@ TABLE_ONE_TITLE = (
     "mean P_I; n = episodes counted, "
     "errors = episodes with status 'error' or 'timeout' (left out)"
 )
+#: Under Table I when a row has the column `estimator` (table_one_weighted with a joint proposal).
+ESTIMATOR_NOTE = (
+    "estimator: is = the weighted mean (1/n) sum w_i f_i over the final stage; is+cv = with pi_hat of the "
+    "joint proposal as a control variate (regression estimator, docs/sampling.md); in brackets the indexes "
+    "that kept the weighted mean (no event in the final stage); a final stage of fewer than "
+    f"{CV_MIN_ROWS} episodes, or a constant control, keeps it for every index"
+)
+
+
+def estimator_note(table: pd.DataFrame) -> str:
+    """ESTIMATOR_NOTE where the table says which estimator each row used, else ""."""
+    return ESTIMATOR_NOTE if "estimator" in table.columns else ""
+
+
 PAIRED_TITLE = (
     "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"
     "b = event under SV only, c = event under V2I only; SV, V2I = event rate over the pairs"
@@ -340,8 +355,10 @@ def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path, ban
     paths = [directory / name for name in TABLE_FILES]
     head = f"**{banner}**\n\n" if banner else ""
     table.to_csv(paths[0], index=False)
+    note = f"\n{estimator_note(table)}\n" if estimator_note(table) else ""
     paths[1].write_text(
-        f"{head}{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8"
+        f"{head}{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n{note}",
+        encoding="utf-8",
     )
     paired.to_csv(paths[2], index=False)
     paths[3].write_text(
