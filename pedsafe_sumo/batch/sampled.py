@@ -19,7 +19,7 @@ from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
 from pedsafe_sumo.io.run_store import read_parts
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
-from pedsafe_sumo.sampling.joint import NORM_DRAWS, joint_update
+from pedsafe_sumo.sampling.joint import NORM_DRAWS, VISIBLE_M, Kinematics, joint_update
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
@@ -38,6 +38,9 @@ from pedsafe_sumo.sampling.stages import (
 #: --is-family: the cross-entropy product of one family per input, or the joint sqrt(pi_hat) proposal.
 FAMILY_PRODUCT = "product"
 FAMILY_JOINT = "joint"
+#: run.json's record of pi_hat's design under the joint family: the inputs and the kinematic features.
+JOINT_FEATURES_KEY = "joint_features"
+JOINT_FEATURES = f"inputs + kinematics (v, 1/w, margin_s with visible_m {VISIBLE_M})"
 FAMILIES = (FAMILY_PRODUCT, FAMILY_JOINT)
 SAMPLER_MC = "mc"
 SAMPLER_IS = "is"
@@ -79,6 +82,8 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
     if arguments.get("is_family", FAMILY_PRODUCT) != FAMILY_PRODUCT:
         # Only when not the product, so that product runs keep their identity.
         identity.update(family=arguments["is_family"], ridge=JOINT_RIDGE, norm_draws=NORM_DRAWS)
+        # Runs recorded before the kinematic features lack this key: their resume is refused (another fit).
+        identity[JOINT_FEATURES_KEY] = JOINT_FEATURES
     if arguments.get("is_score", SCORE_CLEARANCE) != SCORE_CLEARANCE:
         # Only when not the first score, so that runs made before --is-score keep their identity.
         identity.update(score="collision: 1 + impact_speed_mps; otherwise -min_ttc_s", score_kind=SCORE_TTC)
@@ -150,6 +155,26 @@ def _stage_of(chunk: Chunk) -> int:
     return chunk.tasks[0].stage
 
 
+def kinematics_of(config: Any, scenario: str) -> Kinematics:
+    """The kinematic features' maps of `scenario` under the run's parameters (sampling/joint.py): its ego
+    speed bounds, the age groups' walking-speed lognormals in the order the draws number them, and the
+    [algorithm] reaction time and braking of the parameters."""
+    from pedsafe_sumo.batch.runner import scenario_spec
+    from pedsafe_sumo.demand.sampling import age_group_speed_distributions
+
+    spec = scenario_spec(scenario, config.scenario_overrides)
+    laws = list(age_group_speed_distributions(dict(config.params["pedestrians"])).values())
+    algorithm = config.params["algorithm"]
+    return Kinematics(
+        float(spec.ego_speed_min_mps),
+        float(spec.ego_speed_max_mps),
+        tuple(law.log_mu for law in laws),
+        tuple(law.log_sigma for law in laws),
+        float(algorithm["reaction_time_s"]),
+        float(algorithm["max_decel_mps2"]),
+    )
+
+
 def _joint_stage(
     plan: Any,
     identity: dict[str, Any],
@@ -167,8 +192,9 @@ def _joint_stage(
         if _stage_of(c) < stage
     ]
     rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in earlier])
+    kinematics = kinematics_of(plan.config, scenario) if identity["sampler"].get(JOINT_FEATURES_KEY) else None
     proposal, n_collisions = joint_update(
-        rows, ADAPT_CONDITION, float(identity["sampler"]["defensive_share"])
+        rows, ADAPT_CONDITION, float(identity["sampler"]["defensive_share"]), kinematics
     )
     levels.setdefault(scenario, []).append(
         {

@@ -18,6 +18,23 @@ drawn from the nominal families (in the order of the sorted input names), each k
 (q/p)(x) / B where B = lambda + (1 - lambda) / c >= q/p (sqrt(pi_hat) <= 1); the first kept one is the
 episode's. Its weight is p/q = 1 / (lambda + (1 - lambda) sqrt(pi_hat(x)) / c), at most 1/lambda.
 
+Kinematic features (session 8; measured offline in EXPERIMENTS.md, "Session 7: shaping pi_hat at pilot size",
+the `physics` variant): where the scenario draws the ego's speed, the pedestrian's walking speed and the
+conflict offset, three functions of x are appended to the design as further continuous inputs (their
+squares and their products with every continuous input): the ego's speed v = clip(exp(ego_speed_log)) to the
+scenario's bounds (before the approach's speed-limit scale), the pedestrian's time per metre 1/w with w =
+exp(mu_g + sigma_g z) of the age group's lognormal (before the sex factor), and the braking margin
+
+    margin_s = conflict_offset_s + VISIBLE_M / w - t_r - v / (2 a_max)
+
+(the seconds left, from the pedestrian's coming into view VISIBLE_M before the ego lane's centre, beyond the
+stack's reaction time t_r and the time a full stop from v at a_max takes: negative, no stop before the
+conflict point; scenarios/registry.py stages the ego to reach the conflict point conflict_offset_s after
+the pedestrian). Each is standardised by its moments on MOMENT_DRAWS nominal draws. They are features of a
+fit, not a model of the episode: a wrong VISIBLE_M or t_r costs efficiency, never bias (the weights are
+exact whatever pi_hat is). Offline on v5_full's rows, 2-stage pilot: per final episode right_turn 11.5 ->
+19.2, crossing 19.5 -> 55, background_blending 5.0 -> 6.3, jaywalking 4.9 -> 5.4.
+
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
 Dask rebuild the very proposal. The estimate's relative error (stored as `norm_rel_se`) is the relative
@@ -27,6 +44,7 @@ lambda + (1 - lambda) E_p[sqrt(pi_hat)] / c, equal to 1 up to that error.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Mapping
@@ -50,6 +68,14 @@ NORM_DRAWS = 1_000_000
 NORM_SEED = 17_2026
 #: Nominal draws per block of that estimate.
 NORM_BLOCK = 100_000
+#: The inputs the kinematic features need (module docstring); a scenario without one of them fits on x alone.
+KINEMATIC_INPUTS = ("conflict_offset_s", "ego_speed_log", "ped_age_group", "ped_walking_speed_z")
+#: An assumption, not a measurement: SUMO's default lane width 3.2 m less half a car's width 0.9 m, the
+#: distance from an occluder's lane-side flank to the ego lane's centre. Offline the efficiency hardly
+#: moved between 1.6 and 3.2 m (the separate 1/w feature absorbs it; EXPERIMENTS.md, session 7).
+VISIBLE_M = 2.3
+#: Nominal draws (of NORM_SEED + 1) that give the kinematic features' means and standard deviations.
+MOMENT_DRAWS = 100_000
 #: Candidates drawn per block of the rejection step (the episode's Generator draws whole blocks).
 REJECTION_BLOCK = 64
 #: A proposal whose bound B needs more candidates than this per episode on average is refused.
@@ -90,6 +116,65 @@ def _moments(family: Family) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
+class Kinematics:
+    """What turns the inputs x into the kinematic features (module docstring)."""
+
+    ego_speed_min_mps: float
+    ego_speed_max_mps: float
+    #: The walking-speed lognormal of each age group, in the order of ped_age_group's categories.
+    walking_log_mu: tuple[float, ...]
+    walking_log_sigma: tuple[float, ...]
+    reaction_time_s: float
+    max_decel_mps2: float
+    visible_m: float = VISIBLE_M
+    #: (mean, sd) of v, 1/w and margin_s under the nominal; () until with_moments.
+    moments: tuple[tuple[float, float], ...] = ()
+
+    def raw(self, x: Mapping[str, np.ndarray]) -> list[np.ndarray]:
+        """[v (m/s), 1/w (s/m), margin_s (s)] at the inputs x."""
+        v = np.clip(
+            np.exp(np.asarray(x["ego_speed_log"], dtype=float)),
+            self.ego_speed_min_mps,
+            self.ego_speed_max_mps,
+        )
+        group = np.asarray(x["ped_age_group"], dtype=float).astype(int)
+        z = np.asarray(x["ped_walking_speed_z"], dtype=float)
+        w = np.exp(np.asarray(self.walking_log_mu)[group] + np.asarray(self.walking_log_sigma)[group] * z)
+        margin = (
+            np.asarray(x["conflict_offset_s"], dtype=float)
+            + self.visible_m / w
+            - self.reaction_time_s
+            - v / (2.0 * self.max_decel_mps2)
+        )
+        return [v, 1.0 / w, margin]
+
+    def blocks(self, x: Mapping[str, np.ndarray]) -> list[Block]:
+        return [(f - mean) / sd for f, (mean, sd) in zip(self.raw(x), self.moments, strict=True)]
+
+    def with_moments(self, nominal: Mapping[str, Family]) -> Kinematics:
+        rng = np.random.default_rng(NORM_SEED + 1)
+        draws = {name: nominal[name].sample(rng, MOMENT_DRAWS) for name in sorted(nominal)}
+        moments = tuple((float(np.mean(f)), float(np.std(f))) for f in self.raw(draws))
+        return dataclasses.replace(self, moments=moments)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self), "moments": [list(m) for m in self.moments]}
+
+    @staticmethod
+    def from_dict(data: Mapping[str, Any]) -> Kinematics:
+        return Kinematics(
+            float(data["ego_speed_min_mps"]),
+            float(data["ego_speed_max_mps"]),
+            tuple(float(v) for v in data["walking_log_mu"]),
+            tuple(float(v) for v in data["walking_log_sigma"]),
+            float(data["reaction_time_s"]),
+            float(data["max_decel_mps2"]),
+            float(data["visible_m"]),
+            tuple((float(m), float(sd)) for m, sd in data["moments"]),
+        )
+
+
+@dataclass(frozen=True)
 class JointProposal:
     """q ∝ lambda p + (1 - lambda) p sqrt(pi_hat) / c over the inputs of `nominal` (module docstring)."""
 
@@ -102,6 +187,9 @@ class JointProposal:
     #: of the control variate pi_hat (report/tables.py). NaN in proposals stored before it.
     mean_pi_hat: float = math.nan
     mean_pi_hat_se: float = math.nan
+    #: The kinematic features' maps (module docstring); None: the design of x alone (proposals stored
+    #: before session 8, scenarios that lack a KINEMATIC_INPUTS input).
+    kinematics: Kinematics | None = None
 
     is_joint = True
 
@@ -124,6 +212,8 @@ class JointProposal:
             else:
                 mean, sd = _moments(family)
                 blocks.append((v - mean) / sd)
+        if self.kinematics is not None:
+            blocks += self.kinematics.blocks(x)
         return quadratic_design(len(np.atleast_1d(x[self.names[0]])), blocks)
 
     def pi_hat(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -166,6 +256,7 @@ class JointProposal:
                 "mean_pi_hat_se": self.mean_pi_hat_se,
                 "defensive_share": self.defensive_share,
                 "ridge": RIDGE,
+                **({"kinematics": self.kinematics.to_dict()} if self.kinematics is not None else {}),
             },
             sort_keys=True,
         )
@@ -185,6 +276,7 @@ class JointProposal:
             float(data.get("norm_rel_se", 0.0)),
             float(data.get("mean_pi_hat", math.nan)),
             float(data.get("mean_pi_hat_se", math.nan)),
+            Kinematics.from_dict(data["kinematics"]) if "kinematics" in data else None,
         )
 
 
@@ -210,24 +302,37 @@ def fit_joint(
     nominal: Mapping[str, Family],
     defensive_share: float,
     ridge: float = RIDGE,
+    kinematics: Kinematics | None = None,
 ) -> JointProposal | None:
     """The joint proposal fitted on pilot rows (`inputs` name -> values, `collision` 0/1); None when the
-    rows hold no collision (the next stage then stays nominal) or the envelope would be too loose."""
+    rows hold no collision (the next stage then stays nominal) or the envelope would be too loose. With
+    `kinematics`, the kinematic features join the design where every KINEMATIC_INPUTS input is drawn."""
     y = np.asarray(collision, dtype=float)
     if not y.any():
         return None
-    shell = JointProposal(dict(nominal), (), 1.0, defensive_share)
-    proposal = normalised(nominal, fit_logistic(shell.features(inputs), y, ridge), defensive_share)
+    if kinematics is not None:
+        kinematics = kinematics.with_moments(nominal) if set(KINEMATIC_INPUTS) <= set(nominal) else None
+    shell = JointProposal(dict(nominal), (), 1.0, defensive_share, kinematics=kinematics)
+    proposal = normalised(
+        nominal, fit_logistic(shell.features(inputs), y, ridge), defensive_share, kinematics
+    )
     if not proposal.norm > 0 or proposal.bound > MAX_MEAN_TRIES:
         return None
     return proposal
 
 
-def normalised(nominal: Mapping[str, Family], coefficients: Any, defensive_share: float) -> JointProposal:
+def normalised(
+    nominal: Mapping[str, Family],
+    coefficients: Any,
+    defensive_share: float,
+    kinematics: Kinematics | None = None,
+) -> JointProposal:
     """The proposal of these coefficients with c = E_p[sqrt(pi_hat)] and E_p[pi_hat] estimated on
     NORM_DRAWS nominal draws of NORM_SEED (in blocks, so that the design matrix of a million draws is
     never held at once)."""
-    shell = JointProposal(dict(nominal), tuple(float(v) for v in coefficients), 1.0, defensive_share)
+    shell = JointProposal(
+        dict(nominal), tuple(float(v) for v in coefficients), 1.0, defensive_share, kinematics=kinematics
+    )
     draws = shell.sample_nominal(np.random.default_rng(NORM_SEED), NORM_DRAWS)
     pi = np.concatenate(
         [
@@ -246,11 +351,12 @@ def normalised(nominal: Mapping[str, Family], coefficients: Any, defensive_share
         rel_se,
         float(np.mean(pi)),
         float(np.std(pi) / math.sqrt(len(pi))),
+        kinematics,
     )
 
 
 def joint_update(
-    rows: pd.DataFrame, condition: str, defensive_share: float
+    rows: pd.DataFrame, condition: str, defensive_share: float, kinematics: Kinematics | None = None
 ) -> tuple[JointProposal | None, int]:
     """The joint proposal from every pilot row so far of `condition` (status ok), and its collisions."""
     from pedsafe_sumo.sampling.stages import _inputs_and_nominal
@@ -258,7 +364,7 @@ def joint_update(
     rows = rows[(rows["condition"] == condition) & (rows["status"] == "ok")]
     inputs, nominal = _inputs_and_nominal(rows)
     y = rows["collision"].astype(float).to_numpy()
-    return fit_joint(inputs, y, nominal.families, defensive_share), int(y.sum())
+    return fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics), int(y.sum())
 
 
 def proposal_of_json(text: str) -> Any:

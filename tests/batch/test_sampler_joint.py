@@ -14,6 +14,9 @@ from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 from scipy import stats
 
 from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.demand.sampling import age_group_speed_distributions
+from pedsafe_sumo.params import load_params
+from pedsafe_sumo.scenarios.registry import get_scenario
 
 JOINT_RUN = (
     "--scenario", "background_blending", "--episodes", "3", "--seed", "3", "--sampler", "is",
@@ -38,12 +41,54 @@ def _expected_weight(record: dict, data: dict) -> float:
         z = (x - law.mean()) / law.std()
         continuous.append(z)
         columns += [z, z * z]
+    if "kinematics" in data:  # session 8: v, 1/w and the braking margin, standardised by stored moments
+        kin = data["kinematics"]
+        x = record["inputs"]
+        v = min(max(math.exp(x["ego_speed_log"]), kin["ego_speed_min_mps"]), kin["ego_speed_max_mps"])
+        g = int(x["ped_age_group"])
+        w = math.exp(kin["walking_log_mu"][g] + kin["walking_log_sigma"][g] * x["ped_walking_speed_z"])
+        margin = x["conflict_offset_s"] + 2.3 / w - 0.4 - v / (2 * 6.0)
+        for value, (mean, sd) in zip((v, 1 / w, margin), kin["moments"], strict=True):
+            z = (value - mean) / sd
+            continuous.append(z)
+            columns += [z, z * z]
     columns += [
         continuous[i] * continuous[j] for i in range(len(continuous)) for j in range(i + 1, len(continuous))
     ]
     eta = float(np.dot(columns, data["coefficients"]))
     lam = data["defensive_share"]
     return 1.0 / (lam + (1 - lam) * math.sqrt(1.0 / (1.0 + math.exp(-eta))) / data["norm"])
+
+
+def _check_kinematics(data: dict, scenario: str) -> None:
+    """The stored maps are the scenario's bounds, the age groups' laws and the reference stack's braking;
+    the stored moments agree with 10^6 draws of the recorded nominal laws made here with numpy."""
+    kin = data["kinematics"]
+    spec = get_scenario(scenario)
+    params = load_params()
+    laws = list(age_group_speed_distributions(dict(params["pedestrians"])).values())
+    assert (kin["ego_speed_min_mps"], kin["ego_speed_max_mps"]) == (
+        spec.ego_speed_min_mps,
+        spec.ego_speed_max_mps,
+    )
+    assert kin["walking_log_mu"] == pytest.approx([law.log_mu for law in laws], rel=1e-12)
+    assert kin["walking_log_sigma"] == pytest.approx([law.log_sigma for law in laws], rel=1e-12)
+    assert (kin["reaction_time_s"], kin["max_decel_mps2"]) == (0.4, 6.0)  # [algorithm] of defaults.toml
+    rng = np.random.default_rng(0)
+    n = 1_000_000
+    shares = np.array([g["weight_share"] for g in params["pedestrians"]["age_groups"].values()])
+    group = rng.choice(len(laws), size=n, p=shares / shares.sum())
+    w = np.exp(
+        np.array([law.log_mu for law in laws])[group]
+        + np.array([law.log_sigma for law in laws])[group] * rng.standard_normal(n)
+    )
+    ego, offset = data["nominal"]["ego_speed_log"], data["nominal"]["conflict_offset_s"]
+    assert offset["family"] == "beta" and offset["a"] == offset["b"] == 1.0  # uniform
+    v = np.clip(np.exp(rng.normal(ego["mean"], ego["sd"], n)), spec.ego_speed_min_mps, spec.ego_speed_max_mps)
+    margin = rng.uniform(offset["low"], offset["high"], n) + 2.3 / w - 0.4 - v / 12.0
+    for value, (mean, sd) in zip((v, 1 / w, margin), kin["moments"], strict=True):
+        assert mean == pytest.approx(float(np.mean(value)), abs=5e-3 * float(np.std(value)))
+        assert sd == pytest.approx(float(np.std(value)), rel=1e-2)
 
 
 @pytest.mark.slow
@@ -63,6 +108,7 @@ def test_joint_run_weights_recomputed_and_same_rows_on_one_and_two_workers(tmp_p
     assert pilot[pilot.condition == "sv"]["collision"].sum() >= 1
     data = json.loads(proposals[1])
     assert data["kind"] == "joint" and "ego_speed_log" in data["nominal"]
+    _check_kinematics(data, "background_blending")
     for _, row in final.iterrows():
         record = json.loads(row["sampler_inputs"])
         assert row["weight"] == pytest.approx(_expected_weight(record, data), rel=1e-9)
