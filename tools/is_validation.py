@@ -4,7 +4,12 @@ whether they agree, and the efficiency (episodes MC needs for the IS interval's 
 p(1 - p)(1.96 / h)^2 with p the IS estimate, over the episodes IS ran, pilots included; and over the
 final stage's episodes alone).
 
-    .venv/bin/python tools/is_validation.py IS_RUN MC_RUN [--markdown]
+Where the IS run's final stage drew from a joint proposal with a stored E_p[pi_hat] (--is-family joint),
+the IS estimate is Table I's: pi_hat as a control variate (docs/sampling.md, "Control variate"; the column
+`estimator` says which), with the plain weighted estimate and its efficiencies beside it (`plain_*`);
+`--plain` gives the plain weighted estimate alone, the columns of the tables before the control variate.
+
+    .venv/bin/python tools/is_validation.py IS_RUN MC_RUN [--markdown] [--plain]
 
 Either run may be unfinished: the rows of its recorded chunks are read (parts/ and manifest.json).
 """
@@ -33,11 +38,24 @@ def rows_of(run: Path) -> pd.DataFrame:
     return read_parts(run, list(manifest.chunks.values()))
 
 
-def compare(is_rows: pd.DataFrame, mc_rows: pd.DataFrame) -> pd.DataFrame:
-    is_table = table_one_weighted(is_rows)
+def _efficiency(p: float, high: float, n: int) -> float:
+    """Episodes MC needs for the half-width high - p, p(1 - p)(1.96 / h)^2, over `n` (the interval is
+    symmetric before its cut at 0)."""
+    half = high - p
+    mc_needed = p * (1 - p) * (Z / half) ** 2 if half > 0 and 0 < p < 1 else math.nan
+    return mc_needed / n if math.isfinite(mc_needed) and n > 0 else math.nan
+
+
+def compare(
+    is_rows: pd.DataFrame, mc_rows: pd.DataFrame, proposals: dict[str, list[str]] | None = None
+) -> pd.DataFrame:
+    """The comparison table; `proposals` (the IS run's sampler_proposals) for the control variate of a
+    joint final stage, with the plain weighted figures beside (plain_*) when it is used somewhere."""
+    is_table = table_one_weighted(is_rows, proposals=proposals)
+    plain_table = table_one_weighted(is_rows) if "estimator" in is_table.columns else None
     mc_table = table_one(mc_rows)
     out = []
-    for _, r in is_table.iterrows():
+    for i, r in is_table.iterrows():
         m = mc_table[(mc_table.scenario == r.scenario) & (mc_table.condition == r.condition)]
         if m.empty:
             continue
@@ -48,31 +66,39 @@ def compare(is_rows: pd.DataFrame, mc_rows: pd.DataFrame) -> pd.DataFrame:
             "conflict": ("conflict_rate", "conflict_low", "conflict_high") * 2,
         }.items():
             p, low, high = float(r[est]), float(r[lo]), float(r[hi])
-            half = high - p  # the central-limit interval is symmetric before its cut at 0
-            mc_needed = p * (1 - p) * (Z / half) ** 2 if half > 0 and 0 < p < 1 else math.nan
-            out.append(
-                {
-                    "scenario": r.scenario,
-                    "condition": r.condition,
-                    "index": index,
-                    "is_estimate": p,
-                    "is_low": low,
-                    "is_high": high,
-                    "ess": float(r.ess),
-                    "mean_weight": float(r.mean_weight) if "mean_weight" in r else math.nan,
-                    "weight_note": str(r.weight_note) if "weight_note" in r else "",
-                    "is_episodes_run": int(r.n_run),
-                    "mc_estimate": float(m[mest]),
-                    "mc_low": float(m[mlo]),
-                    "mc_high": float(m[mhi]),
-                    "mc_n": int(m.n),
-                    "intervals_overlap": bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
-                    "mc_in_is_interval": bool(low <= float(m[mest]) <= high),
-                    "efficiency": mc_needed / int(r.n_run) if math.isfinite(mc_needed) else math.nan,
-                    # The final stage alone (its n episodes, errors left out): the pilots' cost aside.
-                    "efficiency_final": mc_needed / int(r.n) if math.isfinite(mc_needed) else math.nan,
-                }
-            )
+            row = {
+                "scenario": r.scenario,
+                "condition": r.condition,
+                "index": index,
+                "is_estimate": p,
+                "is_low": low,
+                "is_high": high,
+                "ess": float(r.ess),
+                "mean_weight": float(r.mean_weight) if "mean_weight" in r else math.nan,
+                "weight_note": str(r.weight_note) if "weight_note" in r else "",
+                "is_episodes_run": int(r.n_run),
+                "mc_estimate": float(m[mest]),
+                "mc_low": float(m[mlo]),
+                "mc_high": float(m[mhi]),
+                "mc_n": int(m.n),
+                "intervals_overlap": bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
+                "mc_in_is_interval": bool(low <= float(m[mest]) <= high),
+                "efficiency": _efficiency(p, high, int(r.n_run)),
+                # The final stage alone (its n episodes, errors left out): the pilots' cost aside.
+                "efficiency_final": _efficiency(p, high, int(r.n)),
+            }
+            if plain_table is not None:
+                plain = plain_table.loc[i]
+                q, q_high = float(plain[est]), float(plain[hi])
+                row.update(
+                    estimator=str(r.estimator),
+                    plain_estimate=q,
+                    plain_low=float(plain[lo]),
+                    plain_high=q_high,
+                    plain_efficiency=_efficiency(q, q_high, int(r.n_run)),
+                    plain_efficiency_final=_efficiency(q, q_high, int(r.n)),
+                )
+            out.append(row)
     return pd.DataFrame(out)
 
 
@@ -93,9 +119,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("is_run", type=Path)
     parser.add_argument("mc_run", type=Path)
     parser.add_argument("--markdown", action="store_true")
+    parser.add_argument(
+        "--plain",
+        action="store_true",
+        help="the plain weighted IS estimate only (no control variate), as the tables before it",
+    )
     args = parser.parse_args(argv)
     try:
-        table = compare(rows_of(args.is_run), rows_of(args.mc_run))
+        info = json.loads((args.is_run / "run.json").read_text())
+        proposals = None if args.plain else info.get("sampler_proposals")
+        table = compare(rows_of(args.is_run), rows_of(args.mc_run), proposals)
     except (OSError, ValueError, KeyError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -104,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         with pd.option_context("display.width", 250, "display.max_columns", 30):
             print(table.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
-    levels = json.loads((args.is_run / "run.json").read_text()).get("sampler_levels", {})
+    levels = info.get("sampler_levels", {})
     print(json.dumps(levels))
     return 0
 

@@ -869,17 +869,19 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
             f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "
             "(a pair that killed its worker every time is recorded as errors)"
         )
-    print_table(table)
+    print_table(table, run_info.get("sampler_proposals"))
     print(f"tables and figures: python -m pedsafe_sumo.report {plan.out}")
     return 0
 
 
-def print_table(table: pd.DataFrame) -> None:
+def print_table(table: pd.DataFrame, proposals: dict[str, list[str]] | None = None) -> None:
+    """Table I of the rows; `proposals` (run.json's sampler_proposals) for the control variate of a joint
+    proposal's final stage (report/tables.py: table_one_weighted)."""
     from pedsafe_sumo.report.tables import is_weighted, table_one_of_run
     from pedsafe_sumo.safety.stats import table_one
 
     def summarise(rows: pd.DataFrame) -> pd.DataFrame:
-        return table_one_of_run(rows) if is_weighted(rows) else table_one(rows)
+        return table_one_of_run(rows, proposals=proposals) if is_weighted(rows) else table_one(rows)
 
     summary = summarise(table)
     if is_weighted(table):
@@ -908,6 +910,7 @@ def _print_rows(summary: pd.DataFrame) -> None:
             f"[{row['collision_low']:.4f}, {row['collision_high']:.4f}]  "
             f"injury {row['injury_mean']:.4f} [{row['injury_low']:.4f}, {row['injury_high']:.4f}]  "
             f"conflict {row['conflict_rate']:.4f} [{row['conflict_low']:.4f}, {row['conflict_high']:.4f}]"
+            + (f"  ({row['estimator']})" if "estimator" in summary.columns else "")
         )
 
 

@@ -35,6 +35,7 @@ from pedsafe_sumo.report.tables import (
     PAIRED_TITLE,
     TABLE_ONE_TITLE,
     condition_label,
+    estimator_note,
     markdown_table,
     paired_of_run,
     paired_rows,
@@ -202,7 +203,7 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
     try:
-        table = table_one_of_run(run.episodes)
+        table = table_one_of_run(run.episodes, proposals=(run.run_info or {}).get("sampler_proposals"))
         paired = paired_of_run(run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
@@ -215,6 +216,8 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say("")
     say(TABLE_ONE_TITLE)
     say(text_table(*table_one_rows(table)))
+    if estimator_note(table):
+        say(estimator_note(table))
     say("")
     say(PAIRED_TITLE)
     say(text_table(*paired_rows(paired)))

@@ -7,6 +7,7 @@ the mean injury, exact McNemar); this module only arranges and formats them.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,16 @@ import pandas as pd
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
-from pedsafe_sumo.sampling.importance import is_estimate
+from pedsafe_sumo.sampling.control_variate import (
+    ESTIMATOR_CV,
+    ESTIMATOR_IS,
+    cv_estimate,
+    final_stage_control,
+    pi_hat_of_inputs,
+)
+from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
+from pedsafe_sumo.sampling.importance import Estimate, is_estimate
+from pedsafe_sumo.sampling.joint import JointProposal
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -41,28 +51,43 @@ def is_weighted(episodes: pd.DataFrame) -> bool:
     return "sampler_stage" in episodes.columns and bool((episodes["sampler_stage"] > 0).any())
 
 
-def table_one_weighted(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
+def table_one_weighted(
+    episodes: pd.DataFrame, confidence: float = 0.95, proposals: Mapping[str, Sequence[str]] | None = None
+) -> pd.DataFrame:
     """Table I of an importance-sampling run (docs/sampling.md): per scenario and condition, the unbiased
     weighted estimates (1/n) sum w_i f_i over the final stage's episodes (the highest sampler_stage of
     the scenario) of the collision indicator, the injury probability and the conflict-without-collision
     indicator, with central-limit 95% intervals (sampling.importance.is_estimate), the effective sample
     size `ess` of the final stage's weights, and `n_run`, every episode run under that condition, pilot
     stages and errors included (the cost). `n` and `n_error` count the final stage as in `table_one`.
+
+    `proposals` (run.json's sampler_proposals: scenario -> one JSON proposal per stage): where a scenario's
+    final stage drew from a joint proposal with a stored E_p[pi_hat], each index is estimated with pi_hat
+    as a control variate (sampling/control_variate.py; docs/sampling.md, "Control variate") and the table
+    gains the column `estimator` ("is+cv", or "is" and which indexes kept the plain estimate). Without
+    such a proposal in the table, the table is the plain weighted one, column for column.
     """
-    rows = []
+    rows, controlled = [], False
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
-        final = group[group["sampler_stage"] == group["sampler_stage"].max()]
+        stage = group["sampler_stage"].max()
+        final = group[group["sampler_stage"] == stage]
         errors = final["status"].isin(FAILED_STATUSES).to_numpy()
         ok = final[~errors]
         weights = ok["weight"].to_numpy(dtype=float)
         collisions = _flags(ok["collision"])
         conflicts = conflict_without_collision(_flags(ok["conflict"]), collisions)
         injury = np.nan_to_num(ok["injury_probability"].to_numpy(dtype=float), nan=0.0)
-        est = {
-            "collision": is_estimate(collisions.astype(float), weights, confidence),
-            "injury": is_estimate(injury, weights, confidence),
-            "conflict": is_estimate(conflicts.astype(float), weights, confidence),
+        values = {
+            "collision": collisions.astype(float),
+            "injury": injury,
+            "conflict": conflicts.astype(float),
         }
+        est = {index: is_estimate(v, weights, confidence) for index, v in values.items()}
+        control = final_stage_control((proposals or {}).get(scenario), int(stage))
+        estimator = ESTIMATOR_IS
+        if control is not None:
+            controlled = True
+            est, estimator = _with_control(values, weights, est, control, ok["sampler_inputs"], confidence)
         rows.append(
             {
                 "scenario": scenario,
@@ -81,9 +106,39 @@ def table_one_weighted(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.D
                 "ess": est["collision"].ess,
                 "n_run": len(group),
                 **weight_check(weights, collisions.astype(float)),
+                "estimator": estimator,
             }
         )
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    if not controlled:  # no control variate anywhere: the table of runs before it, column for column
+        table = table.drop(columns="estimator", errors="ignore")
+    return table
+
+
+def _with_control(
+    values: dict[str, np.ndarray],
+    weights: np.ndarray,
+    plain: dict[str, Estimate],
+    control: JointProposal,
+    sampler_inputs: pd.Series,
+    confidence: float,
+) -> tuple[dict[str, Estimate], str]:
+    """Each index's control-variate estimate where it applies (cv_estimate), else its plain one; and the
+    row's `estimator` label."""
+    if len(weights) == 0:
+        return plain, ESTIMATOR_IS
+    g = pi_hat_of_inputs(control, sampler_inputs.tolist())
+    est, kept_plain = {}, []
+    for index, v in values.items():
+        cv = cv_estimate(v, weights, g, control.mean_pi_hat, control.mean_pi_hat_se, confidence)
+        est[index] = plain[index] if cv is None else cv
+        if cv is None:
+            kept_plain.append(index)
+    if not kept_plain:
+        return est, ESTIMATOR_CV
+    if len(kept_plain) == len(values):
+        return est, ESTIMATOR_IS
+    return est, f"{ESTIMATOR_CV} ({ESTIMATOR_IS}: {', '.join(kept_plain)})"
 
 
 def weight_check(weights: np.ndarray, collisions: np.ndarray) -> dict[str, object]:
@@ -110,11 +165,16 @@ def weight_check(weights: np.ndarray, collisions: np.ndarray) -> dict[str, objec
     return {"mean_weight": mean_w, "max_share": max_share, "weight_note": "; ".join(notes)}
 
 
-def table_one_of_run(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
+def table_one_of_run(
+    episodes: pd.DataFrame, confidence: float = 0.95, proposals: Mapping[str, Sequence[str]] | None = None
+) -> pd.DataFrame:
     """Table I (scenario x condition) of `table_one`, rows ordered by scenario then sv before v2i; for an
-    importance-sampling run, `table_one_weighted` (with the columns ess and n_run)."""
+    importance-sampling run, `table_one_weighted` (with the columns ess and n_run; `proposals`, run.json's
+    sampler_proposals, for the control variate of joint proposals)."""
     table = (
-        table_one_weighted(episodes, confidence) if is_weighted(episodes) else table_one(episodes, confidence)
+        table_one_weighted(episodes, confidence, proposals)
+        if is_weighted(episodes)
+        else table_one(episodes, confidence)
     )
     order = {c: i for i, c in enumerate(CONDITION_LABELS)}
     scenario_order = {s: i for i, s in enumerate(pd.unique(episodes["scenario"]))}
@@ -198,6 +258,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
             header += ["mean weight", "check"]
             for cells, r in zip(rows, table.itertuples(index=False)):
                 cells += [f"{r.mean_weight:.3f}", r.weight_note or "ok"]
+        if "estimator" in table.columns:  # a joint proposal's control variate (table_one_weighted)
+            header += ["estimator"]
+            for cells, r in zip(rows, table.itertuples(index=False)):
+                cells += [str(r.estimator)]
     return header, rows
 
 
@@ -259,6 +323,20 @@ TABLE_ONE_TITLE = (
     "mean P_I; n = episodes counted, "
     "errors = episodes with status 'error' or 'timeout' (left out)"
 )
+#: Under Table I when a row has the column `estimator` (table_one_weighted with a joint proposal).
+ESTIMATOR_NOTE = (
+    "estimator: is = the weighted mean (1/n) sum w_i f_i over the final stage; is+cv = with pi_hat of the "
+    "joint proposal as a control variate (regression estimator, docs/sampling.md); in brackets the indexes "
+    "that kept the weighted mean (no event in the final stage); a final stage of fewer than "
+    f"{CV_MIN_ROWS} episodes, or a constant control, keeps it for every index"
+)
+
+
+def estimator_note(table: pd.DataFrame) -> str:
+    """ESTIMATOR_NOTE where the table says which estimator each row used, else ""."""
+    return ESTIMATOR_NOTE if "estimator" in table.columns else ""
+
+
 PAIRED_TITLE = (
     "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"
     "b = event under SV only, c = event under V2I only; SV, V2I = event rate over the pairs"
@@ -277,8 +355,10 @@ def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path, ban
     paths = [directory / name for name in TABLE_FILES]
     head = f"**{banner}**\n\n" if banner else ""
     table.to_csv(paths[0], index=False)
+    note = f"\n{estimator_note(table)}\n" if estimator_note(table) else ""
     paths[1].write_text(
-        f"{head}{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n", encoding="utf-8"
+        f"{head}{_md_title(TABLE_ONE_TITLE)}\n\n{markdown_table(*table_one_rows(table))}\n{note}",
+        encoding="utf-8",
     )
     paired.to_csv(paths[2], index=False)
     paths[3].write_text(

@@ -1,0 +1,175 @@
+"""Table I of a `--is-family joint` run with pi_hat as a control variate (report/tables.py,
+sampling/control_variate.py): the estimates against the regression written out here (pi_hat from the
+coefficients by hand, the estimate as the intercept of least squares); and the plain weighted table,
+column for column, wherever the control does not apply (a product proposal, a joint one stored without
+E_p[pi_hat], var(C) = 0, too few rows)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import special, stats
+
+from pedsafe_sumo.report.tables import table_one_of_run, table_one_rows, table_one_weighted
+from pedsafe_sumo.sampling.draws import product_to_json
+from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal, Product
+from pedsafe_sumo.sampling.joint import JointProposal
+
+LOG_MU, LOG_SIGMA = 1.5853, 0.3827
+NOMINAL = {
+    "conflict_offset_s": Beta(1.0, 1.0, -0.6, 0.6),
+    "ego_speed_log": Normal(LOG_MU, LOG_SIGMA),
+    "ped_risk": Categorical((0.5, 0.25, 0.25)),
+}
+#: 1; z_o, z_o^2; z_e, z_e^2; risk == 1, risk == 2; z_o z_e (sorted names, the sampler's design).
+COEFFICIENTS = (-3.0, 0.8, -0.2, 1.5, 0.1, 0.6, -0.4, 0.3)
+MEAN_PI_HAT, MEAN_PI_HAT_SE = 0.09, 2.0e-4
+PROPOSAL = JointProposal(NOMINAL, COEFFICIENTS, 0.25, 0.1, 1e-3, MEAN_PI_HAT, MEAN_PI_HAT_SE)
+#: table1.csv's columns of an importance-sampling run before the control variate.
+PLAIN_COLUMNS = [
+    "scenario", "condition", "n", "n_error", "collision_rate", "collision_low", "collision_high",
+    "injury_mean", "injury_low", "injury_high", "conflict_rate", "conflict_low", "conflict_high", "ess",
+    "n_run", "mean_weight", "max_share", "weight_note",
+]  # fmt: skip
+
+
+def _pi_hat_by_hand(x: dict) -> float:
+    z_o = (x["conflict_offset_s"] - 0.0) / (1.2 / math.sqrt(12.0))  # uniform on [-0.6, 0.6]
+    z_e = (x["ego_speed_log"] - LOG_MU) / LOG_SIGMA
+    b = COEFFICIENTS
+    eta = (
+        b[0] + b[1] * z_o + b[2] * z_o**2 + b[3] * z_e + b[4] * z_e**2
+        + b[5] * (x["ped_risk"] == 1) + b[6] * (x["ped_risk"] == 2) + b[7] * z_o * z_e
+    )  # fmt: skip
+    return float(special.expit(eta))
+
+
+def _episodes(n_final: int = 48, scenario: str = "right_turn", same_inputs: bool = False) -> pd.DataFrame:
+    """6 pilot pairs (stage 0) and `n_final` final pairs (stage 1) of drawn inputs, weights 1 / (q/p) of
+    the proposal, SV collisions more likely where pi_hat is high, V2I's a subset of SV's; one final V2I
+    row errored."""
+    rng = np.random.default_rng(41)
+    rows = []
+    for episode in range(6 + n_final):
+        stage = 0 if episode < 6 else 1
+        x = {
+            "conflict_offset_s": float(rng.uniform(-0.6, 0.6)),
+            "ego_speed_log": float(rng.normal(LOG_MU + 0.4, LOG_SIGMA)),
+            "ped_risk": float(rng.choice(3)),
+            "clothing": 2.0,
+        }
+        if same_inputs:
+            x = {"conflict_offset_s": 0.1, "ego_speed_log": 2.0, "ped_risk": 1.0, "clothing": 2.0}
+        pi = _pi_hat_by_hand(x)
+        weight = 1.0 if stage == 0 else 1.0 / (0.1 + 0.9 * math.sqrt(pi) / 0.25)
+        collision_sv = bool(rng.uniform() < min(1.0, 1.5 * pi))
+        collision_v2i = collision_sv and bool(rng.uniform() < 0.5)
+        injury = float(rng.uniform(0.05, 0.9))
+        conflict = bool(rng.uniform() < 0.3)
+        record = json.dumps({"inputs": x, "log_weight": -math.log(weight), "nominal": {}})
+        for condition, hit in (("sv", collision_sv), ("v2i", collision_v2i)):
+            errored = stage == 1 and episode == 9 and condition == "v2i"
+            rows.append(
+                {
+                    "scenario": scenario,
+                    "condition": condition,
+                    "episode": episode,
+                    "collision": hit and not errored,
+                    "injury_probability": injury if hit and not errored else (math.nan if errored else 0.0),
+                    "conflict": conflict and not errored,
+                    "status": "error" if errored else "ok",
+                    "weight": weight,
+                    "sampler_stage": stage,
+                    "sampler_inputs": record,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def _regression(y: np.ndarray, c: np.ndarray) -> tuple[float, float, float]:
+    """Estimate and 95% interval: least squares of Y on (1, C), the intercept (E[C] = 0); variance
+    RSS / (n - 2) / n + slope^2 se(E_p[pi_hat])^2."""
+    design = np.column_stack([np.ones_like(c), c])
+    (intercept, slope), rss, *_ = np.linalg.lstsq(design, y, rcond=None)
+    n = len(y)
+    half = stats.norm.ppf(0.975) * math.sqrt(float(rss[0]) / (n - 2) / n + slope**2 * MEAN_PI_HAT_SE**2)
+    return float(intercept), float(intercept - half), float(intercept + half)
+
+
+def test_table_estimates_are_the_regression_written_out():
+    episodes = _episodes()
+    table = table_one_of_run(episodes, proposals={"right_turn": ["", PROPOSAL.to_json()]})
+    assert list(table.columns) == [*PLAIN_COLUMNS, "estimator"]
+    for condition in ("sv", "v2i"):
+        final = episodes[(episodes.sampler_stage == 1) & (episodes.condition == condition)]
+        final = final[final.status == "ok"]
+        w = final["weight"].to_numpy()
+        g = np.array([_pi_hat_by_hand(json.loads(t)["inputs"]) for t in final["sampler_inputs"]])
+        c = w * g - MEAN_PI_HAT
+        collision = final["collision"].to_numpy(dtype=float)
+        injury = final["injury_probability"].to_numpy(dtype=float)
+        conflict = (final["conflict"] & ~final["collision"]).to_numpy(dtype=float)
+        row = table[table.condition == condition].iloc[0]
+        assert row["estimator"] == "is+cv"
+        assert row["n"] == len(final) and row["n_run"] == 6 + 48
+        for name, f in (("collision", collision), ("injury", injury), ("conflict", conflict)):
+            mean, low, high = _regression(w * f, c)
+            prefix = "injury" if name == "injury" else name
+            value = row["injury_mean"] if name == "injury" else row[f"{name}_rate"]
+            assert value == pytest.approx(mean, rel=1e-10, abs=1e-14), name
+            assert row[f"{prefix}_low"] == pytest.approx(max(0.0, low), rel=1e-10, abs=1e-14), name
+            assert row[f"{prefix}_high"] == pytest.approx(high, rel=1e-10), name
+        # ess and the weights' check stay those of the weights
+        assert row["ess"] == pytest.approx(w.sum() ** 2 / (w**2).sum(), rel=1e-12)
+        assert row["mean_weight"] == pytest.approx(w.mean(), rel=1e-12)
+    header, cells = table_one_rows(table)
+    assert header[-1] == "estimator" and [r[-1] for r in cells] == ["is+cv", "is+cv"]
+    # The control does move the estimates (else the comparison above would not tell the two apart).
+    plain = table_one_of_run(episodes)
+    assert not np.allclose(plain["collision_rate"], table["collision_rate"])
+
+
+def test_product_or_meanless_joint_proposals_leave_the_table_as_it_was():
+    """Bit-identical: a product proposal and a joint one stored before E_p[pi_hat] (its JSON without the
+    keys) give the table of no proposals, with its columns; and that table is the plain weighted one."""
+    episodes = _episodes()
+    plain = table_one_of_run(episodes)
+    assert list(plain.columns) == PLAIN_COLUMNS
+    product = product_to_json(Product({"ego_speed_log": Normal(LOG_MU + 0.3, LOG_SIGMA)}))
+    older = json.loads(PROPOSAL.to_json())
+    del older["mean_pi_hat"], older["mean_pi_hat_se"]
+    for proposals in ({"right_turn": ["", product]}, {"right_turn": ["", json.dumps(older)]}, {}):
+        again = table_one_of_run(episodes, proposals=proposals)
+        pd.testing.assert_frame_equal(again, plain, check_exact=True)
+    # The plain table, by the formula: (1/n) sum w f over the final stage's SV rows.
+    final = episodes[(episodes.sampler_stage == 1) & (episodes.condition == "sv")]
+    expected = float(np.mean(final["weight"] * final["collision"]))
+    assert plain[plain.condition == "sv"]["collision_rate"].iloc[0] == pytest.approx(expected, rel=1e-12)
+
+
+def test_constant_control_or_too_few_rows_keep_the_plain_estimates():
+    """var(C) = 0 (every final episode with the same inputs and weight) and a final stage of 10 episodes:
+    the plain estimates, the row labelled "is"; another scenario of the same table with the control keeps
+    it."""
+    joint = PROPOSAL.to_json()
+    for episodes in (_episodes(same_inputs=True), _episodes(n_final=10)):
+        both = pd.concat([episodes, _episodes(scenario="crossing")], ignore_index=True)
+        table = table_one_weighted(both, proposals={"right_turn": ["", joint], "crossing": ["", joint]})
+        plain = table_one_weighted(both)
+        ours = table[table.scenario == "right_turn"]
+        pd.testing.assert_frame_equal(
+            ours.drop(columns="estimator"), plain[plain.scenario == "right_turn"], check_exact=True
+        )
+        assert (ours["estimator"] == "is").all()
+        assert (table[table.scenario == "crossing"]["estimator"] == "is+cv").all()
+
+
+def test_rows_without_the_proposals_inputs_are_refused():
+    episodes = _episodes()
+    episodes["sampler_inputs"] = json.dumps({"inputs": {"ego_speed_log": 2.0}, "nominal": {}})
+    with pytest.raises(ValueError, match="lack the proposal's inputs conflict_offset_s, ped_risk"):
+        table_one_weighted(episodes, proposals={"right_turn": ["", PROPOSAL.to_json()]})
