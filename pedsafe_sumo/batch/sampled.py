@@ -19,7 +19,7 @@ from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
 from pedsafe_sumo.io.run_store import read_parts
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
-from pedsafe_sumo.sampling.joint import NORM_DRAWS, VISIBLE_M, Kinematics, joint_update
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, NORM_DRAWS, VISIBLE_M, Kinematics, joint_update
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
@@ -40,7 +40,10 @@ FAMILY_PRODUCT = "product"
 FAMILY_JOINT = "joint"
 #: run.json's record of pi_hat's design under the joint family: the inputs and the kinematic features.
 JOINT_FEATURES_KEY = "joint_features"
-JOINT_FEATURES = f"inputs + kinematics (v, 1/w, margin_s with visible_m {VISIBLE_M})"
+JOINT_FEATURES = (
+    f"inputs + kinematics (v, 1/w, margin_s with visible_m {VISIBLE_M}); pilot guard margin_s < 0 below "
+    f"{GUARD_MIN_COLLISIONS} collisions"
+)
 FAMILIES = (FAMILY_PRODUCT, FAMILY_JOINT)
 SAMPLER_MC = "mc"
 SAMPLER_IS = "is"
@@ -185,7 +188,8 @@ def _joint_stage(
     levels: dict[str, list[dict[str, Any]]],
 ) -> str:
     """`--is-family joint`: the proposal of `stage`, fitted on the SV rows of every pilot stage before it
-    (sampling/joint.py); "" (the nominal) while those rows hold no collision."""
+    (sampling/joint.py); for a pilot stage while those rows hold fewer than GUARD_MIN_COLLISIONS
+    collisions, the guard's region proposal; "" (the nominal) where neither applies and they hold none."""
     earlier = [
         c
         for c in plan_sampled_chunks([scenario], plan.conditions, identity, proposals)
@@ -193,8 +197,9 @@ def _joint_stage(
     ]
     rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in earlier])
     kinematics = kinematics_of(plan.config, scenario) if identity["sampler"].get(JOINT_FEATURES_KEY) else None
-    proposal, n_collisions = joint_update(
-        rows, ADAPT_CONDITION, float(identity["sampler"]["defensive_share"]), kinematics
+    pilot_stage = stage < int(identity["sampler"]["pilot_stages"])
+    proposal, n_collisions, guard = joint_update(
+        rows, ADAPT_CONDITION, float(identity["sampler"]["defensive_share"]), kinematics, pilot_stage
     )
     levels.setdefault(scenario, []).append(
         {
@@ -205,6 +210,7 @@ def _joint_stage(
             "proposed": proposal.names if proposal else [],
             "norm": proposal.norm if proposal else None,
             "mean_tries": proposal.bound if proposal else None,
+            "guard": guard,
         }
     )
     return proposal.to_json() if proposal else ""

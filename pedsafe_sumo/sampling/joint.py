@@ -35,6 +35,16 @@ fit, not a model of the episode: a wrong VISIBLE_M or t_r costs efficiency, neve
 exact whatever pi_hat is). Offline on v5_full's rows, 2-stage pilot: per final episode right_turn 11.5 ->
 19.2, crossing 19.5 -> 55, background_blending 5.0 -> 6.3, jaywalking 4.9 -> 5.4.
 
+The guard (session 8): a 200-pair nominal stage 0 of a scenario whose collision rate is 0.75% (crossing)
+holds no collision one time in five, and a fit on one or two collisions hardly beats the nominal
+(session 7: seed 23's crossing, 3.6x per final episode). So a PILOT stage whose pooled pilot rows hold
+fewer than GUARD_MIN_COLLISIONS SV collisions draws from the region proposal instead: pi_hat a steep step
+down at margin_s = 0, q ≈ lambda p + (1 - lambda) p 1{margin_s < 0} / P_p(margin_s < 0). It needs no fit:
+on v5_full's rows 75 of 75 crossing collisions, 220 of 220 right_turn, 293 of 299 jaywalking (but 303 of
+504 blending) had margin_s < 0, where the collision rate is 17-71%. The final stage is always the fit
+on the pooled pilot rows (which the guard's stage makes rich in collisions). Pilot rows only train pi_hat,
+so a guard that misses collisions costs efficiency, never bias.
+
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
 Dask rebuild the very proposal. The estimate's relative error (stored as `norm_rel_se`) is the relative
@@ -76,6 +86,12 @@ KINEMATIC_INPUTS = ("conflict_offset_s", "ego_speed_log", "ped_age_group", "ped_
 VISIBLE_M = 2.3
 #: Nominal draws (of NORM_SEED + 1) that give the kinematic features' means and standard deviations.
 MOMENT_DRAWS = 100_000
+#: The guard: a pilot stage whose pooled pilot rows hold fewer SV collisions than this draws from the
+#: region proposal (margin_s < 0) instead of a fit on a handful of collisions (the `adaptive` variant's
+#: threshold of EXPERIMENTS.md, session 7, fixed there before its scores).
+GUARD_MIN_COLLISIONS = 5
+#: The guard's step: pi_hat = expit(-GUARD_STEEPNESS margin_s / sd(margin_s)).
+GUARD_STEEPNESS = 200.0
 #: Candidates drawn per block of the rejection step (the episode's Generator draws whole blocks).
 REJECTION_BLOCK = 64
 #: A proposal whose bound B needs more candidates than this per episode on average is refused.
@@ -296,6 +312,36 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE) -> np.ndarr
     return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
 
 
+def margin_column(nominal: Mapping[str, Family]) -> int:
+    """The design column of the standardised braking margin's linear term (JointProposal.features: the
+    intercept, each input's indicators or z and z^2 in sorted order, then v, 1/w and margin_s)."""
+    column = 1
+    for name in sorted(nominal):
+        family = nominal[name]
+        column += len(family.probabilities) - 1 if isinstance(family, Categorical) else 2
+    return column + 4
+
+
+def region_proposal(
+    nominal: Mapping[str, Family], kinematics: Kinematics | None, defensive_share: float
+) -> JointProposal | None:
+    """The guard of a pilot without collisions (module docstring): pi_hat a steep logistic step down at
+    margin_s = 0, so that q ≈ lambda p + (1 - lambda) p 1{margin_s < 0} / P_p(margin_s < 0); None where the
+    scenario lacks a kinematic input."""
+    if kinematics is None or not set(KINEMATIC_INPUTS) <= set(nominal):
+        return None
+    kinematics = kinematics.with_moments(nominal)
+    mean_s, sd_s = kinematics.moments[2]
+    shell = JointProposal(dict(nominal), (), 1.0, defensive_share, kinematics=kinematics)
+    probe = shell.features(shell.sample_nominal(np.random.default_rng(NORM_SEED), 1))
+    coefficients = np.zeros(probe.shape[1])
+    # eta = -GUARD_STEEPNESS margin_s / sd: pi_hat = 1/2 at margin_s = 0, sqrt(pi_hat) 4.5e-5 at +0.1 sd.
+    coefficients[margin_column(nominal)] = -GUARD_STEEPNESS
+    coefficients[0] = -GUARD_STEEPNESS * mean_s / sd_s
+    proposal = normalised(nominal, coefficients, defensive_share, kinematics)
+    return proposal if proposal.norm > 0 and proposal.bound <= MAX_MEAN_TRIES else None
+
+
 def fit_joint(
     inputs: Mapping[str, np.ndarray],
     collision: np.ndarray,
@@ -356,15 +402,26 @@ def normalised(
 
 
 def joint_update(
-    rows: pd.DataFrame, condition: str, defensive_share: float, kinematics: Kinematics | None = None
-) -> tuple[JointProposal | None, int]:
-    """The joint proposal from every pilot row so far of `condition` (status ok), and its collisions."""
+    rows: pd.DataFrame,
+    condition: str,
+    defensive_share: float,
+    kinematics: Kinematics | None = None,
+    pilot_stage: bool = False,
+) -> tuple[JointProposal | None, int, bool]:
+    """The proposal of the next stage from every pilot row so far of `condition` (status ok), their
+    collisions, and whether it is the guard's region proposal (a `pilot_stage` with fewer than
+    GUARD_MIN_COLLISIONS collisions, where the scenario has the kinematic inputs) rather than the fit."""
     from pedsafe_sumo.sampling.stages import _inputs_and_nominal
 
     rows = rows[(rows["condition"] == condition) & (rows["status"] == "ok")]
     inputs, nominal = _inputs_and_nominal(rows)
     y = rows["collision"].astype(float).to_numpy()
-    return fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics), int(y.sum())
+    n_collisions = int(y.sum())
+    if pilot_stage and kinematics is not None and n_collisions < GUARD_MIN_COLLISIONS:
+        region = region_proposal(nominal.families, kinematics, defensive_share)
+        if region is not None:
+            return region, n_collisions, True
+    return fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics), n_collisions, False
 
 
 def proposal_of_json(text: str) -> Any:

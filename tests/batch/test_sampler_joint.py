@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from batch_cli import batch, resume_after_a_stop_in_the_final_stage
-from scipy import stats
+from scipy import special, stats
 
 from pedsafe_sumo.batch.chunks import episode_seed
 from pedsafe_sumo.demand.sampling import age_group_speed_distributions
@@ -57,7 +57,7 @@ def _expected_weight(record: dict, data: dict) -> float:
     ]
     eta = float(np.dot(columns, data["coefficients"]))
     lam = data["defensive_share"]
-    return 1.0 / (lam + (1 - lam) * math.sqrt(1.0 / (1.0 + math.exp(-eta))) / data["norm"])
+    return 1.0 / (lam + (1 - lam) * math.sqrt(float(special.expit(eta))) / data["norm"])
 
 
 def _check_kinematics(data: dict, scenario: str) -> None:
@@ -123,3 +123,34 @@ def test_joint_run_weights_recomputed_and_same_rows_on_one_and_two_workers(tmp_p
     assert proc.returncode == 0, proc.stderr
     assert "runs again" in proc.stderr
     pd.testing.assert_frame_equal(table, pd.read_parquet(out1 / "episodes.parquet"))
+
+
+@pytest.mark.slow
+def test_a_pilot_without_collisions_draws_its_next_stage_where_no_stop_is_possible(tmp_path):
+    """crossing (SV collision rate about 0.75%): a 20-pair nominal stage 0 holds fewer than 5 collisions,
+    so pilot stage 1 is the guard's region proposal (run.json's sampler_levels says so). Witness: the
+    braking margin computed here from each row's own recorded speeds and conflict offset, against the
+    rows of stage 0: nearly all of stage 1 lies below 0 (the defensive 10% aside), where stage 0 rarely
+    does; and the stage's weights are those of the stored proposal, recomputed by hand."""
+    out = tmp_path / "guard"
+    proc = batch(
+        "--scenario", "crossing", "--episodes", "3", "--seed", "5", "--sampler", "is", "--is-family",
+        "joint", "--is-pilot-stages", "2", "--is-pilot-episodes", "20", "--chunk-size", "10",
+        "--out", str(out),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    run = json.loads((out / "run.json").read_text())
+    level = run["sampler_levels"]["crossing"][0]
+    assert level["n_collisions_sv"] < 5 and level["guard"] is True
+    table = pd.read_parquet(out / "episodes.parquet")
+    sv = table[table.condition == "sv"]
+    records = [json.loads(t) for t in sv["sampler_inputs"]]
+    offset = np.array([r["inputs"]["conflict_offset_s"] for r in records])
+    speed = sv["ego_initial_speed_mps"].to_numpy(float)
+    margin = offset + 2.3 / sv["ped_speed_mps"].to_numpy(float) - 0.4 - speed / 12.0
+    stage = sv["sampler_stage"].to_numpy()
+    assert (margin[stage == 1] < 0).mean() >= 0.8 > (margin[stage == 0] < 0).mean()
+    data = json.loads(run["sampler_proposals"]["crossing"][1])
+    for (_, row), record in zip(sv.iterrows(), records, strict=True):
+        if row["sampler_stage"] == 1:
+            assert row["weight"] == pytest.approx(_expected_weight(record, data), rel=1e-9)

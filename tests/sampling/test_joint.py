@@ -12,7 +12,14 @@ from pedsafe_sumo.demand.sampling import age_group_speed_distributions
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal, is_estimate
-from pedsafe_sumo.sampling.joint import JointProposal, Kinematics, fit_joint, normalised, proposal_of_json
+from pedsafe_sumo.sampling.joint import (
+    JointProposal,
+    Kinematics,
+    fit_joint,
+    normalised,
+    proposal_of_json,
+    region_proposal,
+)
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 PEDESTRIANS = load_params()["pedestrians"]
@@ -222,3 +229,32 @@ def test_a_scenario_without_the_kinematic_inputs_fits_on_its_inputs_alone():
     inputs = {name: family.sample(rng, 50) for name, family in NOMINAL.items()}
     proposal = fit_joint(inputs, y, NOMINAL, DEFENSIVE_SHARE, kinematics=KINEMATICS)
     assert proposal is not None and proposal.kinematics is None
+
+
+def test_the_guard_draws_where_the_braking_margin_is_negative():
+    """region_proposal: pi_hat is a step at margin_s = 0 (margins by hand, _margin_s), and episodes drawn
+    from it through Draws have margin_s < 0 in the share lambda P(margin < 0) + (1 - lambda), P by 10^6
+    vectorised nominal draws; their weights average to 1."""
+    proposal = region_proposal(KIN_NOMINAL, KINEMATICS, DEFENSIVE_SHARE)
+    assert proposal is not None and proposal_of_json(proposal.to_json()) == proposal
+    rng = np.random.default_rng(4)
+    rows = [_kinematic_episode(rng, None) for _ in range(400)]
+    margin = np.array([r[3][2] for r in rows])
+    pi = proposal.pi_hat(_inputs(rows))
+    assert np.all(pi[margin < -0.1] > 0.99) and np.all(pi[margin > 0.1] < 0.01)
+    big = np.random.default_rng(5)
+    n = 1_000_000
+    group = big.choice(len(GROUP_LAWS), size=n, p=GROUP_SHARES)
+    walk = np.exp(
+        np.array([law.log_mu for law in GROUP_LAWS])[group]
+        + np.array([law.log_sigma for law in GROUP_LAWS])[group] * big.standard_normal(n)
+    )
+    ego = np.exp(LOG_MU + LOG_SIGMA * big.standard_normal(n))
+    p_negative = float(np.mean(_margin_s(big.uniform(-1.0, 1.5, n), ego, walk) < 0))
+    drawn = [_kinematic_episode(rng, proposal) for _ in range(2000)]
+    share = np.mean([r[3][2] < 0 for r in drawn])
+    expected = DEFENSIVE_SHARE * p_negative + (1 - DEFENSIVE_SHARE)
+    assert abs(share - expected) < 4 * math.sqrt(expected * (1 - expected) / 2000) + 0.01, (share, expected)
+    w = np.array([r[1] for r in drawn])
+    assert abs(w.mean() - 1.0) < 4 * w.std() / math.sqrt(len(w))
+    assert region_proposal(NOMINAL, KINEMATICS, DEFENSIVE_SHARE) is None  # no kinematic inputs
