@@ -105,6 +105,8 @@ def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
             original, draws = runner.draw_setup_sampled(spec, seed)
             kept = {n: f for n, f in draws.nominals.items() if f is not None}
             continuous = [n for n in sorted(record["nominal"]) if isinstance(kept[n], (Normal, Beta))]
+            if args.only:
+                continuous = [n for n in continuous if n == args.only]
             plan = [(0.0, 0)] + [(d, r) for d in args.deltas for r in range(args.directions)]
             for delta, direction in plan:
                 values = dict(draws.inputs)
@@ -173,6 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--directions", type=int, default=8)
     parser.add_argument("--deltas", type=float, nargs="+", default=list(DELTAS))
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--only", help="move this input alone (default: every continuous proposable input)")
     parser.add_argument("--set", action="append", default=[])
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--summarise", action="store_true", help="only read the CSVs in --out back")
@@ -182,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         args.mc_run / "episodes.parquet", columns=["scenario", "condition", "status", "collision"]
     )
     for scenario in args.scenario:
-        path = args.out / f"{scenario}_roughness.csv"
+        path = args.out / f"{scenario}{'_' + args.only if args.only else ''}_roughness.csv"
         if not args.summarise:
             run_scenario(args, scenario).to_csv(path, index=False)
         outcomes = pd.read_csv(path)
