@@ -44,7 +44,14 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from is_within_episode import BOOTSTRAP, BOOTSTRAP_SEED, FixedInputs, ceiling, pick_episodes  # noqa: E402
+from is_within_episode import (  # noqa: E402
+    BOOTSTRAP,
+    BOOTSTRAP_SEED,
+    FixedInputs,
+    ceiling,
+    pick_episodes,
+    sv_rows_and_runner,
+)
 
 from pedsafe_sumo.sampling.importance import Beta, Normal  # noqa: E402
 
@@ -81,19 +88,7 @@ def same_world(a: Any, b: Any) -> bool:
 
 
 def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
-    from pedsafe_sumo.batch.runner import scenario_spec
-    from pedsafe_sumo.control.agent import load_agent_class
-    from pedsafe_sumo.network.sites import get_site
-    from pedsafe_sumo.settings import configure, parse_set
-    from pedsafe_sumo.sim.episode import EpisodeRunner
-
-    rows = pd.read_parquet(args.mc_run / "episodes.parquet")
-    sv = rows[(rows["scenario"] == scenario) & (rows["condition"] == "sv") & (rows["status"] == "ok")]
-    sv = sv.sort_values("episode")
-    info = json.loads((args.mc_run / "run.json").read_text())
-    _, params = configure([scenario], None, args.set)
-    spec = scenario_spec(scenario, parse_set(args.set)[0])
-    runner = EpisodeRunner(get_site(info["site"]), params, load_agent_class(info["algorithm"]))
+    sv, spec, runner = sv_rows_and_runner(args.mc_run, scenario, args.set)
     chosen = pick_episodes(sv, args.collisions, 0, args.seed)
     rng = np.random.default_rng(args.seed)
     out = []

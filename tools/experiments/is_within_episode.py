@@ -160,20 +160,26 @@ def setup_for(runner: Any, spec: Any, row: pd.Series, mode: str, fresh: int) -> 
     return dataclasses.replace(setup, background=background)
 
 
-def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
+def sv_rows_and_runner(mc_run: Path, scenario: str, settings: list[str]) -> tuple[pd.DataFrame, Any, Any]:
+    """The MC run's ok SV rows of `scenario` (by episode), its scenario spec under `settings` (--set) and
+    an EpisodeRunner on the run's site and algorithm."""
     from pedsafe_sumo.batch.runner import scenario_spec
     from pedsafe_sumo.control.agent import load_agent_class
     from pedsafe_sumo.network.sites import get_site
     from pedsafe_sumo.settings import configure, parse_set
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
-    rows = pd.read_parquet(args.mc_run / "episodes.parquet")
+    rows = pd.read_parquet(mc_run / "episodes.parquet")
     sv = rows[(rows["scenario"] == scenario) & (rows["condition"] == "sv") & (rows["status"] == "ok")]
-    sv = sv.sort_values("episode")
-    info = json.loads((args.mc_run / "run.json").read_text())
-    _, params = configure([scenario], None, args.set)
-    spec = scenario_spec(scenario, parse_set(args.set)[0])
+    info = json.loads((mc_run / "run.json").read_text())
+    _, params = configure([scenario], None, settings)
+    spec = scenario_spec(scenario, parse_set(settings)[0])
     runner = EpisodeRunner(get_site(info["site"]), params, load_agent_class(info["algorithm"]))
+    return sv.sort_values("episode"), spec, runner
+
+
+def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
+    sv, spec, runner = sv_rows_and_runner(args.mc_run, scenario, args.set)
     chosen = pick_episodes(sv, args.collisions, args.others, args.seed)
     out = []
     started = time.perf_counter()
