@@ -88,6 +88,16 @@ def test_a_nominal_law_that_differs_from_the_proposal_is_refused():
         draw_lognormal(draws, "ego_speed_log", LOG_MU, LOG_SIGMA)
 
 
+def _final_stage_holds(final: list, truth: float):
+    """The final stage's estimate (rows of (record, weight, event, ...)): its interval holds `truth` and
+    the weights average to 1 within 4 of their standard errors."""
+    w = np.array([r[1] for r in final])
+    est = is_estimate(np.array([r[2] for r in final], dtype=float), w)
+    assert est.low <= truth <= est.high, (est, truth)
+    assert abs(w.mean() - 1.0) < 4 * w.std() / math.sqrt(len(w))
+    return est
+
+
 @pytest.mark.parametrize("pilot_stages", [1, 2])
 def test_pilots_then_joint_final_stage_recover_the_toy_probability(pilot_stages):
     """The joint toy event (P = 0.0038): pilot stages of 1,000 (the first nominal, the next from the
@@ -101,12 +111,7 @@ def test_pilots_then_joint_final_stage_recover_the_toy_probability(pilot_stages)
         inputs = {n: np.array([r[0]["inputs"][n] for r in pilots]) for n in NOMINAL}
         proposal = fit_joint(inputs, np.array([r[2] for r in pilots], dtype=float), NOMINAL, DEFENSIVE_SHARE)
         assert proposal is not None
-    final = [_episode(rng, proposal) for _ in range(2000)]
-    w = np.array([r[1] for r in final])
-    f = np.array([r[2] for r in final], dtype=float)
-    est = is_estimate(f, w)
-    assert est.low <= TOY_P <= est.high, (est, TOY_P)
-    assert abs(w.mean() - 1.0) < 4 * w.std() / math.sqrt(len(w))
+    est = _final_stage_holds([_episode(rng, proposal) for _ in range(2000)], TOY_P)
     if pilot_stages == 2:
         n_total = 1000 * pilot_stages + 2000
         assert (est.high - est.low) / 2 < 1.96 * math.sqrt(TOY_P * (1 - TOY_P) / n_total)
@@ -213,12 +218,7 @@ def test_joint_proposal_with_kinematics_recovers_a_margin_event():
     proposal = fit_joint(_inputs(pilot), y, KIN_NOMINAL, DEFENSIVE_SHARE, kinematics=KINEMATICS)
     assert proposal is not None and proposal.kinematics is not None and proposal.kinematics.moments
     assert proposal_of_json(proposal.to_json()) == proposal
-    final = [_kinematic_episode(rng, proposal) for _ in range(2000)]
-    w = np.array([r[1] for r in final])
-    f = np.array([r[2] for r in final], dtype=float)
-    est = is_estimate(f, w)
-    assert est.low <= truth <= est.high, (est, truth)
-    assert abs(w.mean() - 1.0) < 4 * w.std() / math.sqrt(len(w))
+    est = _final_stage_holds([_kinematic_episode(rng, proposal) for _ in range(2000)], truth)
     assert (est.high - est.low) / 2 < 1.96 * math.sqrt(truth * (1 - truth) / 3000)
 
 

@@ -45,10 +45,8 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from is_within_episode import (  # noqa: E402
-    BOOTSTRAP,
-    BOOTSTRAP_SEED,
     FixedInputs,
-    ceiling,
+    ceiling_with_interval,
     pick_episodes,
     sv_rows_and_runner,
 )
@@ -147,16 +145,12 @@ def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
         k = per["sum"].to_numpy(float) + own.loc[per.index].to_numpy(float)
         m = per["count"].to_numpy(float) + 1
         inverse_root = np.sqrt(m / k)
-        rng = np.random.default_rng(BOOTSTRAP_SEED)
-        boot = np.sort([ceiling(rate, rng.choice(inverse_root, len(inverse_root))) for _ in range(BOOTSTRAP)])
         table.append(
             {
                 "delta (nominal sd)": delta,
                 "moved runs that collide": float(by_delta["collision"].mean()),
                 "episodes that always collide": f"{int((per['sum'] == per['count']).sum())}/{len(per)}",
-                "ceiling": ceiling(rate, inverse_root),
-                "ceiling 5%": float(boot[int(0.05 * BOOTSTRAP)]),
-                "ceiling 95%": float(boot[int(0.95 * BOOTSTRAP)]),
+                **ceiling_with_interval(rate, inverse_root),
             }
         )
     return pd.DataFrame(table)

@@ -227,6 +227,18 @@ def ceiling(rate: float, inverse_root: np.ndarray) -> float:
     return (1 - rate) / (rate * excess) if excess > 0 else math.inf
 
 
+def ceiling_with_interval(rate: float, inverse_root: np.ndarray) -> dict[str, float]:
+    """The ceiling and its bootstrap 90% interval over the collision episodes (columns of the summaries)."""
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    # Sorted, not np.quantile: resamples of pi = 1 alone give inf, which np.quantile turns into NaN.
+    boot = np.sort([ceiling(rate, rng.choice(inverse_root, len(inverse_root))) for _ in range(BOOTSTRAP)])
+    return {
+        "ceiling": ceiling(rate, inverse_root),
+        "ceiling 5%": float(boot[int(0.05 * BOOTSTRAP)]),
+        "ceiling 95%": float(boot[int(0.95 * BOOTSTRAP)]),
+    }
+
+
 def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
     """Per mode, from the collision stratum (p(x | Y = 1) = pi(x) p(x) / P, so E_p[g(pi)] = P E[g(pi) / pi |
     Y = 1] for any g): the ceiling of a proposal over what the mode keeps, with pi per episode taken as
@@ -241,9 +253,6 @@ def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
         hit, other = per[per["stratum"] == 1], per[per["stratum"] == 0]
         k, m = hit["sum"].to_numpy(float), hit["count"].to_numpy(float)
         inverse_root = np.sqrt((m + 1) / (k + 1))
-        rng = np.random.default_rng(BOOTSTRAP_SEED)
-        # Sorted, not np.quantile: resamples of pi = 1 alone give inf, which np.quantile turns into NaN.
-        boot = np.sort([ceiling(rate, rng.choice(inverse_root, len(inverse_root))) for _ in range(BOOTSTRAP)])
         pi_hit = float(np.mean(k / m))
         table.append(
             {
@@ -256,9 +265,7 @@ def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
                 f"({rate * (1 - pi_hit) / (1 - rate):.4f})",
                 "other episodes with pi > 0": f"{int((other['sum'] > 0).sum())}/{len(other)}",
                 "share of Var(Y) left": (1 - pi_hit) / (1 - rate),
-                "ceiling": ceiling(rate, inverse_root),
-                "ceiling 5%": float(boot[int(0.05 * BOOTSTRAP)]),
-                "ceiling 95%": float(boot[int(0.95 * BOOTSTRAP)]),
+                **ceiling_with_interval(rate, inverse_root),
             }
         )
     return pd.DataFrame(table)
