@@ -5,7 +5,9 @@
    episode, P(1 - P) / Var_q(w f), with Var_q(w f) = E_q[w^2 f^2] - P^2 = E_p[w f^2] - P^2 estimated on the
    MC rows (drawn from the nominal p): w(x) = p(x) / (lambda p(x) + (1 - lambda) q(x)) is the weight the IS
    run gives an episode with inputs x (the defensive mixture of sampling/draws.py), f the collision.
-   It is the efficiency the IS run's final stage would show on average, without its run's noise.
+   It is the efficiency the IS run's final stage would show on average, without its run's noise. For a
+   joint proposal also `proposal_efficiency_cv`: the same with pi_hat as a control variate at its best
+   slope (the estimator of Table I under --is-family joint).
 2. `sqrt_pi`: what a proposal shaped by the inputs' collision probability gives, whatever its form (not
    a product of one family per input as the cross-entropy stages fit). An episode's collision is random
    given its inputs x (background traffic, sensor noise, the SUMO dynamics are not proposed): with
@@ -94,6 +96,21 @@ def joint_efficiency(f: np.ndarray, inputs: pd.DataFrame, joint: JointProposal) 
     p_hat = float(np.mean(f))
     variance = float(np.mean(w * f**2)) - p_hat**2
     return (p_hat * (1 - p_hat) / variance if variance > 0 else math.inf), float(np.mean(ratio))
+
+
+def joint_cv_efficiency(f: np.ndarray, inputs: pd.DataFrame, joint: JointProposal) -> float:
+    """Item 1 for a joint proposal with pi_hat as a control variate (sampling/control_variate.py): the
+    regression estimator's variance per final-stage episode at its best slope, Var_q(Y - beta C) with
+    Y = w f and C = w g - mu, g = pi_hat(x), mu = E_p[g]; every moment under q taken on the nominal rows as
+    E_q[h] = E_p[h / w]. The slope is the one the run would estimate with many rows."""
+    x = {name: inputs[name].to_numpy(dtype=float) for name in joint.names}
+    w = 1.0 / joint.q_over_p(x)
+    g = joint.pi_hat(x)
+    p_hat, mu = float(np.mean(f)), float(np.mean(g))
+    control = w * g - mu
+    slope = float(np.mean(f * control)) / float(np.mean(control**2 / w))  # cov_q(Y, C) / var_q(C)
+    variance = float(np.mean((w * f - slope * control) ** 2 / w)) - p_hat**2
+    return p_hat * (1 - p_hat) / variance if variance > 0 else math.inf
 
 
 def product_fit_efficiency(
@@ -206,6 +223,7 @@ def main(argv: list[str] | None = None) -> int:
                 joint = JointProposal.from_json(final)
                 row["proposed"] = "joint:" + ",".join(joint.names)
                 row["proposal_efficiency"], row["mean_q_over_p"] = joint_efficiency(y, inputs, joint)
+                row["proposal_efficiency_cv"] = joint_cv_efficiency(y, inputs, joint)
                 out.append(row)
                 continue
             proposal = product_from_json(final) if final else Product({})

@@ -122,11 +122,13 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     # TTC since session 6: the clearance score drove the proposal away from collisions on Xueqing's
     # crossing; the TTC score agreed with plain MC on all four scenarios (docs/sampling.md).
     "is_score": SCORE_TTC,
-    "is_family": FAMILY_PRODUCT,
+    # joint since session 10: against the 10,000-pair MC run it needed fewer episodes than the
+    # product on all four scenarios (EXPERIMENTS.md, sessions 6-8); the product stays one flag away.
+    "is_family": FAMILY_JOINT,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a
 #: key missing from an older run.json with this, not with today's default, so the run stays the same run.
-RESUME_DEFAULTS_OF_OLDER_RUNS: dict[str, Any] = {"is_score": SCORE_CLEARANCE}
+RESUME_DEFAULTS_OF_OLDER_RUNS: dict[str, Any] = {"is_score": SCORE_CLEARANCE, "is_family": FAMILY_PRODUCT}
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
 #: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
@@ -328,7 +330,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         dest="is_family",
         help="--sampler is: the proposal's shape: 'product' = one family per input, refitted by the "
         "cross-entropy method; 'joint' = p sqrt(pi_hat) with pi_hat a logistic fit of the collision on "
-        f"every pilot row so far, drawn by rejection (docs/sampling.md) [{FAMILY_PRODUCT}]",
+        f"every pilot row so far, drawn by rejection (docs/sampling.md); --is-inputs, --is-min-spread and "
+        f"--is-score need --is-family product [{FAMILY_JOINT}]",
     )
     parser.add_argument(
         "--is-proposal",
@@ -520,7 +523,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         # The joint proposal moves every proposable input at once, fitted on the pilots' collisions: no
         # input screen, spread floor or score for the pilots' elite (docs/sampling.md).
         given = ", ".join(f"--{name.replace('_', '-')}" for name in unused_by_joint)
-        raise UsageError(f"{given}: not used by --is-family joint (only by the product family)")
+        raise UsageError(f"{given}: not used by --is-family joint (give --is-family product)")
     if not MIN_SPREAD_FLAG <= arguments["is_min_spread"] <= 1.0:
         raise UsageError(
             f"--is-min-spread must lie in {MIN_SPREAD_FLAG}..1, got {arguments['is_min_spread']}"

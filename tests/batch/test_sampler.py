@@ -18,6 +18,7 @@ from pedsafe_sumo.sampling.importance import Product, likelihood_ratio
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 CROSSING = ["--scenario", "crossing", "--episodes", "2"]
+PRODUCT = ["--is-family", "product"]
 
 
 @pytest.mark.parametrize(
@@ -32,12 +33,14 @@ CROSSING = ["--scenario", "crossing", "--episodes", "2"]
         (["--is-family", "joint"], "--is-family: need --sampler is"),
         (["--sampler", "is", "--is-family", "mixture"], "invalid choice"),
         (["--sampler", "is", "--is-inputs", "some"], "invalid choice"),
-        (["--sampler", "is", "--is-min-spread", "0.01"], "--is-min-spread must lie in 0.05..1"),
-        (["--sampler", "is", "--is-min-spread", "1000000000000"], "--is-min-spread must lie in 0.05..1"),
+        (["--sampler", "is", *PRODUCT, "--is-min-spread", "0.01"], "--is-min-spread must lie in 0.05..1"),
+        (["--sampler", "is", *PRODUCT, "--is-min-spread", "1e12"], "--is-min-spread must lie in 0.05..1"),
         (["--sampler", "is", "--is-proposal", "/nonexistent/run"], "--is-proposal: cannot read"),
         (["--sampler", "is", "--is-proposal", "X", "--is-pilot-stages", "2"], "leave out the other --is-*"),
         (["--sampler", "is", "--condition", "v2i"], "adapts its proposal on the SV condition"),
         (["--sampler", "is", "--is-family", "joint", "--is-score", "ttc"], "--is-score: not used by"),
+        # joint is the default since session 10: the product's own flags alone name the wrong family
+        (["--sampler", "is", "--is-inputs", "all"], "--is-inputs: not used by --is-family joint (give"),
         (
             ["--sampler", "is", "--is-family", "joint", "--is-inputs", "all", "--is-min-spread", "0.5"],
             "--is-inputs, --is-min-spread: not used by --is-family joint",
@@ -112,11 +115,26 @@ def test_the_ttc_score_is_the_default_and_older_runs_resume_with_the_clearance_s
     )
 
 
+def test_the_joint_family_is_the_default_and_older_runs_resume_with_the_product(tmp_path):
+    """Since session 10 --sampler is fits the joint proposal unless told otherwise; a run recorded before
+    --is-family existed drew from the product, and --resume must keep drawing from it."""
+    plan = prepare(parse_args(["--scenario", "crossing", "--sampler", "is", "--out", str(tmp_path / "r")]))
+    assert plan.identity["sampler"]["family"] == "joint"
+    product = prepare(
+        parse_args(["--scenario", "crossing", "--sampler", "is", *PRODUCT, "--out", str(tmp_path / "p")])
+    )
+    assert "family" not in product.identity["sampler"]  # a product run's identity is as before
+    older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
+    assert resumed_arguments(older, {})["is_family"] == "product"
+    assert resumed_arguments({**older, "is_family": "joint"}, {})["is_family"] == "joint"
+
+
 #: --is-inputs all: 20 pilot pairs (an elite of 2) are too few for the input screen to select anything,
 #: and this test checks the weights of a proposal that moves the inputs.
 IS_RUN = (
     "--scenario", "right_turn", "--episodes", "3", "--seed", "4", "--sampler", "is",
-    "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--chunk-size", "5", "--is-inputs", "all",
+    "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--chunk-size", "5", "--is-family", "product",
+    "--is-inputs", "all",
 )  # fmt: skip
 
 

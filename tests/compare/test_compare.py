@@ -147,6 +147,11 @@ def test_same_stack_passes_and_a_slower_reacting_stack_fails(tmp_path):
     assert f"python -m pedsafe_sumo.replay {slow} --episode" in worse.stdout
 
 
+#: The cross-entropy product moving every input (not the default joint family): its stage-1 proposal
+#: moves inputs even when 20 pilot pairs hold no collision.
+PRODUCT_ALL_INPUTS = ("--is-family", "product", "--is-inputs", "all")
+
+
 def _is_batch(out, *extra):
     """A small importance-sampled crossing run, SV only: one pilot stage of 20 pairs (every input
     proposed: 20 pairs are too few for the screen), 20 final pairs."""
@@ -162,7 +167,7 @@ def test_builds_on_a_shared_proposal_compare_with_their_weights(tmp_path):
     them and passes at a margin above the resolution of the weighted sample; a stack reacting 2.6 s later
     on the same proposal fails; the weighted difference is the one recomputed from the rows."""
     run_a, run_b, slow = tmp_path / "a", tmp_path / "b", tmp_path / "slow"
-    _is_batch(run_a, "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--is-inputs", "all")
+    _is_batch(run_a, *("--is-pilot-stages", "1", "--is-pilot-episodes", "20"), *PRODUCT_ALL_INPUTS)
     _is_batch(run_b, "--is-proposal", str(run_a))
     _is_batch(slow, "--is-proposal", str(run_a), "--set", "algorithm.reaction_time_s=3.0")
     rows_a = pd.read_parquet(run_a / "episodes.parquet")
