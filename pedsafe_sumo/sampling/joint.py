@@ -300,14 +300,19 @@ def is_joint_json(text: str) -> bool:
     return bool(text) and text.lstrip().startswith("{") and json.loads(text).get("kind") == KIND
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE) -> np.ndarray:
-    """Ridge logistic regression (the intercept unpenalised)."""
+def fit_logistic(
+    x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, row_weight: np.ndarray | None = None
+) -> np.ndarray:
+    """Ridge logistic regression (the intercept unpenalised); `row_weight` scales each row's log-likelihood
+    (None: every row 1, the sampler's fit)."""
+    sw = np.ones(len(y)) if row_weight is None else np.asarray(row_weight, dtype=float)
 
     def loss(b: np.ndarray) -> tuple[float, np.ndarray]:
         eta = x @ b
-        grad = x.T @ (special.expit(eta) - y)
+        grad = x.T @ (sw * (special.expit(eta) - y))
         grad[1:] += ridge * b[1:]
-        return float(np.sum(np.logaddexp(0, eta) - y * eta) + 0.5 * ridge * np.sum(b[1:] ** 2)), grad
+        nll = float(np.sum(sw * (np.logaddexp(0, eta) - y * eta)))
+        return nll + 0.5 * ridge * float(np.sum(b[1:] ** 2)), grad
 
     return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
 

@@ -16,6 +16,7 @@ from pedsafe_sumo.sampling.joint import (
     JointProposal,
     Kinematics,
     fit_joint,
+    fit_logistic,
     normalised,
     proposal_of_json,
     region_proposal,
@@ -258,3 +259,17 @@ def test_the_guard_draws_where_the_braking_margin_is_negative():
     w = np.array([r[1] for r in drawn])
     assert abs(w.mean() - 1.0) < 4 * w.std() / math.sqrt(len(w))
     assert region_proposal(NOMINAL, KINEMATICS, DEFENSIVE_SHARE) is None  # no kinematic inputs
+
+
+def test_a_row_weight_of_k_fits_as_k_copies_of_the_row():
+    """fit_logistic's row weights scale each row's log-likelihood: integer weights give the fit of the
+    rows repeated that many times (an independent fit), and weights of 1 give the unweighted fit."""
+    rng = np.random.default_rng(17)
+    x = np.column_stack([np.ones(300), rng.normal(size=(300, 2))])
+    y = (rng.random(300) < special.expit(x @ np.array([-1.0, 1.5, -0.5]))).astype(float)
+    counts = rng.integers(1, 4, size=300)
+    weighted = fit_logistic(x, y, 1.0, counts.astype(float))
+    repeated = fit_logistic(np.repeat(x, counts, axis=0), np.repeat(y, counts), 1.0)
+    np.testing.assert_allclose(weighted, repeated, atol=1e-4)
+    np.testing.assert_array_equal(fit_logistic(x, y, 1.0, np.ones(300)), fit_logistic(x, y, 1.0))
+    assert not np.allclose(weighted, fit_logistic(x, y, 1.0), atol=1e-3)
