@@ -5,39 +5,65 @@ Table I estimates from the final stage only (report/tables.py). Each stage t's w
 w_i f_i is unbiased given the stages before it, so a combination with weights fixed in advance is too.
 Here every episode of stages `first`..K counts once (the stages' means weighted by their sizes; plain IS,
 no control variate), with variance sum_t n_t s_t^2 / N^2 (s_t^2 the sample variance of w f in stage t) and
-a central-limit 95% interval. Efficiency is against plain MC at the estimate, with every episode run
-counted (pilots included): P (1 - P) (1.96 / h)^2 / n_run. With `--mc RUN` the MC estimate is shown
-beside it.
+a central-limit 95% interval. With `--control`, each stage whose proposal is joint with a stored
+E_p[pi_hat] is estimated with pi_hat as a control variate (sampling.control_variate.cv_estimate, Table I's
+estimator under --is-family joint) and its variance taken from that estimate; the stages are still
+weighted by their sizes. Efficiency is against plain MC at the estimate, with every episode run counted
+(pilots included): P (1 - P) (1.96 / h)^2 / n_run. With `--mc RUN` the MC estimate is shown beside it.
 
-    .venv/bin/python tools/experiments/is_stage_pooling.py IS_RUN [--mc /work/results/v5_full]
+    .venv/bin/python tools/experiments/is_stage_pooling.py IS_RUN [--control] [--mc /work/results/v5_full]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from pedsafe_sumo.sampling.control_variate import cv_estimate, final_stage_control, pi_hat_of_inputs
 
-def pooled_estimate(rows: pd.DataFrame, first: int) -> tuple[float, float, int]:
-    """(estimate, 95% half-width, episodes used) of stages >= first of one scenario and condition."""
+
+def stage_estimate(stage: pd.DataFrame, proposals: list[str] | None) -> tuple[float, float]:
+    """(mean, variance of the mean) of one stage's collision rate: plain weighted, or with the stage's
+    pi_hat as a control variate where `proposals` is given and the stage's proposal allows it."""
+    w = stage["weight"].to_numpy(dtype=float)
+    f = stage["collision"].astype(float).to_numpy()
+    control = final_stage_control(proposals, int(stage["sampler_stage"].iloc[0])) if proposals else None
+    if control is not None:
+        g = pi_hat_of_inputs(control, stage["sampler_inputs"].tolist())
+        cv = cv_estimate(f, w, g, control.mean_pi_hat, control.mean_pi_hat_se)
+        if cv is not None:
+            return cv.mean, ((cv.high - cv.mean) / 1.96) ** 2
+    y = w * f
+    return float(np.mean(y)), float(np.var(y, ddof=1)) / len(y)
+
+
+def pooled_estimate(
+    rows: pd.DataFrame, first: int, proposals: list[str] | None = None
+) -> tuple[float, float, int]:
+    """(estimate, 95% half-width, episodes used) of stages >= first of one scenario and condition, each
+    stage weighted by its size."""
     used = rows[rows["sampler_stage"] >= first]
-    variance = 0.0
+    estimate = variance = 0.0
     for _, stage in used.groupby("sampler_stage"):
-        y = stage["weight"].to_numpy(dtype=float) * stage["collision"].astype(float).to_numpy()
-        variance += len(y) * float(np.var(y, ddof=1))
-    y_all = used["weight"].to_numpy(dtype=float) * used["collision"].astype(float).to_numpy()
-    return float(np.mean(y_all)), 1.96 * (variance / len(y_all) ** 2) ** 0.5, len(y_all)
+        mean, var = stage_estimate(stage, proposals)
+        share = len(stage) / len(used)
+        estimate += share * mean
+        variance += share**2 * var
+    return estimate, 1.96 * variance**0.5, len(used)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path)
     parser.add_argument("--mc", type=Path, help="a plain MC run of the same scenarios")
+    parser.add_argument("--control", action="store_true", help="pi_hat as a control variate per stage")
     args = parser.parse_args(argv)
+    stored = json.loads((args.run / "run.json").read_text())["sampler_proposals"] if args.control else {}
     rows = pd.read_parquet(args.run / "episodes.parquet")
     rows = rows[rows["status"] == "ok"]
     mc = pd.read_parquet(args.mc / "episodes.parquet") if args.mc else None
@@ -45,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     for (scenario, condition), group in rows.groupby(["scenario", "condition"]):
         last = int(group["sampler_stage"].max())
         for first in sorted({last, *range(1, last)}, reverse=True):
-            estimate, half, n = pooled_estimate(group, first)
+            proposals = stored.get(scenario) if args.control else None
+            estimate, half, n = pooled_estimate(group, first, proposals)
             row = {
                 "scenario": scenario,
                 "condition": condition,
