@@ -9,7 +9,13 @@ the IS estimate is Table I's: pi_hat as a control variate (docs/sampling.md, "Co
 `estimator` says which), with the plain weighted estimate and its efficiencies beside it (`plain_*`);
 `--plain` gives the plain weighted estimate alone, the columns of the tables before the control variate.
 
-    .venv/bin/python tools/is_validation.py IS_RUN MC_RUN [--markdown] [--plain]
+The stages estimated are Table I's (run.json's `estimate_from_stage`, `--is-pool-from`); `--pool-from
+STAGE` evaluates the run as if it had been made with `--is-pool-from STAGE` (for runs made before the
+flag, or to see what another choice would have given: a look at the data, not the run's estimate).
+`efficiency_final` counts the estimated stages' episodes only (the other pilots' cost aside). Without
+MC_RUN the MC columns are left out: the efficiency needs the IS run alone.
+
+    .venv/bin/python tools/is_validation.py IS_RUN [MC_RUN] [--markdown] [--plain] [--pool-from STAGE]
 
 Either run may be unfinished: the rows of its recorded chunks are read (parts/ and manifest.json).
 """
@@ -27,6 +33,7 @@ import pandas as pd
 from pedsafe_sumo.io.run_store import EPISODES_FILE, Manifest, read_parts
 from pedsafe_sumo.report.tables import table_one_weighted
 from pedsafe_sumo.safety.stats import table_one
+from pedsafe_sumo.sampling.pooling import first_estimated_stage
 
 Z = 1.959964
 
@@ -47,19 +54,27 @@ def _efficiency(p: float, high: float, n: int) -> float:
 
 
 def compare(
-    is_rows: pd.DataFrame, mc_rows: pd.DataFrame, proposals: dict[str, list[str]] | None = None
+    is_rows: pd.DataFrame,
+    mc_rows: pd.DataFrame | None,
+    proposals: dict[str, list[str]] | None = None,
+    first_stage: int | None = None,
 ) -> pd.DataFrame:
     """The comparison table; `proposals` (the IS run's sampler_proposals) for the control variate of a
-    joint final stage, with the plain weighted figures beside (plain_*) when it is used somewhere."""
-    is_table = table_one_weighted(is_rows, proposals=proposals)
-    plain_table = table_one_weighted(is_rows) if "estimator" in is_table.columns else None
-    mc_table = table_one(mc_rows)
+    joint proposal, with the plain weighted figures beside (plain_*) when it is used somewhere;
+    `first_stage` the first stage pooled (None: the final stage alone); without `mc_rows`, no MC columns."""
+    is_table = table_one_weighted(is_rows, proposals=proposals, first_stage=first_stage)
+    plain_table = (
+        table_one_weighted(is_rows, first_stage=first_stage) if "estimator" in is_table.columns else None
+    )
+    mc_table = table_one(mc_rows) if mc_rows is not None else None
     out = []
     for i, r in is_table.iterrows():
-        m = mc_table[(mc_table.scenario == r.scenario) & (mc_table.condition == r.condition)]
-        if m.empty:
-            continue
-        m = m.iloc[0]
+        m = None
+        if mc_table is not None:
+            same = mc_table[(mc_table.scenario == r.scenario) & (mc_table.condition == r.condition)]
+            if same.empty:
+                continue
+            m = same.iloc[0]
         for index, (est, lo, hi, mest, mlo, mhi) in {
             "collision": ("collision_rate", "collision_low", "collision_high") * 2,
             "injury": ("injury_mean", "injury_low", "injury_high") * 2,
@@ -77,16 +92,22 @@ def compare(
                 "mean_weight": float(r.mean_weight) if "mean_weight" in r else math.nan,
                 "weight_note": str(r.weight_note) if "weight_note" in r else "",
                 "is_episodes_run": int(r.n_run),
-                "mc_estimate": float(m[mest]),
-                "mc_low": float(m[mlo]),
-                "mc_high": float(m[mhi]),
-                "mc_n": int(m.n),
-                "intervals_overlap": bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
-                "mc_in_is_interval": bool(low <= float(m[mest]) <= high),
-                "efficiency": _efficiency(p, high, int(r.n_run)),
-                # The final stage alone (its n episodes, errors left out): the pilots' cost aside.
-                "efficiency_final": _efficiency(p, high, int(r.n)),
+                "stages": str(r.stages) if "stages" in r else "final",
             }
+            if m is not None:
+                row.update(
+                    mc_estimate=float(m[mest]),
+                    mc_low=float(m[mlo]),
+                    mc_high=float(m[mhi]),
+                    mc_n=int(m.n),
+                    intervals_overlap=bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
+                    mc_in_is_interval=bool(low <= float(m[mest]) <= high),
+                )
+            row.update(
+                efficiency=_efficiency(p, high, int(r.n_run)),
+                # The estimated stages alone (their n episodes, errors left out): the other pilots aside.
+                efficiency_final=_efficiency(p, high, int(r.n)),
+            )
             if plain_table is not None:
                 plain = plain_table.loc[i]
                 q, q_high = float(plain[est]), float(plain[hi])
@@ -117,7 +138,13 @@ def markdown_table(table: pd.DataFrame) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("is_run", type=Path)
-    parser.add_argument("mc_run", type=Path)
+    parser.add_argument("mc_run", type=Path, nargs="?", help="a plain MC run of the same scenarios")
+    parser.add_argument(
+        "--pool-from",
+        type=int,
+        metavar="STAGE",
+        help="estimate from stages STAGE..final (default: the run's own, run.json's estimate_from_stage)",
+    )
     parser.add_argument("--markdown", action="store_true")
     parser.add_argument(
         "--plain",
@@ -128,7 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         info = json.loads((args.is_run / "run.json").read_text())
         proposals = None if args.plain else info.get("sampler_proposals")
-        table = compare(rows_of(args.is_run), rows_of(args.mc_run), proposals)
+        first = args.pool_from if args.pool_from is not None else first_estimated_stage(info)
+        mc_rows = rows_of(args.mc_run) if args.mc_run is not None else None
+        table = compare(rows_of(args.is_run), mc_rows, proposals, first)
     except (OSError, ValueError, KeyError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -48,6 +48,7 @@ from pedsafe_sumo.batch.sampled import (
     FAMILIES,
     FAMILY_JOINT,
     FAMILY_PRODUCT,
+    PROPOSALS_KEY,
     SAMPLER_IS,
     SAMPLER_MC,
     SamplerError,
@@ -72,9 +73,11 @@ from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.safety.stats import ERROR_STATUS
 from pedsafe_sumo.sampling.importance import SQRT_HALF
+from pedsafe_sumo.sampling.pooling import first_estimated_stage
 from pedsafe_sumo.sampling.stages import (
     DEFAULT_PILOT_EPISODES,
     DEFAULT_PILOT_STAGES,
+    DEFAULT_POOL_FROM_STAGE,
     INPUT_MODES,
     INPUTS_SCREENED,
     MAX_PILOT_EPISODES,
@@ -125,10 +128,17 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     # joint since session 10: against the 10,000-pair MC run it needed fewer episodes than the
     # product on all four scenarios (EXPERIMENTS.md, sessions 6-8); the product stays one flag away.
     "is_family": FAMILY_JOINT,
+    # since session 11: Table I pools the pilot stages from stage 2 with the final one (docs/sampling.md).
+    "is_pool_from": DEFAULT_POOL_FROM_STAGE,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a
 #: key missing from an older run.json with this, not with today's default, so the run stays the same run.
-RESUME_DEFAULTS_OF_OLDER_RUNS: dict[str, Any] = {"is_score": SCORE_CLEARANCE, "is_family": FAMILY_PRODUCT}
+RESUME_DEFAULTS_OF_OLDER_RUNS: dict[str, Any] = {
+    "is_score": SCORE_CLEARANCE,
+    "is_family": FAMILY_PRODUCT,
+    # None: the final stage alone, Table I's estimator before --is-pool-from.
+    "is_pool_from": None,
+}
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
 #: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
@@ -334,6 +344,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         f"--is-score need --is-family product [{FAMILY_JOINT}]",
     )
     parser.add_argument(
+        "--is-pool-from",
+        type=int,
+        dest="is_pool_from",
+        metavar="STAGE",
+        help="--sampler is: Table I estimates from the episodes of stages STAGE..final, each stage with its "
+        "own estimate weighted by its share of the episodes (docs/sampling.md, 'Pooling the stages'); fixed "
+        "with the run, 0 to --is-pilot-stages (that number: the final stage alone) "
+        f"[{DEFAULT_POOL_FROM_STAGE}, or the final stage when there are fewer pilot stages]",
+    )
+    parser.add_argument(
         "--is-proposal",
         dest="is_proposal",
         metavar="RUN",
@@ -509,6 +529,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "is_min_spread",
         "is_score",
         "is_family",
+        "is_pool_from",
     )
     is_flags = (*pilot_flags, "is_proposal")
     if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
@@ -531,6 +552,12 @@ def prepare(args: argparse.Namespace) -> Plan:
     if not 1 <= arguments["is_pilot_stages"] <= MAX_PILOT_STAGES:
         raise UsageError(
             f"--is-pilot-stages must lie in 1..{MAX_PILOT_STAGES}, got {arguments['is_pilot_stages']}"
+        )
+    pool_from, final_stage = arguments.get("is_pool_from"), arguments["is_pilot_stages"]
+    if "is_pool_from" in explicit and pool_from is not None and not 0 <= pool_from <= final_stage:
+        raise UsageError(
+            f"--is-pool-from must lie in 0..{arguments['is_pilot_stages']} (the final stage, after "
+            f"--is-pilot-stages {arguments['is_pilot_stages']}), got {pool_from}"
         )
     if not MIN_PILOT_EPISODES <= arguments["is_pilot_episodes"] <= MAX_PILOT_EPISODES:
         raise UsageError(
@@ -872,24 +899,30 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
             f"{backend.worker_deaths} worker process death(s): the chunks they were running ran again "
             "(a pair that killed its worker every time is recorded as errors)"
         )
-    print_table(table, run_info.get("sampler_proposals"))
+    print_table(table, run_info)
     print(f"tables and figures: python -m pedsafe_sumo.report {plan.out}")
     return 0
 
 
-def print_table(table: pd.DataFrame, proposals: dict[str, list[str]] | None = None) -> None:
-    """Table I of the rows; `proposals` (run.json's sampler_proposals) for the control variate of a joint
-    proposal's final stage (report/tables.py: table_one_weighted)."""
+def print_table(table: pd.DataFrame, run_info: dict[str, Any] | None = None) -> None:
+    """Table I of the rows; `run_info` (run.json) for an importance-sampling run's stages pooled and the
+    control variates of joint proposals (report/tables.py: table_one_weighted)."""
     from pedsafe_sumo.report.tables import is_weighted, table_one_of_run
     from pedsafe_sumo.safety.stats import table_one
 
+    proposals = (run_info or {}).get(PROPOSALS_KEY)
+    first_stage = first_estimated_stage(run_info)
+
     def summarise(rows: pd.DataFrame) -> pd.DataFrame:
-        return table_one_of_run(rows, proposals=proposals) if is_weighted(rows) else table_one(rows)
+        if not is_weighted(rows):
+            return table_one(rows)
+        return table_one_of_run(rows, proposals=proposals, first_stage=first_stage)
 
     summary = summarise(table)
     if is_weighted(table):
+        which = "the final stage" if first_stage is None else f"stages {first_stage}..final, pooled"
         print(
-            "Table I (importance sampling: weighted estimates of the final stage, 95% central-limit "
+            f"Table I (importance sampling: weighted estimates of {which}, 95% central-limit "
             "intervals; see tables/table1.csv for ess and the episodes run, pilots included):"
         )
     else:

@@ -21,6 +21,7 @@ from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
 from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, NORM_DRAWS, VISIBLE_M, Kinematics, joint_update
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
+from pedsafe_sumo.sampling.pooling import POOL_FROM_KEY, pooled_from_stage
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
     COLLISION_SCORE,
@@ -87,6 +88,10 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
         identity.update(family=arguments["is_family"], ridge=JOINT_RIDGE, norm_draws=NORM_DRAWS)
         # Runs recorded before the kinematic features lack this key: their resume is refused (another fit).
         identity[JOINT_FEATURES_KEY] = JOINT_FEATURES
+    first_pooled = pooled_from_stage(arguments.get("is_pool_from"), identity["pilot_stages"])
+    if first_pooled < identity["pilot_stages"]:
+        # Only when pilots are pooled, so that runs made before --is-pool-from keep their identity.
+        identity[POOL_FROM_KEY] = first_pooled
     if arguments.get("is_score", SCORE_CLEARANCE) != SCORE_CLEARANCE:
         # Only when not the first score, so that runs made before --is-score keep their identity.
         identity.update(score="collision: 1 + impact_speed_mps; otherwise -min_ttc_s", score_kind=SCORE_TTC)

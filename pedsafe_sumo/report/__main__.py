@@ -44,6 +44,7 @@ from pedsafe_sumo.report.tables import (
     text_table,
     write_tables,
 )
+from pedsafe_sumo.sampling.pooling import first_estimated_stage
 
 TABLES_DIR = "tables"
 FIGURES_DIR = "figures"
@@ -203,7 +204,11 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
     try:
-        table = table_one_of_run(run.episodes, proposals=(run.run_info or {}).get("sampler_proposals"))
+        table = table_one_of_run(
+            run.episodes,
+            proposals=(run.run_info or {}).get("sampler_proposals"),
+            first_stage=first_estimated_stage(run.run_info),
+        )
         paired = paired_of_run(run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc

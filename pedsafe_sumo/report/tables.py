@@ -15,16 +15,9 @@ import pandas as pd
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
-from pedsafe_sumo.sampling.control_variate import (
-    ESTIMATOR_CV,
-    ESTIMATOR_IS,
-    cv_estimate,
-    final_stage_control,
-    pi_hat_of_inputs,
-)
+from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, pi_hat_of_inputs, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
-from pedsafe_sumo.sampling.importance import Estimate, is_estimate
-from pedsafe_sumo.sampling.joint import JointProposal
+from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -52,42 +45,59 @@ def is_weighted(episodes: pd.DataFrame) -> bool:
 
 
 def table_one_weighted(
-    episodes: pd.DataFrame, confidence: float = 0.95, proposals: Mapping[str, Sequence[str]] | None = None
+    episodes: pd.DataFrame,
+    confidence: float = 0.95,
+    proposals: Mapping[str, Sequence[str]] | None = None,
+    first_stage: int | None = None,
 ) -> pd.DataFrame:
     """Table I of an importance-sampling run (docs/sampling.md): per scenario and condition, the unbiased
-    weighted estimates (1/n) sum w_i f_i over the final stage's episodes (the highest sampler_stage of
-    the scenario) of the collision indicator, the injury probability and the conflict-without-collision
-    indicator, with central-limit 95% intervals (sampling.importance.is_estimate), the effective sample
-    size `ess` of the final stage's weights, and `n_run`, every episode run under that condition, pilot
-    stages and errors included (the cost). `n` and `n_error` count the final stage as in `table_one`.
+    weighted estimates of the collision indicator, the injury probability and the conflict-without-collision
+    indicator with central-limit 95% intervals, from the episodes of stages `first_stage`..final (the final
+    stage is the highest sampler_stage of the scenario; `first_stage` None, or above it: the final stage
+    alone, (1/n) sum w_i f_i). Several stages are pooled by sampling.pooling.pooled_estimate: each stage's
+    own estimate, weighted by its share of the episodes, and the table gains the column `stages` ("2-3").
+    Also the effective sample size `ess` of the pooled weights, and `n_run`, every episode run under that
+    condition, pilot stages and errors included (the cost). `n` and `n_error` count the pooled stages.
 
-    `proposals` (run.json's sampler_proposals: scenario -> one JSON proposal per stage): where a scenario's
-    final stage drew from a joint proposal with a stored E_p[pi_hat], each index is estimated with pi_hat
-    as a control variate (sampling/control_variate.py; docs/sampling.md, "Control variate") and the table
-    gains the column `estimator` ("is+cv", or "is" and which indexes kept the plain estimate). Without
-    such a proposal in the table, the table is the plain weighted one, column for column.
+    `proposals` (run.json's sampler_proposals: scenario -> one JSON proposal per stage): each stage that
+    drew from a joint proposal with a stored E_p[pi_hat] is estimated with its pi_hat as a control variate
+    (sampling/control_variate.py; docs/sampling.md, "Control variate") and the table gains the column
+    `estimator` ("is+cv", or "is" and which indexes kept the plain estimate in every stage). Without such a
+    proposal in the table, the table is the plain weighted one, column for column.
     """
-    rows, controlled = [], False
+    rows, controlled, pooled = [], False, False
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
-        stage = group["sampler_stage"].max()
-        final = group[group["sampler_stage"] == stage]
-        errors = final["status"].isin(FAILED_STATUSES).to_numpy()
-        ok = final[~errors]
+        final_stage = int(group["sampler_stage"].max())
+        first = final_stage if first_stage is None else min(int(first_stage), final_stage)
+        pooled |= first < final_stage
+        used = group[group["sampler_stage"] >= first]
+        errors = used["status"].isin(FAILED_STATUSES).to_numpy()
+        ok = used[~errors]
         weights = ok["weight"].to_numpy(dtype=float)
         collisions = _flags(ok["collision"])
-        conflicts = conflict_without_collision(_flags(ok["conflict"]), collisions)
-        injury = np.nan_to_num(ok["injury_probability"].to_numpy(dtype=float), nan=0.0)
         values = {
             "collision": collisions.astype(float),
-            "injury": injury,
-            "conflict": conflicts.astype(float),
+            "injury": np.nan_to_num(ok["injury_probability"].to_numpy(dtype=float), nan=0.0),
+            "conflict": conflict_without_collision(_flags(ok["conflict"]), collisions).astype(float),
         }
-        est = {index: is_estimate(v, weights, confidence) for index, v in values.items()}
-        control = final_stage_control((proposals or {}).get(scenario), int(stage))
-        estimator = ESTIMATOR_IS
-        if control is not None:
-            controlled = True
-            est, estimator = _with_control(values, weights, est, control, ok["sampler_inputs"], confidence)
+        stage_of_row = ok["sampler_stage"].to_numpy(dtype=int)
+        stage_numbers = sorted(set(stage_of_row.tolist()))
+        controls = {
+            stage: _stage_control_values(ok, stage_of_row == stage, (proposals or {}).get(scenario), stage)
+            for stage in stage_numbers
+        }
+        est, kept_plain = {}, []
+        for index, v in values.items():
+            stages = [
+                StageRows(v[stage_of_row == stage], weights[stage_of_row == stage], *controls[stage])
+                for stage in stage_numbers
+            ]
+            result = pooled_estimate(stages, confidence)
+            est[index] = result.estimate
+            if result.stages_with_control == 0:
+                kept_plain.append(index)
+        has_control = any(control[0] is not None for control in controls.values())
+        controlled |= has_control
         rows.append(
             {
                 "scenario": scenario,
@@ -106,39 +116,38 @@ def table_one_weighted(
                 "ess": est["collision"].ess,
                 "n_run": len(group),
                 **weight_check(weights, collisions.astype(float)),
-                "estimator": estimator,
+                "estimator": _estimator_label(has_control and len(ok) > 0, kept_plain, list(values)),
+                "stages": f"{first}-{final_stage}" if first < final_stage else str(final_stage),
             }
         )
     table = pd.DataFrame(rows)
     if not controlled:  # no control variate anywhere: the table of runs before it, column for column
         table = table.drop(columns="estimator", errors="ignore")
+    if not pooled:  # the final stage alone everywhere, as before --is-pool-from
+        table = table.drop(columns="stages", errors="ignore")
     return table
 
 
-def _with_control(
-    values: dict[str, np.ndarray],
-    weights: np.ndarray,
-    plain: dict[str, Estimate],
-    control: JointProposal,
-    sampler_inputs: pd.Series,
-    confidence: float,
-) -> tuple[dict[str, Estimate], str]:
-    """Each index's control-variate estimate where it applies (cv_estimate), else its plain one; and the
-    row's `estimator` label."""
-    if len(weights) == 0:
-        return plain, ESTIMATOR_IS
-    g = pi_hat_of_inputs(control, sampler_inputs.tolist())
-    est, kept_plain = {}, []
-    for index, v in values.items():
-        cv = cv_estimate(v, weights, g, control.mean_pi_hat, control.mean_pi_hat_se, confidence)
-        est[index] = plain[index] if cv is None else cv
-        if cv is None:
-            kept_plain.append(index)
+def _stage_control_values(
+    rows: pd.DataFrame, in_stage: np.ndarray, proposals: Sequence[str] | None, stage: int
+) -> tuple[np.ndarray | None, float, float]:
+    """pi_hat at the stage's rows with its nominal mean and that mean's standard error, where the stage
+    drew from a joint proposal that can serve as a control variate (stage_control); else (None, nan, nan)."""
+    control = stage_control(proposals, stage)
+    if control is None or not in_stage.any():
+        return None, math.nan, math.nan
+    g = pi_hat_of_inputs(control, rows.loc[in_stage, "sampler_inputs"].tolist())
+    return g, control.mean_pi_hat, control.mean_pi_hat_se
+
+
+def _estimator_label(has_control: bool, kept_plain: list[str], indexes: list[str]) -> str:
+    """The row's `estimator`: is+cv where every index used the control variate in some stage, is where
+    none did (or no stage has a control), else is+cv with the indexes that kept the weighted mean."""
+    if not has_control or len(kept_plain) == len(indexes):
+        return ESTIMATOR_IS
     if not kept_plain:
-        return est, ESTIMATOR_CV
-    if len(kept_plain) == len(values):
-        return est, ESTIMATOR_IS
-    return est, f"{ESTIMATOR_CV} ({ESTIMATOR_IS}: {', '.join(kept_plain)})"
+        return ESTIMATOR_CV
+    return f"{ESTIMATOR_CV} ({ESTIMATOR_IS}: {', '.join(kept_plain)})"
 
 
 def weight_check(weights: np.ndarray, collisions: np.ndarray) -> dict[str, object]:
@@ -166,13 +175,17 @@ def weight_check(weights: np.ndarray, collisions: np.ndarray) -> dict[str, objec
 
 
 def table_one_of_run(
-    episodes: pd.DataFrame, confidence: float = 0.95, proposals: Mapping[str, Sequence[str]] | None = None
+    episodes: pd.DataFrame,
+    confidence: float = 0.95,
+    proposals: Mapping[str, Sequence[str]] | None = None,
+    first_stage: int | None = None,
 ) -> pd.DataFrame:
     """Table I (scenario x condition) of `table_one`, rows ordered by scenario then sv before v2i; for an
     importance-sampling run, `table_one_weighted` (with the columns ess and n_run; `proposals`, run.json's
-    sampler_proposals, for the control variate of joint proposals)."""
+    sampler_proposals, for the control variate of joint proposals; `first_stage`, the first stage pooled,
+    batch.sampled.first_estimated_stage of run.json)."""
     table = (
-        table_one_weighted(episodes, confidence, proposals)
+        table_one_weighted(episodes, confidence, proposals, first_stage)
         if is_weighted(episodes)
         else table_one(episodes, confidence)
     )
@@ -262,6 +275,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
             header += ["estimator"]
             for cells, r in zip(rows, table.itertuples(index=False)):
                 cells += [str(r.estimator)]
+        if "stages" in table.columns:  # the stages pooled (--is-pool-from)
+            header += ["stages"]
+            for cells, r in zip(rows, table.itertuples(index=False)):
+                cells += [str(r.stages)]
     return header, rows
 
 
@@ -330,11 +347,21 @@ ESTIMATOR_NOTE = (
     "that kept the weighted mean (no event in the final stage); a final stage of fewer than "
     f"{CV_MIN_ROWS} episodes, or a constant control, keeps it for every index"
 )
+#: Under Table I when a row has the column `stages` (table_one_weighted with --is-pool-from).
+STAGES_NOTE = (
+    "stages: the sampler stages estimated from (--is-pool-from, fixed with the run): each stage's own "
+    "estimate (with its own pi_hat as control variate where it has one), weighted by its share of the "
+    "episodes (docs/sampling.md, 'Pooling the stages'); n counts their episodes"
+)
 
 
 def estimator_note(table: pd.DataFrame) -> str:
-    """ESTIMATOR_NOTE where the table says which estimator each row used, else ""."""
-    return ESTIMATOR_NOTE if "estimator" in table.columns else ""
+    """ESTIMATOR_NOTE where the table says which estimator each row used, STAGES_NOTE where it pools
+    stages (both, one per line), else ""."""
+    notes = [ESTIMATOR_NOTE] if "estimator" in table.columns else []
+    if "stages" in table.columns:
+        notes.append(STAGES_NOTE)
+    return "\n\n".join(notes)
 
 
 PAIRED_TITLE = (

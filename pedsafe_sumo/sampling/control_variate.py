@@ -54,7 +54,7 @@ def control_of(proposal_json: str) -> JointProposal | None:
     return proposal
 
 
-def final_stage_control(proposals: Sequence[str] | None, stage: int) -> JointProposal | None:
+def stage_control(proposals: Sequence[str] | None, stage: int) -> JointProposal | None:
     """The control of stage `stage` among a scenario's stored proposals (run.json's sampler_proposals:
     one JSON text per stage), None when there is none (control_of)."""
     if not proposals or not 0 <= stage < len(proposals):
@@ -72,21 +72,17 @@ def pi_hat_of_inputs(proposal: JointProposal, sampler_inputs: Sequence[str]) -> 
     return np.asarray(proposal.pi_hat(x), dtype=float)
 
 
-def cv_estimate(
+def cv_parts(
     values: np.ndarray,
     weights: np.ndarray,
     control: np.ndarray,
     control_mean: float,
     control_mean_se: float,
-    confidence: float = 0.95,
-) -> Estimate | None:
-    """The regression estimate of E_p[f] with the control g (module docstring) and its normal interval;
-    `ess` is the weights' (sum w)^2 / sum w^2, as in is_estimate.
-
-    None where the estimator does not apply and the plain estimate stands: fewer than MIN_ROWS rows, no
-    draw with w f != 0 (then is_estimate's rule-of-three bound is the interval; the regression would give
-    a zero-width one), or var(C) = 0.
-    """
+) -> tuple[float, float] | None:
+    """The regression estimate of E_p[f] with the control g (module docstring) and its variance; None
+    where the estimator does not apply and the plain estimate stands: fewer than MIN_ROWS rows, no draw
+    with w f != 0 (then is_estimate's rule-of-three bound is the interval; the regression would give a
+    zero-width one), or var(C) = 0."""
     f = np.asarray(values, dtype=float)
     w = np.asarray(weights, dtype=float)
     g = np.asarray(control, dtype=float)
@@ -106,7 +102,25 @@ def cv_estimate(
     mean = float(np.mean(y) - beta * np.mean(c))
     residual = y - beta * c - mean
     variance = float(np.sum(residual * residual)) / (n - 2) / n + beta * beta * control_mean_se**2
+    return mean, variance
+
+
+def cv_estimate(
+    values: np.ndarray,
+    weights: np.ndarray,
+    control: np.ndarray,
+    control_mean: float,
+    control_mean_se: float,
+    confidence: float = 0.95,
+) -> Estimate | None:
+    """The regression estimate of E_p[f] with the control g (module docstring, cv_parts) and its normal
+    interval; `ess` is the weights' (sum w)^2 / sum w^2, as in is_estimate. None where cv_parts is None."""
+    parts = cv_parts(values, weights, control, control_mean, control_mean_se)
+    if parts is None:
+        return None
+    mean, variance = parts
+    w = np.asarray(weights, dtype=float)
     alpha = 1.0 - confidence
     half = float(special.ndtri(1.0 - alpha / 2)) * math.sqrt(variance)
     ess = float(np.sum(w) ** 2 / np.sum(w**2)) if np.any(w > 0) else 0.0
-    return Estimate(mean, mean - half, mean + half, n, ess)
+    return Estimate(mean, mean - half, mean + half, len(w), ess)

@@ -88,6 +88,14 @@ MAX_PILOT_STAGES = 10
 DEFAULT_PILOT_EPISODES = 200
 MIN_PILOT_EPISODES = 20
 MAX_PILOT_EPISODES = 100_000
+#: Default of --is-pool-from: Table I pools the episodes of stages 2..final, each stage with its own
+#: estimate (sampling/pooling.py). A stage's episodes add precision when its efficiency is above about half
+#: the final stage's (the pooled variance sum n_t s_t^2 / N^2 is then below the final stage's alone).
+#: Stage 0 is plain Monte Carlo and stage 1's proposal is fitted on one stage of 200 pairs; on ten-stage
+#: runs of jaywalking and blending (EXPERIMENTS.md, session 10) stage 1 was worth 1.7-6.1 per episode
+#: against the final's 4.8-12.3 with the control variate, and stage 2 5.7-10.3. So from stage 2, fixed
+#: before any run of this session; a run of fewer pilot stages pools from its final stage.
+DEFAULT_POOL_FROM_STAGE = 2
 
 
 @dataclass(frozen=True)

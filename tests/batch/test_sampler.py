@@ -13,8 +13,10 @@ from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 from pedsafe_sumo.batch.__main__ import main, parse_args, prepare, resumed_arguments
 from pedsafe_sumo.batch.chunks import episode_seed
 from pedsafe_sumo.protocol import main as protocol_main
+from pedsafe_sumo.report.tables import table_one_of_run
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
 from pedsafe_sumo.sampling.importance import Product, likelihood_ratio
+from pedsafe_sumo.sampling.pooling import first_estimated_stage
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 CROSSING = ["--scenario", "crossing", "--episodes", "2"]
@@ -46,6 +48,13 @@ PRODUCT = ["--is-family", "product"]
             "--is-inputs, --is-min-spread: not used by --is-family joint",
         ),
         (["--sampler", "xyz"], "invalid choice"),
+        (["--is-pool-from", "2"], "--is-pool-from: need --sampler is"),
+        (["--sampler", "is", "--is-pool-from", "4"], "--is-pool-from must lie in 0..3 (the final stage"),
+        (
+            ["--sampler", "is", "--is-pilot-stages", "5", "--is-pool-from", "-1"],
+            "--is-pool-from must lie in 0..5",
+        ),
+        (["--sampler", "is", "--is-proposal", "X", "--is-pool-from", "2"], "leave out the other --is-*"),
     ],
 )
 def test_bad_sampler_flags_are_refused_in_one_line(capsys, tmp_path, extra, message):
@@ -129,12 +138,34 @@ def test_the_joint_family_is_the_default_and_older_runs_resume_with_the_product(
     assert resumed_arguments({**older, "is_family": "joint"}, {})["is_family"] == "joint"
 
 
+def test_table_one_pools_from_stage_2_by_default_and_older_runs_resume_with_the_final_stage_alone(tmp_path):
+    """Since session 11 Table I pools the stages from 2 on (--is-pool-from, recorded in the sampler's
+    identity so that a resume cannot change it); a run of fewer pilot stages, or one given its final stage,
+    estimates from the final stage alone and keeps the identity runs had before the flag; a run recorded
+    before the flag resumes with the final stage alone."""
+
+    def sampler_of(*extra: str) -> dict:
+        args = parse_args(["--scenario", "crossing", "--sampler", "is", *extra, "--out", str(tmp_path / "r")])
+        return prepare(args).identity["sampler"]  # prepare writes nothing
+
+    assert sampler_of()["estimate_from_stage"] == 2
+    assert sampler_of("--is-pilot-stages", "10")["estimate_from_stage"] == 2
+    assert sampler_of("--is-pilot-stages", "10", "--is-pool-from", "6")["estimate_from_stage"] == 6
+    assert sampler_of("--is-pool-from", "0")["estimate_from_stage"] == 0
+    # the default capped at the final stage
+    assert "estimate_from_stage" not in sampler_of("--is-pilot-stages", "2")
+    assert "estimate_from_stage" not in sampler_of("--is-pool-from", "3")
+    older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
+    assert resumed_arguments(older, {})["is_pool_from"] is None
+    assert resumed_arguments({**older, "is_pool_from": 2}, {})["is_pool_from"] == 2
+
+
 #: --is-inputs all: 20 pilot pairs (an elite of 2) are too few for the input screen to select anything,
 #: and this test checks the weights of a proposal that moves the inputs.
 IS_RUN = (
     "--scenario", "right_turn", "--episodes", "3", "--seed", "4", "--sampler", "is",
     "--is-pilot-stages", "1", "--is-pilot-episodes", "20", "--chunk-size", "5", "--is-family", "product",
-    "--is-inputs", "all",
+    "--is-inputs", "all", "--is-pool-from", "0",
 )  # fmt: skip
 
 
@@ -174,6 +205,18 @@ def test_importance_sampled_run_stages_weights_and_workers(tmp_path):
         assert 0 < row["weight"] <= 1 / DEFENSIVE_SHARE + 1e-12
     pairs = table.pivot(index="episode", columns="condition", values="weight")
     assert (pairs["sv"] == pairs["v2i"]).all()
+    # --is-pool-from 0: recorded, and Table I's estimate is the weighted mean over both stages' 23 rows
+    # (a product proposal has no control variate; the stages' shares are their sizes).
+    assert run["sampler"]["estimate_from_stage"] == 0
+    assert "stages 0..final, pooled" in proc.stdout
+    summary = table_one_of_run(
+        table, proposals=run["sampler_proposals"], first_stage=first_estimated_stage(run)
+    )
+    for condition, rows in table.groupby("condition"):
+        row = summary[summary.condition == condition].iloc[0]
+        assert row["n"] == 23 and row["stages"] == "0-1"
+        expected = float(np.mean(rows["weight"] * rows["collision"].astype(float)))
+        assert row["collision_rate"] == pytest.approx(expected, rel=1e-12, abs=1e-15)
     # Same rows on 1 worker.
     proc = batch(*IS_RUN, "--workers", "1", "--out", str(out1))
     assert proc.returncode == 0, proc.stderr

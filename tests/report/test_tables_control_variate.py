@@ -173,3 +173,35 @@ def test_rows_without_the_proposals_inputs_are_refused():
     episodes["sampler_inputs"] = json.dumps({"inputs": {"ego_speed_log": 2.0}, "nominal": {}})
     with pytest.raises(ValueError, match="lack the proposal's inputs conflict_offset_s, ped_risk"):
         table_one_weighted(episodes, proposals={"right_turn": ["", PROPOSAL.to_json()]})
+
+
+def test_pooled_stages_are_each_stages_own_estimate_weighted_by_its_share():
+    """--is-pool-from 0 on a run of a nominal stage 0 and a joint stage 1: stage 0's weighted mean and
+    stage 1's regression (written out above), weighted by their shares of the episodes, the variances
+    added with the squared shares (sampling/pooling.py)."""
+    episodes = _episodes()
+    proposals = {"right_turn": ["", PROPOSAL.to_json()]}
+    table = table_one_of_run(episodes, proposals=proposals, first_stage=0)
+    assert list(table.columns) == [*PLAIN_COLUMNS, "estimator", "stages"]
+    z = stats.norm.ppf(0.975)
+    for condition in ("sv", "v2i"):
+        rows = episodes[(episodes.condition == condition) & (episodes.status == "ok")]
+        nominal, final = rows[rows.sampler_stage == 0], rows[rows.sampler_stage == 1]
+        y0 = nominal["weight"].to_numpy() * nominal["collision"].to_numpy(dtype=float)
+        w1 = final["weight"].to_numpy()
+        y1 = w1 * final["collision"].to_numpy(dtype=float)
+        g1 = np.array([_pi_hat_by_hand(json.loads(t)["inputs"]) for t in final["sampler_inputs"]])
+        mean1, _, high1 = _regression(y1, w1 * g1 - MEAN_PI_HAT)
+        var0 = float(np.var(y0, ddof=1)) / len(y0) if np.any(y0) else 0.0
+        var1 = ((high1 - mean1) / z) ** 2
+        n0, n1 = len(y0), len(y1)
+        share0, share1 = n0 / (n0 + n1), n1 / (n0 + n1)
+        row = table[table.condition == condition].iloc[0]
+        assert row["n"] == n0 + n1 and row["stages"] == "0-1"
+        assert row["collision_rate"] == pytest.approx(share0 * float(np.mean(y0)) + share1 * mean1, rel=1e-9)
+        half = z * math.sqrt(share0**2 * var0 + share1**2 * var1)
+        assert row["collision_high"] - row["collision_rate"] == pytest.approx(half, rel=1e-9)
+    # the final stage alone (first_stage None, or the final stage's number): the table before pooling
+    alone = table_one_of_run(episodes, proposals=proposals)
+    pd.testing.assert_frame_equal(alone, table_one_of_run(episodes, proposals=proposals, first_stage=1))
+    assert "stages" not in alone.columns

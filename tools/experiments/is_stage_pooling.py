@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pedsafe_sumo.sampling.control_variate import cv_estimate, final_stage_control, pi_hat_of_inputs
+from pedsafe_sumo.sampling.control_variate import cv_estimate, pi_hat_of_inputs, stage_control
 
 
 def stage_estimate(stage: pd.DataFrame, proposals: list[str] | None) -> tuple[float, float]:
@@ -32,7 +32,7 @@ def stage_estimate(stage: pd.DataFrame, proposals: list[str] | None) -> tuple[fl
     pi_hat as a control variate where `proposals` is given and the stage's proposal allows it."""
     w = stage["weight"].to_numpy(dtype=float)
     f = stage["collision"].astype(float).to_numpy()
-    control = final_stage_control(proposals, int(stage["sampler_stage"].iloc[0])) if proposals else None
+    control = stage_control(proposals, int(stage["sampler_stage"].iloc[0])) if proposals else None
     if control is not None:
         g = pi_hat_of_inputs(control, stage["sampler_inputs"].tolist())
         cv = cv_estimate(f, w, g, control.mean_pi_hat, control.mean_pi_hat_se)
