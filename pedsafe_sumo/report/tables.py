@@ -342,10 +342,10 @@ TABLE_ONE_TITLE = (
 )
 #: Under Table I when a row has the column `estimator` (table_one_weighted with a joint proposal).
 ESTIMATOR_NOTE = (
-    "estimator: is = the weighted mean (1/n) sum w_i f_i over the final stage; is+cv = with pi_hat of the "
-    "joint proposal as a control variate (regression estimator, docs/sampling.md); in brackets the indexes "
-    "that kept the weighted mean (no event in the final stage); a final stage of fewer than "
-    f"{CV_MIN_ROWS} episodes, or a constant control, keeps it for every index"
+    "estimator: is = the weighted mean (1/n) sum w_i f_i over the final stage (or over each stage of "
+    "`stages`); is+cv = with pi_hat of the joint proposal as a control variate (regression estimator, "
+    "docs/sampling.md); in brackets the indexes that kept the weighted mean (no event in the stages); a "
+    f"stage of fewer than {CV_MIN_ROWS} episodes, or a constant control, keeps it for every index"
 )
 #: Under Table I when a row has the column `stages` (table_one_weighted with --is-pool-from).
 STAGES_NOTE = (
