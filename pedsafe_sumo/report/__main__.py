@@ -32,13 +32,13 @@ from pedsafe_sumo.report.summaries import (
     ok_episodes,
 )
 from pedsafe_sumo.report.tables import (
-    PAIRED_TITLE,
     TABLE_ONE_TITLE,
     condition_label,
     estimator_note,
     markdown_table,
     paired_of_run,
     paired_rows,
+    paired_title,
     table_one_of_run,
     table_one_rows,
     text_table,
@@ -204,12 +204,11 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
     try:
+        first_stage = first_estimated_stage(run.run_info)
         table = table_one_of_run(
-            run.episodes,
-            proposals=(run.run_info or {}).get("sampler_proposals"),
-            first_stage=first_estimated_stage(run.run_info),
+            run.episodes, proposals=(run.run_info or {}).get("sampler_proposals"), first_stage=first_stage
         )
-        paired = paired_of_run(run.episodes)
+        paired = paired_of_run(run.episodes, first_stage)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
     if run.incomplete:
@@ -224,7 +223,7 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     if estimator_note(table):
         say(estimator_note(table))
     say("")
-    say(PAIRED_TITLE)
+    say(paired_title(paired))
     say(text_table(*paired_rows(paired)))
     say("")
     out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path

@@ -27,10 +27,10 @@ import pandas as pd  # noqa: E402
 
 from pedsafe_sumo.report.rundir import RunDirectory, run_header  # noqa: E402
 from pedsafe_sumo.report.tables import (  # noqa: E402
-    PAIRED_TITLE,
     TABLE_ONE_TITLE,
     condition_label,
     paired_rows,
+    paired_title,
     table_one_rows,
 )
 
@@ -188,7 +188,7 @@ def write_html_report(
     parts.append(f"<p>{html.escape(run_header(run))}</p>")
     parts.append(f"<h2>{html.escape(TABLE_ONE_TITLE)}</h2>")
     parts.append(_table_html(*table_one_rows(table), "table-one"))
-    parts.append(f"<h2>{html.escape(PAIRED_TITLE)}</h2>")
+    parts.append(f"<h2>{html.escape(paired_title(paired))}</h2>")
     parts.append(_table_html(*paired_rows(paired), "paired-tests"))
     parts.append('<h2>Figures</h2><div class="figures">')
     pictures = sorted(figures_dir.glob("*.png")) if figures_dir.is_dir() else []

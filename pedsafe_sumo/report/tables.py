@@ -12,11 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import special
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, pi_hat_of_inputs, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
+from pedsafe_sumo.sampling.importance import Estimate
 from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
@@ -200,17 +202,26 @@ def _flags(column: pd.Series) -> np.ndarray:
     return column.astype("boolean").fillna(False).to_numpy(dtype=bool)
 
 
-def paired_of_run(episodes: pd.DataFrame) -> pd.DataFrame:
+def paired_of_run(episodes: pd.DataFrame, first_stage: int | None = None) -> pd.DataFrame:
     """Per scenario and outcome, the exact McNemar test of SV against V2I on pairs of the same episode.
 
     Outcomes: collisions, and Table I's conflict (a conflict in an episode without a collision).
     Columns: scenario, outcome, n_pairs, both, b (SV only), c (V2I only), neither, sv_rate, v2i_rate
     (shares of the pairs), p_value. A scenario run under one condition only has n_pairs = 0, p = 1.
+
+    An importance-sampling run (is_weighted) drew its pairs from a proposal, so the counts and shares of
+    the drawn pairs say nothing of the nominal population: there, over the stages Table I estimates from
+    (`first_stage`, as in table_one_weighted), the counts are those drawn, `sv_rate` and `v2i_rate` the
+    weighted estimates, and `p_value` the two-sided test of E_p[SV - V2I] = 0 on the weighted paired
+    differences (their pooled estimate over its standard error, normal; 1 with no discordant pair), and
+    the table gains the column `test` ("weighted z").
     """
     frame = episodes.copy()
     frame["table_conflict"] = conflict_without_collision(
         _flags(frame["conflict"]), _flags(frame["collision"])
     )
+    if is_weighted(frame):
+        frame = _estimated_stages(frame, first_stage)
     parts = []
     for column, name in PAIRED_OUTCOMES.items():
         test = paired_mcnemar(frame, outcome=column)
@@ -220,10 +231,57 @@ def paired_of_run(episodes: pd.DataFrame) -> pd.DataFrame:
     n = paired["n_pairs"].where(paired["n_pairs"] > 0)
     paired.insert(len(paired.columns) - 1, "sv_rate", (paired["both"] + paired["b"]) / n)
     paired.insert(len(paired.columns) - 1, "v2i_rate", (paired["both"] + paired["c"]) / n)
+    if is_weighted(episodes):
+        for i, row in paired.iterrows():
+            column = next(c for c, name in PAIRED_OUTCOMES.items() if name == row["outcome"])
+            sv_rate, v2i_rate, p_value = _weighted_paired_test(
+                frame[frame["scenario"] == row["scenario"]], column
+            )
+            paired.loc[i, ["sv_rate", "v2i_rate", "p_value"]] = [sv_rate, v2i_rate, p_value]
+        paired["test"] = WEIGHTED_PAIRED_TEST
     scenario_order = {s: i for i, s in enumerate(pd.unique(episodes["scenario"]))}
     return paired.sort_values(
         "scenario", key=lambda s: s.map(scenario_order), kind="stable", ignore_index=True
     )
+
+
+#: The `test` column of an importance-sampling run's paired table (paired_of_run).
+WEIGHTED_PAIRED_TEST = "weighted z"
+
+
+def _estimated_stages(frame: pd.DataFrame, first_stage: int | None) -> pd.DataFrame:
+    """The rows of the stages Table I estimates from, per scenario (table_one_weighted's choice)."""
+    final = frame.groupby("scenario")["sampler_stage"].transform("max")
+    first = final if first_stage is None else np.minimum(int(first_stage), final)
+    return frame[frame["sampler_stage"] >= first]
+
+
+def _weighted_paired_test(rows: pd.DataFrame, column: str) -> tuple[float, float, float]:
+    """(SV estimate, V2I estimate, two-sided p of E_p[SV - V2I] = 0) from one scenario's weighted pairs,
+    each stage's own mean weighted by its share (sampling.pooling.pooled_estimate, no control variate)."""
+    ok = rows[~rows["status"].isin(FAILED_STATUSES)]
+    sides = [ok[ok["condition"] == c].set_index("episode") for c in ("sv", "v2i")]
+    pairs = sides[0][["weight", "sampler_stage", column]].merge(
+        sides[1][[column]], left_index=True, right_index=True, suffixes=("", "_v2i")
+    )
+    if pairs.empty:
+        return math.nan, math.nan, 1.0
+    sv = _flags(pairs[column]).astype(float)
+    v2i = _flags(pairs[f"{column}_v2i"]).astype(float)
+    weights = pairs["weight"].to_numpy(dtype=float)
+    stage = pairs["sampler_stage"].to_numpy(dtype=int)
+
+    def pooled(values: np.ndarray) -> Estimate:
+        stages = [StageRows(values[stage == s], weights[stage == s]) for s in sorted(set(stage.tolist()))]
+        return pooled_estimate(stages).estimate
+
+    difference = sv - v2i
+    if not np.any(difference != 0):
+        return pooled(sv).mean, pooled(v2i).mean, 1.0
+    d = pooled(difference)
+    se = (d.high - d.mean) / float(special.ndtri(0.975))
+    p_value = float(2 * special.ndtr(-abs(d.mean) / se)) if se > 0 else 0.0
+    return pooled(sv).mean, pooled(v2i).mean, p_value
 
 
 # ---------------------------------------------------------------- formatting
@@ -368,6 +426,19 @@ PAIRED_TITLE = (
     "Paired SV vs V2I (same episode, same seed): exact McNemar test on the discordant pairs\n"
     "b = event under SV only, c = event under V2I only; SV, V2I = event rate over the pairs"
 )
+#: The paired table of an importance-sampling run (paired_of_run with the column `test`).
+PAIRED_WEIGHTED_TITLE = (
+    "Paired SV vs V2I (same episode, same draw), importance sampling: pairs drawn from the proposal\n"
+    "both, b (SV only), c (V2I only), neither = pairs as drawn, of the stages Table I estimates from; "
+    "SV, V2I = weighted estimates of the event rate (no control variate); p = two-sided normal test of "
+    "E[SV - V2I] = 0 on the weighted paired differences (test: weighted z), not McNemar's; a normal "
+    "approximation, which needs more than a handful of discordant pairs (b + c)"
+)
+
+
+def paired_title(paired: pd.DataFrame) -> str:
+    """The title of the paired table: PAIRED_WEIGHTED_TITLE for an importance-sampling run's."""
+    return PAIRED_WEIGHTED_TITLE if "test" in paired.columns else PAIRED_TITLE
 
 
 def _md_title(title: str) -> str:
@@ -389,6 +460,7 @@ def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path, ban
     )
     paired.to_csv(paths[2], index=False)
     paths[3].write_text(
-        f"{head}{_md_title(PAIRED_TITLE)}\n\n{markdown_table(*paired_rows(paired))}\n", encoding="utf-8"
+        f"{head}{_md_title(paired_title(paired))}\n\n{markdown_table(*paired_rows(paired))}\n",
+        encoding="utf-8",
     )
     return paths

@@ -205,3 +205,30 @@ def test_pooled_stages_are_each_stages_own_estimate_weighted_by_its_share():
     alone = table_one_of_run(episodes, proposals=proposals)
     pd.testing.assert_frame_equal(alone, table_one_of_run(episodes, proposals=proposals, first_stage=1))
     assert "stages" not in alone.columns
+
+
+def test_the_paired_table_of_an_importance_sampling_run_is_weighted():
+    """The pairs of an IS run were drawn from the proposal: the paired table's SV and V2I rates are the
+    weighted estimates over Table I's stages, and p the normal test of the weighted paired differences
+    (written out here: mean(w d) over its standard error), not McNemar's on the counts as drawn."""
+    from pedsafe_sumo.report.tables import paired_of_run, paired_title
+
+    episodes = _episodes()
+    paired = paired_of_run(episodes)
+    assert (paired["test"] == "weighted z").all() and "importance sampling" in paired_title(paired)
+    final = episodes[(episodes.sampler_stage == 1)]
+    sv = final[final.condition == "sv"].set_index("episode")
+    v2i = final[(final.condition == "v2i") & (final.status == "ok")].set_index("episode")
+    sv = sv.loc[v2i.index]  # the errored V2I episode's pair is left out
+    w = sv["weight"].to_numpy()
+    f_sv, f_v2i = sv["collision"].to_numpy(dtype=float), v2i["collision"].to_numpy(dtype=float)
+    row = paired[paired.outcome == "collision"].iloc[0]
+    assert row["n_pairs"] == len(w) == 47
+    assert row["sv_rate"] == pytest.approx(np.mean(w * f_sv), rel=1e-12)
+    assert row["v2i_rate"] == pytest.approx(np.mean(w * f_v2i), rel=1e-12)
+    d = w * (f_sv - f_v2i)
+    z = np.mean(d) / (np.std(d, ddof=1) / math.sqrt(len(d)))
+    assert row["p_value"] == pytest.approx(2 * stats.norm.sf(abs(z)), rel=1e-9)
+    # a plain MC run keeps McNemar's table, without the column
+    plain = episodes.assign(sampler_stage=0, weight=1.0)
+    assert "test" not in paired_of_run(plain).columns
