@@ -1,5 +1,5 @@
 """The estimate of an importance-sampling run with its later pilot stages pooled into the final stage
-(issue 17, session 10; offline, not Table I's estimator).
+(issue 17, session 10; Table I's estimator since session 11, `--is-pool-from`).
 
 Table I estimates from the final stage only (report/tables.py). Each stage t's weighted mean (1/n_t) sum
 w_i f_i is unbiased given the stages before it, so a combination with weights fixed in advance is too.
@@ -21,40 +21,34 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from pedsafe_sumo.sampling.control_variate import cv_estimate, pi_hat_of_inputs, stage_control
+from pedsafe_sumo.sampling.control_variate import pi_hat_of_inputs, stage_control
+from pedsafe_sumo.sampling.pooling import StageRows
+from pedsafe_sumo.sampling.pooling import pooled_estimate as pool
 
 
-def stage_estimate(stage: pd.DataFrame, proposals: list[str] | None) -> tuple[float, float]:
-    """(mean, variance of the mean) of one stage's collision rate: plain weighted, or with the stage's
-    pi_hat as a control variate where `proposals` is given and the stage's proposal allows it."""
+def stage_rows(stage: pd.DataFrame, proposals: list[str] | None) -> StageRows:
+    """One stage's collision rows, with its pi_hat as a control where `proposals` is given and the stage's
+    proposal allows it."""
     w = stage["weight"].to_numpy(dtype=float)
     f = stage["collision"].astype(float).to_numpy()
     control = stage_control(proposals, int(stage["sampler_stage"].iloc[0])) if proposals else None
-    if control is not None:
-        g = pi_hat_of_inputs(control, stage["sampler_inputs"].tolist())
-        cv = cv_estimate(f, w, g, control.mean_pi_hat, control.mean_pi_hat_se)
-        if cv is not None:
-            return cv.mean, ((cv.high - cv.mean) / 1.96) ** 2
-    y = w * f
-    return float(np.mean(y)), float(np.var(y, ddof=1)) / len(y)
+    if control is None:
+        return StageRows(f, w)
+    g = pi_hat_of_inputs(control, stage["sampler_inputs"].tolist())
+    return StageRows(f, w, g, control.mean_pi_hat, control.mean_pi_hat_se)
 
 
 def pooled_estimate(
     rows: pd.DataFrame, first: int, proposals: list[str] | None = None
 ) -> tuple[float, float, int]:
     """(estimate, 95% half-width, episodes used) of stages >= first of one scenario and condition, each
-    stage weighted by its size."""
+    stage weighted by its size: Table I's estimator since session 11 (sampling.pooling)."""
     used = rows[rows["sampler_stage"] >= first]
-    estimate = variance = 0.0
-    for _, stage in used.groupby("sampler_stage"):
-        mean, var = stage_estimate(stage, proposals)
-        share = len(stage) / len(used)
-        estimate += share * mean
-        variance += share**2 * var
-    return estimate, 1.96 * variance**0.5, len(used)
+    stages = [stage_rows(stage, proposals) for _, stage in used.groupby("sampler_stage")]
+    estimate = pool(stages).estimate
+    return estimate.mean, estimate.high - estimate.mean, len(used)
 
 
 def main(argv: list[str] | None = None) -> int:
