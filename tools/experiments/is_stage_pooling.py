@@ -11,7 +11,7 @@ estimator under --is-family joint) and its variance taken from that estimate; th
 weighted by their sizes. Efficiency is against plain MC at the estimate, with every episode run counted
 (pilots included): P (1 - P) (1.96 / h)^2 / n_run. With `--mc RUN` the MC estimate is shown beside it.
 
-    .venv/bin/python tools/experiments/is_stage_pooling.py IS_RUN [--control] [--mc /work/results/v5_full]
+    .venv/bin/python tools/experiments/is_stage_pooling.py IS_RUN [--control] [--each] [--mc MC_RUN]
 """
 
 from __future__ import annotations
@@ -56,6 +56,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("run", type=Path)
     parser.add_argument("--mc", type=Path, help="a plain MC run of the same scenarios")
     parser.add_argument("--control", action="store_true", help="pi_hat as a control variate per stage")
+    parser.add_argument(
+        "--each",
+        action="store_true",
+        help="also each stage alone, with its efficiency per episode of that stage (session 11)",
+    )
     args = parser.parse_args(argv)
     stored = json.loads((args.run / "run.json").read_text())["sampler_proposals"] if args.control else {}
     rows = pd.read_parquet(args.run / "episodes.parquet")
@@ -82,6 +87,23 @@ def main(argv: list[str] | None = None) -> int:
                 ref = mc[same & (mc["status"] == "ok")]
                 row["mc_estimate"] = float(ref["collision"].mean())
             out.append(row)
+        if args.each:
+            for stage, alone in group.groupby("sampler_stage"):
+                proposals = stored.get(scenario) if args.control else None
+                estimate, half, n = pooled_estimate(alone, int(stage), proposals)
+                per_episode = estimate * (1 - estimate) * (1.96 / half) ** 2 / n if half > 0 else float("nan")
+                out.append(
+                    {
+                        "scenario": scenario,
+                        "condition": condition,
+                        "stages": f"{stage} alone",
+                        "n": n,
+                        "estimate": estimate,
+                        "low": estimate - half,
+                        "high": estimate + half,
+                        "efficiency_per_episode": per_episode,
+                    }
+                )
     print(pd.DataFrame(out).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     return 0
 
