@@ -11,8 +11,8 @@ the stages' shares lambda_t = n_t / N fixed by the run's layout before any episo
 is unbiased by the tower rule, and the stage errors m_t - mu are martingale differences, uncorrelated, so
 the variance adds (v_t the variance of m_t: s_t^2 / n_t for the weighted mean, the regression's for the
 control variate). The interval is the normal one on that variance (the martingale central limit theorem,
-Hall & Heyde 1980, chapter 3; the adaptive-IS combination of Owen & Zhou 2000, "Safe and effective
-importance sampling", JASA 95:135-143, section 4, with weights fixed in advance).
+Hall & Heyde, Martingale limit theory and its application, 1980), as for any fixed-weight combination of
+adaptive importance-sampling stages.
 
 Weights chosen from the stages' own estimated variances (inverse-variance weighting) are not used: under
 importance sampling a stage's estimate and its estimated variance are positively correlated (both come
