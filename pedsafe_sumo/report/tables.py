@@ -19,7 +19,7 @@ from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, pi_hat_of_inputs, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
-from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate
+from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -70,7 +70,7 @@ def table_one_weighted(
     rows, controlled, pooled = [], False, False
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
         final_stage = int(group["sampler_stage"].max())
-        first = final_stage if first_stage is None else min(int(first_stage), final_stage)
+        first = pooled_from_stage(first_stage, final_stage)
         pooled |= first < final_stage
         used = group[group["sampler_stage"] >= first]
         errors = used["status"].isin(FAILED_STATUSES).to_numpy()
@@ -252,7 +252,7 @@ WEIGHTED_PAIRED_TEST = "weighted z"
 def _estimated_stages(frame: pd.DataFrame, first_stage: int | None) -> pd.DataFrame:
     """The rows of the stages Table I estimates from, per scenario (table_one_weighted's choice)."""
     final = frame.groupby("scenario")["sampler_stage"].transform("max")
-    first = final if first_stage is None else np.minimum(int(first_stage), final)
+    first = final.map(lambda stage: pooled_from_stage(first_stage, int(stage)))
     return frame[frame["sampler_stage"] >= first]
 
 

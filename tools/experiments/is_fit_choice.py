@@ -16,7 +16,6 @@ episode (plain IS, refitted on all pooled rows) on the MC run's rows, as tools/i
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -25,22 +24,13 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from is_limits import inputs_of, joint_efficiency, rows_of  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from pedsafe_sumo.sampling.joint import RIDGE, JointProposal, fit_logistic, normalised  # noqa: E402
+from is_limits import joint_efficiency, rows_of  # noqa: E402
+from is_pilot_pool import refit, run_and_reference  # noqa: E402
+
+from pedsafe_sumo.sampling.joint import JointProposal  # noqa: E402
 from pedsafe_sumo.sampling.stages import _inputs_and_nominal  # noqa: E402
-
-
-def fitted(pool: pd.DataFrame, recorded: JointProposal, weighted: bool) -> JointProposal:
-    """The joint proposal of pi_hat fitted on `pool` (unweighted, or rows weighted by p/q)."""
-    inputs, nominal = _inputs_and_nominal(pool)
-    shell = JointProposal(
-        dict(nominal.families), (), 1.0, recorded.defensive_share, kinematics=recorded.kinematics
-    )
-    w = pool["weight"].to_numpy(dtype=float)
-    y = pool["collision"].astype(float).to_numpy()
-    coefficients = fit_logistic(shell.features(inputs), y, RIDGE, w / w.mean() if weighted else None)
-    return normalised(nominal.families, coefficients, recorded.defensive_share, recorded.kinematics)
 
 
 def held_out_second_moment(pool: pd.DataFrame, recorded: JointProposal, weighted: bool, seed: int) -> float:
@@ -48,7 +38,7 @@ def held_out_second_moment(pool: pd.DataFrame, recorded: JointProposal, weighted
     fold = np.random.default_rng(seed).integers(0, 2, len(pool))
     total = 0.0
     for k in (0, 1):
-        candidate = fitted(pool[fold != k], recorded, weighted)
+        candidate = refit(pool[fold != k], recorded, weighted)
         held = pool[fold == k]
         inputs, _ = _inputs_and_nominal(held)
         ratio = candidate.q_over_p({name: np.asarray(inputs[name], dtype=float) for name in candidate.names})
@@ -68,21 +58,14 @@ def main(argv: list[str] | None = None) -> int:
     mc = mc[(mc["status"] == "ok") & (mc["condition"] == "sv")]
     out = []
     for run in args.runs:
-        info = json.loads((run / "run.json").read_text())
-        scenario = info["arguments"]["scenario"]
-        stored = info["sampler_proposals"][scenario]
-        rows = pd.read_parquet(run / "episodes.parquet")
-        rows = rows[(rows["condition"] == "sv") & (rows["status"] == "ok")]
-        reference = mc[mc["scenario"] == scenario]
-        inputs, _ = inputs_of(reference)
-        f = reference["collision"].astype(float).to_numpy()
+        stored, rows, inputs, f = run_and_reference(run, mc)
         for stage in args.stages:
             if stage >= len(stored) or not stored[stage]:
                 continue
             recorded = JointProposal.from_json(stored[stage])
             pool = rows[rows["sampler_stage"] < stage].reset_index(drop=True)
             score = {wt: held_out_second_moment(pool, recorded, wt, stage) for wt in (False, True)}
-            true = {wt: joint_efficiency(f, inputs, fitted(pool, recorded, wt))[0] for wt in (False, True)}
+            true = {wt: joint_efficiency(f, inputs, refit(pool, recorded, wt))[0] for wt in (False, True)}
             chosen = min(score, key=lambda wt: score[wt])
             out.append(
                 {

@@ -37,16 +37,32 @@ from pedsafe_sumo.sampling.joint import RIDGE, JointProposal, fit_logistic, norm
 from pedsafe_sumo.sampling.stages import _inputs_and_nominal  # noqa: E402
 
 
-def weighted_refit(pool: pd.DataFrame, recorded: JointProposal) -> JointProposal:
-    """pi_hat refitted on `pool` (SV rows of the pilot stages before), rows weighted by p/q."""
+def refit(pool: pd.DataFrame, recorded: JointProposal, weighted: bool = True) -> JointProposal:
+    """pi_hat refitted on `pool` (SV rows of the pilot stages before), rows weighted by p/q or, with
+    `weighted` False, unweighted (the sampler's own fit)."""
     inputs, nominal = _inputs_and_nominal(pool)
     shell = JointProposal(
         dict(nominal.families), (), 1.0, recorded.defensive_share, kinematics=recorded.kinematics
     )
     weight = pool["weight"].to_numpy(dtype=float)
     y = pool["collision"].astype(float).to_numpy()
-    coefficients = fit_logistic(shell.features(inputs), y, RIDGE, weight / weight.mean())
+    row_weight = weight / weight.mean() if weighted else None
+    coefficients = fit_logistic(shell.features(inputs), y, RIDGE, row_weight)
     return normalised(nominal.families, coefficients, recorded.defensive_share, recorded.kinematics)
+
+
+def run_and_reference(
+    run: Path, mc: pd.DataFrame
+) -> tuple[list[str], pd.DataFrame, pd.DataFrame, np.ndarray]:
+    """An IS run's stored proposals and ok SV rows, and the MC run's ok SV rows of the same scenario
+    (`mc`, already cut to those): their inputs and collision indicators."""
+    info = json.loads((run / "run.json").read_text())
+    scenario = info["arguments"]["scenario"]
+    rows = pd.read_parquet(run / "episodes.parquet")
+    rows = rows[(rows["condition"] == "sv") & (rows["status"] == "ok")]
+    reference = mc[mc["scenario"] == scenario]
+    inputs, _ = inputs_of(reference)
+    return info["sampler_proposals"][scenario], rows, inputs, reference["collision"].astype(float).to_numpy()
 
 
 def mixture_efficiency(f: np.ndarray, inputs: pd.DataFrame, proposals: list[JointProposal]) -> float:
@@ -71,20 +87,13 @@ def main(argv: list[str] | None = None) -> int:
     mc = mc[(mc["status"] == "ok") & (mc["condition"] == "sv")]
     out = []
     for run in args.runs:
-        info = json.loads((run / "run.json").read_text())
-        scenario = info["arguments"]["scenario"]
-        stored = info["sampler_proposals"][scenario]
-        rows = pd.read_parquet(run / "episodes.parquet")
-        rows = rows[(rows["condition"] == "sv") & (rows["status"] == "ok")]
-        reference = mc[mc["scenario"] == scenario]
-        inputs, _ = inputs_of(reference)
-        f = reference["collision"].astype(float).to_numpy()
+        stored, rows, inputs, f = run_and_reference(run, mc)
         for stage in args.stages:
             if stage >= len(stored) or not stored[stage]:
                 continue
             recorded = JointProposal.from_json(stored[stage])
             pool = rows[rows["sampler_stage"] < stage]
-            refit = weighted_refit(pool, recorded)
+            refitted = refit(pool, recorded)
             first = args.mixture_from
             mixed = [JointProposal.from_json(stored[s]) for s in range(first, stage + 1) if stored[s]]
             out.append(
@@ -95,8 +104,8 @@ def main(argv: list[str] | None = None) -> int:
                     "pooled_collisions": int(pool["collision"].sum()),
                     "recorded": joint_efficiency(f, inputs, recorded)[0],
                     "recorded_cv": joint_cv_efficiency(f, inputs, recorded),
-                    "weighted": joint_efficiency(f, inputs, refit)[0],
-                    "weighted_cv": joint_cv_efficiency(f, inputs, refit),
+                    "weighted": joint_efficiency(f, inputs, refitted)[0],
+                    "weighted_cv": joint_cv_efficiency(f, inputs, refitted),
                     f"mixture_{first}_to_s": mixture_efficiency(f, inputs, mixed) if mixed else np.nan,
                 }
             )
