@@ -60,6 +60,31 @@ def test_the_ceiling_from_the_collision_stratum_equals_the_one_over_the_nominal(
     assert math.isclose(tool.ceiling(1 / 3, 1 / hit), 1.6, rel_tol=0.02)
 
 
+def test_episodes_drawn_from_a_proposal_give_the_nominal_ceiling_through_their_weights() -> None:
+    # The same x ~ U(0, 1), pi(x) = x^2 (ceiling 1.6), but the episodes drawn from q(x) = 2x, each with
+    # its weight p/q = 1 / (2x): unweighted, x given Y = 1 follows x^3 instead of x^2 and the mean of
+    # 1/sqrt(pi) falls from 3/2 to 4/3 (ceiling 2/3 (1/(16/9 - 1)) / (1/3) = 2.57 instead of 1.6).
+    rng = np.random.default_rng(5)
+    x = np.sqrt(rng.random(400_000))  # inverse CDF of q(x) = 2x
+    hit = x[rng.random(x.size) < x * x]
+    assert math.isclose(tool.ceiling(1 / 3, 1 / hit, 1 / (2 * hit)), 1.6, rel_tol=0.03)
+    assert math.isclose(tool.ceiling(1 / 3, 1 / hit), (2 / 3) / (16 / 9 - 1) / (1 / 3), rel_tol=0.03)
+
+
+def test_weighted_strata_by_hand() -> None:
+    # Collision episode 1 (weight 3) collides in all 4 repeats, episode 2 (weight 1) in 2 of 4:
+    # E[pi | Y=1] = (3 * 1 + 1 * 0.5) / 4; the other stratum's episodes (weights 1 and 3, pi 1/4 and 0)
+    # give (1 * 0.25 + 3 * 0) / 4.
+    outcomes = _outcomes({(1, 1): [1] * 4, (1, 2): [1, 0, 1, 0], (0, 3): [1, 0, 0, 0], (0, 4): [0] * 4})
+    outcomes["weight"] = outcomes["episode"].map({1: 3.0, 2: 1.0, 3: 1.0, 4: 3.0})
+    row = tool.summarise(outcomes, 0.1).iloc[0]
+    assert math.isclose(row["E[pi | Y=1]"], 3.5 / 4)
+    assert row["E[pi | Y=0] (implied)"].startswith(f"{0.25 / 4:.4f} ")
+    # pi taken as (k + 1) / (m + 1): episode 1 1, episode 2 3/5; E[pi^(-1/2)] weighted 3:1.
+    mean_inverse_root = (3 * 1 + math.sqrt(5 / 3)) / 4
+    assert math.isclose(row["ceiling"], 0.9 / (0.1 * (mean_inverse_root**2 - 1)))
+
+
 @pytest.mark.slow
 def test_on_sumo_an_episode_reproduces_and_fresh_draws_keep_only_its_inputs(tmp_path):
     """A real 3-pair MC run of jaywalking (SV): re-run with all its own draws, each episode gives its
@@ -100,5 +125,35 @@ def test_on_sumo_an_episode_reproduces_and_fresh_draws_keep_only_its_inputs(tmp_
             fresh = tool.setup_for(runner, spec, row, "fresh", tool.fresh_seed(1, int(row["episode"]), 0))
             assert fresh.pedestrian.walking_speed_mps == own.pedestrian.walking_speed_mps
             assert fresh.signals.cycle_start_s != own.signals.cycle_start_s
+    finally:
+        runner.close()
+
+
+@pytest.mark.slow
+def test_on_sumo_the_final_stage_of_an_is_run_reproduces_under_v2i(tmp_path):
+    """A real IS run of jaywalking (one nominal pilot stage of 20 pairs, then 3 final pairs drawn from the
+    fitted proposal, or the nominal when the pilot saw no collision): the final stage's V2I rows come back
+    through the stage's proposal (rows_and_runner), and each reproduces its recorded V2I outcome, the link
+    drawn from its own seed; a fresh world keeps its proposable inputs."""
+    from pedsafe_sumo.batch.__main__ import main as batch_main
+
+    run = tmp_path / "is"
+    argv = ["--scenario", "jaywalking", "--episodes", "3", "--seed", "4", "--workers", "1"]
+    argv += ["--sampler", "is", "--is-pilot-stages", "1", "--is-pilot-episodes", "20"]
+    assert batch_main([*argv, "--out", str(run)]) == 0
+    rows, spec, runner, proposal = tool.rows_and_runner(run, "jaywalking", [], "v2i")
+    try:
+        assert len(rows) == 3 and set(rows["condition"]) == {"v2i"} and set(rows["sampler_stage"]) == {1}
+        stored = json.loads((run / "run.json").read_text())["sampler_proposals"]["jaywalking"][1]
+        assert proposal and proposal == stored  # the guard's region proposal or the fit: never the nominal
+        for _, row in rows.iterrows():
+            own = tool.setup_for(runner, spec, row, "reproduce", 0, proposal)
+            outcome = runner.run(spec, "v2i", int(row["seed"]), setup=own).outcome
+            assert outcome["collision"] == row["collision"]
+            assert outcome["min_ttc_s"] == pytest.approx(row["min_ttc_s"], rel=0, abs=0, nan_ok=True)
+            fresh = tool.setup_for(
+                runner, spec, row, "fresh", tool.fresh_seed(1, int(row["episode"]), 0), proposal
+            )
+            assert fresh.pedestrian.walking_speed_mps == own.pedestrian.walking_speed_mps
     finally:
         runner.close()

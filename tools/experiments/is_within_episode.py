@@ -40,7 +40,7 @@ but not 0, which weigh most in E_p[sqrt(pi)]). The other stratum is a check (`su
         /work/results/v5_full --scenario jaywalking --collisions 20 --others 20 --repeats 12 \\
         --set traffic.background_speed_limit_scaled=false --set pedestrians.detour_wait_s=600 --out DIR
 
-Writes DIR/<scenario>_outcomes.csv (one row per episode, mode and repeat) and prints the summary; with
+Writes DIR/<scenario>[_v2i]_outcomes.csv (one row per episode, mode and repeat) and prints the summary; with
 `--summarise DIR` only reads the CSVs back.
 """
 
@@ -58,7 +58,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pedsafe_sumo.batch.runner import sampler_proposal
 from pedsafe_sumo.sampling.importance import Family
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 #: World inputs no proposal moves, by group (the names sampler_inputs records; `vehicles` takes the rest).
 WORLD_GROUPS = {
@@ -74,6 +76,7 @@ MODES = (
     "keep_clothing",
     "keep_signal",
     "keep_vehicles",
+    "keep_link",
 )
 #: What each mode keeps at the MC episode's draws besides x: world groups ("all": the whole world
 #: stream), and whether the background traffic.
@@ -85,8 +88,13 @@ KEPT: dict[str, tuple[tuple[str, ...], bool]] = {
     "keep_clothing": (("clothing",), False),
     "keep_signal": (("signal",), False),
     "keep_vehicles": (("vehicles",), False),
+    "keep_link": ((), False),
     "reproduce": (("all",), True),
 }
+#: Modes that keep the episode's own run seed, which draws the sensors' per-frame misses (none at
+#: miss_probability 0) and, under V2I, the link's losses and noise: `keep_link` keeps it alone.
+KEEPS_RUN_SEED = {"keep_link", "reproduce"}
+CONDITIONS = ("sv", "v2i")
 
 
 def group_of(name: str) -> str:
@@ -120,9 +128,9 @@ def fresh_seed(seed: int, episode: int, repeat: int) -> int:
     return int(sequence.generate_state(1, dtype=np.uint32)[0])
 
 
-def pick_episodes(sv: pd.DataFrame, n_collisions: int, n_others: int, seed: int) -> pd.DataFrame:
+def pick_episodes(rows: pd.DataFrame, n_collisions: int, n_others: int, seed: int) -> pd.DataFrame:
     rng = np.random.default_rng(seed)
-    hit, other = sv[sv["collision"]], sv[~sv["collision"]]
+    hit, other = rows[rows["collision"]], rows[~rows["collision"]]
     take = [
         hit.iloc[np.sort(rng.choice(len(hit), min(n_collisions, len(hit)), replace=False))],
         other.iloc[np.sort(rng.choice(len(other), min(n_others, len(other)), replace=False))],
@@ -130,14 +138,17 @@ def pick_episodes(sv: pd.DataFrame, n_collisions: int, n_others: int, seed: int)
     return pd.concat(take)
 
 
-def setup_for(runner: Any, spec: Any, row: pd.Series, mode: str, fresh: int) -> Any:
+def setup_for(runner: Any, spec: Any, row: pd.Series, mode: str, fresh: int, proposal: str = "") -> Any:
     """The episode's initial world under `mode`: x from the row; the kept world groups and background
-    traffic from its own seed, the rest from `fresh`."""
+    traffic from its own seed, the rest from `fresh`. `proposal` is the JSON of the proposal the row's stage
+    drew from (run.json's sampler_proposals; "" under MC): the row's own draw is rebuilt through it."""
     seed = int(row["seed"])
     groups, keep_traffic = KEPT[mode]
     record = json.loads(row["sampler_inputs"])
     x = {name: float(record["inputs"][name]) for name in record["nominal"]}
-    original, draws = runner.draw_setup_sampled(spec, seed)
+    original, draws = runner.draw_setup_sampled(
+        spec, seed, sampler_proposal(proposal), DEFENSIVE_SHARE if proposal else 0.0
+    )
     for name, value in x.items():
         if draws.inputs[name] != value:
             raise RuntimeError(
@@ -160,9 +171,20 @@ def setup_for(runner: Any, spec: Any, row: pd.Series, mode: str, fresh: int) -> 
     return dataclasses.replace(setup, background=background)
 
 
-def sv_rows_and_runner(mc_run: Path, scenario: str, settings: list[str]) -> tuple[pd.DataFrame, Any, Any]:
-    """The MC run's ok SV rows of `scenario` (by episode), its scenario spec under `settings` (--set) and
-    an EpisodeRunner on the run's site and algorithm."""
+def final_stage(rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows of the run's last sampler stage: every row of an MC run, the final stage of an IS run (one
+    proposal, whose weights summarise takes back to the nominal)."""
+    if "sampler_stage" not in rows:
+        return rows
+    return rows[rows["sampler_stage"] == rows["sampler_stage"].max()]
+
+
+def rows_and_runner(
+    mc_run: Path, scenario: str, settings: list[str], condition: str = "sv"
+) -> tuple[pd.DataFrame, Any, Any, str]:
+    """The run's ok rows of `scenario` and `condition` in its final stage (final_stage, by episode), its
+    scenario spec under `settings` (--set), an EpisodeRunner on the run's site and algorithm, and the JSON
+    of the proposal that stage drew from ("" under MC)."""
     from pedsafe_sumo.batch.runner import scenario_spec
     from pedsafe_sumo.control.agent import load_agent_class
     from pedsafe_sumo.network.sites import get_site
@@ -170,17 +192,21 @@ def sv_rows_and_runner(mc_run: Path, scenario: str, settings: list[str]) -> tupl
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     rows = pd.read_parquet(mc_run / "episodes.parquet")
-    sv = rows[(rows["scenario"] == scenario) & (rows["condition"] == "sv") & (rows["status"] == "ok")]
+    rows = rows[(rows["scenario"] == scenario) & (rows["condition"] == condition) & (rows["status"] == "ok")]
     info = json.loads((mc_run / "run.json").read_text())
     _, params = configure([scenario], None, settings)
     spec = scenario_spec(scenario, parse_set(settings)[0])
     runner = EpisodeRunner(get_site(info["site"]), params, load_agent_class(info["algorithm"]))
-    return sv.sort_values("episode"), spec, runner
+    rows = final_stage(rows)
+    proposals = info.get("sampler_proposals", {}).get(scenario, [])
+    stage = int(rows["sampler_stage"].max()) if "sampler_stage" in rows and len(rows) else 0
+    proposal = proposals[stage] if stage < len(proposals) else ""
+    return rows.sort_values("episode"), spec, runner, proposal or ""
 
 
 def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
-    sv, spec, runner = sv_rows_and_runner(args.mc_run, scenario, args.set)
-    chosen = pick_episodes(sv, args.collisions, args.others, args.seed)
+    rows, spec, runner, proposal = rows_and_runner(args.mc_run, scenario, args.set, args.condition)
+    chosen = pick_episodes(rows, args.collisions, args.others, args.seed)
     out = []
     started = time.perf_counter()
     try:
@@ -188,15 +214,16 @@ def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
             plan = [("reproduce", 0)] + [(mode, r) for mode in args.modes for r in range(args.repeats)]
             for mode, repeat in plan:
                 fresh = fresh_seed(args.seed, int(row["episode"]), repeat)
-                setup = setup_for(runner, spec, row, mode, fresh)
+                setup = setup_for(runner, spec, row, mode, fresh, proposal)
                 # The run's seed draws SV's per-frame misses (none at miss_probability 0) and V2I's link.
-                run_seed = int(row["seed"]) if mode == "reproduce" else fresh
-                result = runner.run(spec, "sv", run_seed, setup=setup)
+                run_seed = int(row["seed"]) if mode in KEEPS_RUN_SEED else fresh
+                result = runner.run(spec, args.condition, run_seed, setup=setup)
                 out.append(
                     {
                         "scenario": scenario,
                         "episode": int(row["episode"]),
                         "stratum": int(bool(row["collision"])),
+                        "weight": float(row["weight"]) if "weight" in row else 1.0,
                         "mode": mode,
                         "repeat": repeat,
                         "collision": int(bool(result.outcome["collision"])),
@@ -220,20 +247,25 @@ BOOTSTRAP = 2000
 BOOTSTRAP_SEED = 7
 
 
-def ceiling(rate: float, inverse_root: np.ndarray) -> float:
+def ceiling(rate: float, inverse_root: np.ndarray, weight: np.ndarray | None = None) -> float:
     """P (1 - P) / (E_p[sqrt(pi)]^2 - P^2) with E_p[sqrt(pi)] = P E[pi^(-1/2) | Y = 1] (module docstring):
-    (1 - P) / (P (E[pi^(-1/2) | Y = 1]^2 - 1))."""
-    excess = float(np.mean(inverse_root)) ** 2 - 1.0
+    (1 - P) / (P (E[pi^(-1/2) | Y = 1]^2 - 1)); the mean over the collision episodes weighted by `weight`
+    (p/q of episodes drawn from a proposal q; None: every episode 1, drawn from p)."""
+    excess = float(np.average(inverse_root, weights=weight)) ** 2 - 1.0
     return (1 - rate) / (rate * excess) if excess > 0 else math.inf
 
 
-def ceiling_with_interval(rate: float, inverse_root: np.ndarray) -> dict[str, float]:
+def ceiling_with_interval(
+    rate: float, inverse_root: np.ndarray, weight: np.ndarray | None = None
+) -> dict[str, float]:
     """The ceiling and its bootstrap 90% interval over the collision episodes (columns of the summaries)."""
     rng = np.random.default_rng(BOOTSTRAP_SEED)
+    weight = np.ones(len(inverse_root)) if weight is None else np.asarray(weight, dtype=float)
+    picks = [rng.choice(len(inverse_root), len(inverse_root)) for _ in range(BOOTSTRAP)]
     # Sorted, not np.quantile: resamples of pi = 1 alone give inf, which np.quantile turns into NaN.
-    boot = np.sort([ceiling(rate, rng.choice(inverse_root, len(inverse_root))) for _ in range(BOOTSTRAP)])
+    boot = np.sort([ceiling(rate, inverse_root[k], weight[k]) for k in picks])
     return {
-        "ceiling": ceiling(rate, inverse_root),
+        "ceiling": ceiling(rate, inverse_root, weight),
         "ceiling 5%": float(boot[int(0.05 * BOOTSTRAP)]),
         "ceiling 95%": float(boot[int(0.95 * BOOTSTRAP)]),
     }
@@ -246,14 +278,24 @@ def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
     the ceiling up: it stays a ceiling) and a bootstrap 90% interval over the collision episodes; the
     share of Var(Y) = P (1 - P) left given what is kept, E_p[pi (1 - pi)] / (P (1 - P)) = (1 - E[pi | Y =
     1]) / (1 - P), E[pi | Y = 1] by k / m (unbiased); and the other stratum as a check: its mean pi
-    should be P (1 - E[pi | Y = 1]) / (1 - P)."""
+    should be P (1 - E[pi | Y = 1]) / (1 - P). Episodes of an IS run's final stage (drawn from q) carry
+    their weight p/q in the CSV's `weight`: every mean over a stratum is weighted by it, which takes x given
+    the stratum back to its nominal law (1 for an MC run: the plain means)."""
     table = []
     for mode, by_mode in outcomes[outcomes["mode"] != "reproduce"].groupby("mode", sort=False):
-        per = by_mode.groupby(["stratum", "episode"])["collision"].agg(["sum", "count"]).reset_index()
+        if "weight" not in by_mode:
+            by_mode = by_mode.assign(weight=1.0)
+        per = (
+            by_mode.groupby(["stratum", "episode"])
+            .agg(sum=("collision", "sum"), count=("collision", "count"), weight=("weight", "first"))
+            .reset_index()
+        )
         hit, other = per[per["stratum"] == 1], per[per["stratum"] == 0]
         k, m = hit["sum"].to_numpy(float), hit["count"].to_numpy(float)
+        w_hit = hit["weight"].to_numpy(float)
         inverse_root = np.sqrt((m + 1) / (k + 1))
-        pi_hit = float(np.mean(k / m))
+        pi_hit = float(np.average(k / m, weights=w_hit))
+        pi_other = float(np.average(other["sum"] / other["count"], weights=other["weight"]))
         table.append(
             {
                 "mode": mode,
@@ -261,11 +303,10 @@ def summarise(outcomes: pd.DataFrame, rate: float) -> pd.DataFrame:
                 "repeats": int(m.min()),
                 "E[pi | Y=1]": pi_hit,
                 "collision episodes with pi < 1": f"{int((k < m).sum())}/{len(hit)}",
-                "E[pi | Y=0] (implied)": f"{float(np.mean(other['sum'] / other['count'])):.4f} "
-                f"({rate * (1 - pi_hit) / (1 - rate):.4f})",
+                "E[pi | Y=0] (implied)": f"{pi_other:.4f} ({rate * (1 - pi_hit) / (1 - rate):.4f})",
                 "other episodes with pi > 0": f"{int((other['sum'] > 0).sum())}/{len(other)}",
                 "share of Var(Y) left": (1 - pi_hit) / (1 - rate),
-                **ceiling_with_interval(rate, inverse_root),
+                **ceiling_with_interval(rate, inverse_root, w_hit),
             }
         )
     return pd.DataFrame(table)
@@ -282,25 +323,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--set", action="append", default=[])
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--condition", choices=CONDITIONS, default="sv", help="whose collisions (default sv)")
     parser.add_argument("--summarise", action="store_true", help="only read the CSVs in --out back")
     args = parser.parse_args(argv)
     if args.repeats < 2:
         print("is_within_episode: --repeats must be at least 2", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = pd.read_parquet(
-        args.mc_run / "episodes.parquet", columns=["scenario", "condition", "status", "collision"]
-    )
+    rows = pd.read_parquet(args.mc_run / "episodes.parquet")
+    suffix = "" if args.condition == "sv" else f"_{args.condition}"
     for scenario in args.scenario:
-        path = args.out / f"{scenario}_outcomes.csv"
+        path = args.out / f"{scenario}{suffix}_outcomes.csv"
         if not args.summarise:
             run_scenario(args, scenario).to_csv(path, index=False)
         outcomes = pd.read_csv(path)
-        sv = rows[(rows["scenario"] == scenario) & (rows["condition"] == "sv") & (rows["status"] == "ok")]
-        rate = float(sv["collision"].mean())
+        ok = rows[
+            (rows["scenario"] == scenario) & (rows["condition"] == args.condition) & (rows["status"] == "ok")
+        ]
+        ok = final_stage(ok)
+        weight = ok["weight"].to_numpy(float) if "weight" in ok else np.ones(len(ok))
+        # The plain (IS) estimate over the final stage: the rows' mean under MC.
+        rate = float(np.mean(weight * ok["collision"].to_numpy(float)))
         reproduced = outcomes[outcomes["mode"] == "reproduce"]
         print(
-            f"\n{scenario}: MC SV collision rate P = {rate:.4f} ({len(sv)} episodes); reproduce: "
+            f"\n{scenario}: {args.condition.upper()} collision rate P = {rate:.4f} ({len(ok)} episodes"
+            f"{', weighted' if np.any(weight != 1) else ''}); reproduce: "
             f"{int((reproduced['collision'] == reproduced['stratum']).sum())}/{len(reproduced)} as recorded"
         )
         with pd.option_context("display.width", 250, "display.max_columns", 20):

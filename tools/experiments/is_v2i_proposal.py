@@ -1,0 +1,170 @@
+"""Would a proposal aimed at V2I's collisions too gain on V2I? (issue 17, session 12; offline, no SUMO.)
+
+The sampler's joint proposal is q ∝ p (lambda + (1 - lambda) sqrt(pi_sv) / c), pi_sv a ridge logistic of
+the SV collision on the pilots' inputs (sampling/joint.py). For two rates P_sv and P_v2i from one draw, the
+proposal that minimises the sum of their relative variances is q ∝ p sqrt(pi_sv / P_sv^2 + pi_v2i / P_v2i^2)
+(the argument of Owen 2013, section 9.1, for one rate, applied to the sum; pi the conditional probabilities
+given x). This tool fits pi_v2i on the same pilot rows with the same design and ridge, and scores
+
+    q_alpha ∝ p (lambda + (1 - lambda) sqrt(alpha pi_sv + (1 - alpha) pi_v2i) / c_alpha)
+
+for alpha = 1 (the sampler's, a check: its pi_sv must equal the stored one), 1/2, the relative-variance
+rule alpha = m_v2i^2 / (m_sv^2 + m_v2i^2) (m = E_p[pi_hat] on nominal draws) and 0 (V2I alone).
+
+Scoring without new episodes: the run's final stage drew x from its proposal q with weights w = p/q, so
+for any q' with weights w' = p/q' (q' > 0 where q is: the defensive share keeps q >= lambda p)
+
+    E_q'[w'^2 f] = E_p[f p/q'] = E_q[w w' f],
+
+and the efficiency per final episode of plain IS under q' is P (1 - P) / (mean(w w' f) - P^2), P = mean(w
+f). With pi_hat g as a control variate (known mean mu_g) at its best slope b, the variance is E_q[w w' (f - b
+g)^2] - (P - b mu_g)^2. `--oracle` refits pi_sv and pi_v2i on the final stage's own rows (in-sample, so
+optimistic): how much a sharper fit of the same form could give at most.
+
+    OMP_NUM_THREADS=1 nice -n 10 .venv/bin/python tools/experiments/is_v2i_proposal.py RUN [RUN ...] \\
+        [--oracle]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pedsafe_sumo.sampling.joint import NORM_SEED, RIDGE, JointProposal, fit_logistic
+from pedsafe_sumo.sampling.stages import _inputs_and_nominal
+
+#: Nominal draws for c_alpha and m (a relative error of about 1e-3 on c, as the sampler's NORM_DRAWS / 2.5).
+NOMINAL_DRAWS = 400_000
+
+
+def reweighted_efficiency(
+    f: np.ndarray,
+    weight: np.ndarray,
+    new_weight: np.ndarray,
+    control: np.ndarray | None = None,
+    control_mean: float = math.nan,
+) -> tuple[float, float, float]:
+    """(P, efficiency of plain IS per episode, efficiency with `control` at its best slope) of the proposal
+    whose weights are `new_weight`, from rows drawn from another proposal with weights `weight` (module
+    docstring); the third is NaN without a control."""
+    f, w, wn = (np.asarray(a, dtype=float) for a in (f, weight, new_weight))
+    rate = float(np.mean(w * f))
+    second = float(np.mean(w * wn * f * f))
+    plain = rate * (1 - rate) / (second - rate * rate)
+    if control is None:
+        return rate, plain, math.nan
+    g = np.asarray(control, dtype=float)
+    cross, square = float(np.mean(w * wn * f * g)), float(np.mean(w * wn * g * g))
+    slope = (cross - rate * control_mean) / (square - control_mean**2)
+    variance = second - 2 * slope * cross + slope**2 * square - (rate - slope * control_mean) ** 2
+    return rate, plain, rate * (1 - rate) / variance if variance > 0 else math.inf
+
+
+def final_pairs(run: Path) -> tuple[pd.DataFrame, pd.DataFrame, JointProposal]:
+    """The pilot rows (both conditions, ok), the final stage's pairs (weight, inputs, both collisions) and
+    the final stage's stored joint proposal."""
+    rows = pd.read_parquet(run / "episodes.parquet")
+    info = json.loads((run / "run.json").read_text())
+    proposals = info["sampler_proposals"][str(rows["scenario"].iloc[0])]
+    rows = rows[rows["status"] == "ok"]
+    final = int(rows["sampler_stage"].max())
+    recorded = JointProposal.from_json(proposals[final])
+    last = rows[rows["sampler_stage"] == final]
+    sv = last[last["condition"] == "sv"].set_index("episode")
+    v2i = last[last["condition"] == "v2i"].set_index("episode")
+    pairs = sv[["weight", "collision", "sampler_inputs"]].join(
+        v2i[["collision"]].rename(columns={"collision": "collision_v2i"}), how="inner"
+    )
+    return rows[rows["sampler_stage"] < final], pairs, recorded
+
+
+def fitted(rows: pd.DataFrame, recorded: JointProposal, ridge: float = RIDGE) -> JointProposal:
+    """pi_hat of `rows`' collisions (one condition), unweighted, the sampler's design and ridge; c unset."""
+    inputs, nominal = _inputs_and_nominal(rows)
+    shell = JointProposal(
+        dict(nominal.families), (), 1.0, recorded.defensive_share, kinematics=recorded.kinematics
+    )
+    y = rows["collision"].astype(float).to_numpy()
+    coefficients = fit_logistic(shell.features(inputs), y, ridge)
+    return JointProposal(
+        dict(nominal.families),
+        tuple(coefficients),
+        1.0,
+        recorded.defensive_share,
+        kinematics=recorded.kinematics,
+    )
+
+
+def score(run: Path, oracle: bool = False) -> pd.DataFrame:
+    pilot, pairs, recorded = final_pairs(run)
+    x = {
+        name: np.array([json.loads(t)["inputs"][name] for t in pairs["sampler_inputs"]])
+        for name in recorded.names
+    }
+    w = pairs["weight"].to_numpy(float)
+    outcome = {
+        "sv": pairs["collision"].astype(float).to_numpy(),
+        "v2i": pairs["collision_v2i"].astype(float).to_numpy(),
+    }
+    final_rows = (
+        pd.DataFrame({"sampler_inputs": pairs["sampler_inputs"], "collision": outcome["sv"]}),
+        pd.DataFrame({"sampler_inputs": pairs["sampler_inputs"], "collision": outcome["v2i"]}),
+    )
+    source = {
+        "sv": final_rows[0] if oracle else pilot[pilot["condition"] == "sv"],
+        "v2i": final_rows[1] if oracle else pilot[pilot["condition"] == "v2i"],
+    }
+    model = {condition: fitted(rows, recorded) for condition, rows in source.items()}
+    if not oracle and not np.allclose(model["sv"].coefficients, recorded.coefficients, atol=1e-4):
+        raise SystemExit(f"{run}: the refitted pi_sv differs from the stored proposal's")
+    nominal_x = recorded.sample_nominal(np.random.default_rng(NORM_SEED), NOMINAL_DRAWS)
+    pi_nominal = {c: m.pi_hat(nominal_x) for c, m in model.items()}
+    pi_rows = {c: m.pi_hat(x) for c, m in model.items()}
+    mean = {c: float(np.mean(v)) for c, v in pi_nominal.items()}
+    rule = mean["v2i"] ** 2 / (mean["sv"] ** 2 + mean["v2i"] ** 2)
+    lam = recorded.defensive_share
+    table = []
+    for label, alpha in (("sv (sampler)", 1.0), ("half", 0.5), ("relative variance", rule), ("v2i", 0.0)):
+        root_nominal = np.sqrt(alpha * pi_nominal["sv"] + (1 - alpha) * pi_nominal["v2i"])
+        norm = float(np.mean(root_nominal))
+        root = np.sqrt(alpha * pi_rows["sv"] + (1 - alpha) * pi_rows["v2i"])
+        new_weight = 1.0 / (lam + (1 - lam) * root / norm)
+        row = {
+            "proposal": label,
+            "alpha": alpha,
+            "mean tries": lam + (1 - lam) * float(root_nominal.max()) / norm,
+        }
+        for condition in ("sv", "v2i"):
+            _, plain, with_cv = reweighted_efficiency(
+                outcome[condition], w, new_weight, pi_rows[condition], mean[condition]
+            )
+            row[f"{condition} plain"], row[f"{condition} cv"] = plain, with_cv
+        table.append(row)
+    print(
+        f"\n{run} ({'oracle: fitted on the final stage' if oracle else 'fitted on the pilots'}): "
+        f"collisions in the fit SV {int(source['sv']['collision'].sum())}, V2I "
+        f"{int(source['v2i']['collision'].sum())}; final-stage pairs {len(pairs)}; "
+        f"E_p pi_sv {mean['sv']:.4f}, E_p pi_v2i {mean['v2i']:.4f}"
+    )
+    return pd.DataFrame(table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("--oracle", action="store_true", help="fit on the final stage's rows (in-sample)")
+    args = parser.parse_args(argv)
+    for run in args.runs:
+        table = score(run, args.oracle)
+        print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
