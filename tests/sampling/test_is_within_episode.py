@@ -157,3 +157,20 @@ def test_on_sumo_the_final_stage_of_an_is_run_reproduces_under_v2i(tmp_path):
             assert fresh.pedestrian.walking_speed_mps == own.pedestrian.walking_speed_mps
     finally:
         runner.close()
+
+
+def test_modes_joined_by_plus_keep_every_source_named() -> None:
+    assert tool.kept_by("fresh") == ((), False, False)
+    assert tool.kept_by("keep_link") == ((), False, True)
+    assert tool.kept_by("keep_vehicles") == (("colours", "vehicles"), False, False)
+    assert tool.kept_by("keep_clothing+colours+link") == (("clothing", "colours"), False, True)
+    assert tool.kept_by("keep_traffic+ped_traits") == (("ped_traits",), True, False)
+    with pytest.raises(ValueError, match="unknown mode"):
+        tool.kept_by("keep_clothing+weather")
+    # The vehicles' colours form their own group; their classes and gaps stay "vehicles".
+    assert [tool.group_of(n) for n in ("queued_2.colour", "queued_2.gap_m", "clothing", "ped_female")] == [
+        "colours",
+        "vehicles",
+        "clothing",
+        "ped_traits",
+    ]

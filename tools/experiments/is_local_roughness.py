@@ -48,7 +48,7 @@ from is_within_episode import (  # noqa: E402
     FixedInputs,
     ceiling_with_interval,
     pick_episodes,
-    sv_rows_and_runner,
+    rows_and_runner,
 )
 
 from pedsafe_sumo.sampling.importance import Beta, Normal  # noqa: E402
@@ -86,7 +86,7 @@ def same_world(a: Any, b: Any) -> bool:
 
 
 def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
-    sv, spec, runner = sv_rows_and_runner(args.mc_run, scenario, args.set)
+    sv, spec, runner, _ = rows_and_runner(args.mc_run, scenario, args.set)  # an MC run: "" proposal
     chosen = pick_episodes(sv, args.collisions, 0, args.seed)
     rng = np.random.default_rng(args.seed)
     out = []

@@ -20,21 +20,24 @@ Where the randomness given x comes from (sim/episode.py; the episode seed s is s
   the V2I link's loss and noise, draws only under V2I; SUMO's own --seed reaches no row (see
   sim/connection.py); the pedestrian model and the reference stack draw nothing.
 
-Modes, each a set of sources kept at the MC episode's own draws while the others are fresh (the run's
-seed is fresh in every mode but `reproduce`):
+Modes, each a set of sources kept at the episode's own draws while the others are fresh (the run's
+seed is fresh in every mode but `keep_link` and `reproduce`):
 - `fresh`: every source fresh, x alone kept: pi(x);
 - `keep_world` (the whole world stream), `keep_traffic`, and the world's groups `keep_ped_traits` (sex,
   age within the group), `keep_clothing`, `keep_signal` (signal_cycle_u), `keep_vehicles` (the other
-  world inputs: vehicle colours, queued vehicles, gaps not proposed): that source kept too (switched off
-  as a source of variance): pi(x, source), whose ceiling is what a proposal over x AND that source could
-  reach at best (the kept draws are the MC episode's, drawn from p within its stratum, as x is);
+  world inputs: vehicle colours, queued vehicles, gaps not proposed), `keep_colours` (the vehicles'
+  colours alone), `keep_link` (the run seed: the V2I link's losses and noise): that source kept too
+  (switched off as a source of variance): pi(x, source), whose ceiling is what a proposal over x AND that
+  source could reach at best (the kept draws are the episode's, drawn from p within its stratum, as x is);
+- keep_ modes joined by "+" (`keep_clothing+colours`): those sources kept at once;
 - `reproduce` (once per episode): every source kept; must give the recorded outcome (a check).
 
-Sampling of the episodes: `--collisions` SV collision episodes and `--others` other SV episodes of the MC
-run (ok rows), each set drawn at random (Generator of `--seed`). The collision stratum alone gives the
-figures: x given Y = 1 has the law pi(x) p(x) / P, so E_p[sqrt(pi)] = P E[pi^(-1/2) | Y = 1] and E_p[pi^2]
-= P E[pi | Y = 1] (a sample of nominal episodes would need thousands to see the rare x where pi is small
-but not 0, which weigh most in E_p[sqrt(pi)]). The other stratum is a check (`summarise`).
+Sampling of the episodes: `--collisions` collision episodes and `--others` other episodes of the run (ok
+rows of `--condition`, sv by default; of an IS run, its final stage, each weighted by p/q), each set
+drawn at random (Generator of `--seed`). The collision stratum alone gives the figures: x given Y = 1 has
+the law pi(x) p(x) / P, so E_p[sqrt(pi)] = P E[pi^(-1/2) | Y = 1] and E_p[pi^2] = P E[pi | Y = 1] (a
+sample of nominal episodes would need thousands to see the rare x where pi is small but not 0, which
+weigh most in E_p[sqrt(pi)]). The other stratum is a check (`summarise`).
 
     OMP_NUM_THREADS=1 nice -n 10 .venv/bin/python tools/experiments/is_within_episode.py \\
         /work/results/v5_full --scenario jaywalking --collisions 20 --others 20 --repeats 12 \\
@@ -76,6 +79,7 @@ MODES = (
     "keep_clothing",
     "keep_signal",
     "keep_vehicles",
+    "keep_colours",
     "keep_link",
 )
 #: What each mode keeps at the MC episode's draws besides x: world groups ("all": the whole world
@@ -87,7 +91,8 @@ KEPT: dict[str, tuple[tuple[str, ...], bool]] = {
     "keep_ped_traits": (("ped_traits",), False),
     "keep_clothing": (("clothing",), False),
     "keep_signal": (("signal",), False),
-    "keep_vehicles": (("vehicles",), False),
+    "keep_vehicles": (("vehicles", "colours"), False),
+    "keep_colours": (("colours",), False),
     "keep_link": ((), False),
     "reproduce": (("all",), True),
 }
@@ -97,11 +102,32 @@ KEEPS_RUN_SEED = {"keep_link", "reproduce"}
 CONDITIONS = ("sv", "v2i")
 
 
+def kept_by(mode: str) -> tuple[tuple[str, ...], bool, bool]:
+    """(world groups kept, whether the background traffic, whether the run seed) of `mode`: one of MODES,
+    or keep_ modes joined by "+" (`keep_ped_traits+vehicles`: both sources kept at once)."""
+    parts = mode.removeprefix("keep_").split("+") if "+" in mode else [mode.removeprefix("keep_")]
+    names = [mode] if "+" not in mode else [f"keep_{part}" for part in parts]
+    if any(name not in KEPT or name == "reproduce" for name in names):
+        raise ValueError(f"unknown mode {mode!r}: one of {', '.join(MODES)}, or keep_ modes joined by '+'")
+    groups = tuple(sorted({group for name in names for group in KEPT[name][0]}))
+    return groups, any(KEPT[name][1] for name in names), any(name in KEEPS_RUN_SEED for name in names)
+
+
+def mode_argument(text: str) -> str:
+    try:
+        kept_by(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+    return text
+
+
 def group_of(name: str) -> str:
+    """The world group of input `name`: WORLD_GROUPS', "colours" for the other vehicles' colours (what the
+    cameras' contrast rule compares the clothing with), else "vehicles" (classes, gaps, positions)."""
     for group, names in WORLD_GROUPS.items():
         if name in names:
             return group
-    return "vehicles"
+    return "colours" if name.endswith(".colour") else "vehicles"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,7 +169,7 @@ def setup_for(runner: Any, spec: Any, row: pd.Series, mode: str, fresh: int, pro
     traffic from its own seed, the rest from `fresh`. `proposal` is the JSON of the proposal the row's stage
     drew from (run.json's sampler_proposals; "" under MC): the row's own draw is rebuilt through it."""
     seed = int(row["seed"])
-    groups, keep_traffic = KEPT[mode]
+    groups, keep_traffic, _ = kept_by(mode) if mode != "reproduce" else (("all",), True, True)
     record = json.loads(row["sampler_inputs"])
     x = {name: float(record["inputs"][name]) for name in record["nominal"]}
     original, draws = runner.draw_setup_sampled(
@@ -216,7 +242,7 @@ def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
                 fresh = fresh_seed(args.seed, int(row["episode"]), repeat)
                 setup = setup_for(runner, spec, row, mode, fresh, proposal)
                 # The run's seed draws SV's per-frame misses (none at miss_probability 0) and V2I's link.
-                run_seed = int(row["seed"]) if mode in KEEPS_RUN_SEED else fresh
+                run_seed = int(row["seed"]) if mode == "reproduce" or kept_by(mode)[2] else fresh
                 result = runner.run(spec, args.condition, run_seed, setup=setup)
                 out.append(
                     {
@@ -319,7 +345,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--collisions", type=int, default=20)
     parser.add_argument("--others", type=int, default=20)
     parser.add_argument("--repeats", type=int, default=12)
-    parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES)
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        default=list(MODES),
+        type=mode_argument,
+        help=f"of {', '.join(MODES)}; keep_ modes joined by '+' keep several sources at once",
+    )
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--set", action="append", default=[])
     parser.add_argument("--out", type=Path, required=True)
