@@ -51,6 +51,9 @@ from pedsafe_sumo.batch.sampled import (
     PROPOSALS_KEY,
     SAMPLER_IS,
     SAMPLER_MC,
+    V2I_FACTOR_CONTRAST,
+    V2I_FACTOR_NONE,
+    V2I_FACTORS,
     SamplerError,
     plan_sampled_chunks,
     run_sampled,
@@ -130,6 +133,9 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "is_family": FAMILY_JOINT,
     # since session 11: Table I pools the pilot stages from stage 2 with the final one (docs/sampling.md).
     "is_pool_from": DEFAULT_POOL_FROM_STAGE,
+    # since session 12: the joint proposal also aims at V2I's collisions where the pilots hold enough of
+    # them (sampling/joint.py, "The V2I factor"; EXPERIMENTS.md, session 12).
+    "is_v2i_factor": V2I_FACTOR_CONTRAST,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a
 #: key missing from an older run.json with this, not with today's default, so the run stays the same run.
@@ -138,6 +144,7 @@ RESUME_DEFAULTS_OF_OLDER_RUNS: dict[str, Any] = {
     "is_family": FAMILY_PRODUCT,
     # None: the final stage alone, Table I's estimator before --is-pool-from.
     "is_pool_from": None,
+    "is_v2i_factor": V2I_FACTOR_NONE,
 }
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
 #: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
@@ -344,6 +351,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         f"--is-score need --is-family product [{FAMILY_JOINT}]",
     )
     parser.add_argument(
+        "--is-v2i-factor",
+        choices=V2I_FACTORS,
+        dest="is_v2i_factor",
+        help="--sampler is, --is-family joint: 'contrast' = the proposal also aims at V2I's collisions, "
+        "modelled from the pilots by the contrast between the clothing and the vehicles' colours, where "
+        "the pilots' SV collisions hold at least 5 V2I ones (docs/sampling.md, 'The V2I factor'); 'none' "
+        f"= fitted on SV's collisions alone [{V2I_FACTOR_CONTRAST}]",
+    )
+    parser.add_argument(
         "--is-pool-from",
         type=int,
         dest="is_pool_from",
@@ -530,6 +546,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         "is_score",
         "is_family",
         "is_pool_from",
+        "is_v2i_factor",
     )
     is_flags = (*pilot_flags, "is_proposal")
     if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
@@ -545,6 +562,8 @@ def prepare(args: argparse.Namespace) -> Plan:
         # input screen, spread floor or score for the pilots' elite (docs/sampling.md).
         given = ", ".join(f"--{name.replace('_', '-')}" for name in unused_by_joint)
         raise UsageError(f"{given}: not used by --is-family joint (give --is-family product)")
+    if arguments["is_family"] != FAMILY_JOINT and "is_v2i_factor" in explicit:
+        raise UsageError("--is-v2i-factor: used only by --is-family joint")
     if not MIN_SPREAD_FLAG <= arguments["is_min_spread"] <= 1.0:
         raise UsageError(
             f"--is-min-spread must lie in {MIN_SPREAD_FLAG}..1, got {arguments['is_min_spread']}"

@@ -19,7 +19,14 @@ from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
 from pedsafe_sumo.io.run_store import read_parts
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
-from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, NORM_DRAWS, VISIBLE_M, Kinematics, joint_update
+from pedsafe_sumo.sampling.joint import (
+    GUARD_MIN_COLLISIONS,
+    NORM_DRAWS,
+    VISIBLE_M,
+    Kinematics,
+    joint_update,
+    low_contrast_table,
+)
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
 from pedsafe_sumo.sampling.pooling import POOL_FROM_KEY, pooled_from_stage
 from pedsafe_sumo.sampling.stages import (
@@ -46,6 +53,17 @@ JOINT_FEATURES = (
     f"{GUARD_MIN_COLLISIONS} collisions"
 )
 FAMILIES = (FAMILY_PRODUCT, FAMILY_JOINT)
+#: --is-v2i-factor: whether the joint proposal also aims at V2I's collisions (sampling/joint.py, "The V2I
+#: factor"), and run.json's record of it (the key only when on, so that runs before it keep their identity).
+V2I_FACTOR_CONTRAST = "contrast"
+V2I_FACTOR_NONE = "none"
+V2I_FACTORS = (V2I_FACTOR_CONTRAST, V2I_FACTOR_NONE)
+V2I_FACTOR_KEY = "v2i_factor"
+V2I_FACTOR_RECORD = (
+    "pi_hat r, r a ridge logistic of V2I's collision on the pilots' SV collisions over low-contrast "
+    f"indicators (clothing against each vehicle colour, the roadside camera's delta E threshold), at least "
+    f"{GUARD_MIN_COLLISIONS} V2I collisions; a = m_v2i^2 / (m_sv^2 + m_v2i^2)"
+)
 SAMPLER_MC = "mc"
 SAMPLER_IS = "is"
 PROPOSALS_KEY = "sampler_proposals"
@@ -88,6 +106,8 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
         identity.update(family=arguments["is_family"], ridge=JOINT_RIDGE, norm_draws=NORM_DRAWS)
         # Runs recorded before the kinematic features lack this key: their resume is refused (another fit).
         identity[JOINT_FEATURES_KEY] = JOINT_FEATURES
+        if arguments.get("is_v2i_factor", V2I_FACTOR_NONE) == V2I_FACTOR_CONTRAST:
+            identity[V2I_FACTOR_KEY] = V2I_FACTOR_RECORD
     first_pooled = pooled_from_stage(arguments.get("is_pool_from"), identity["pilot_stages"])
     if first_pooled < identity["pilot_stages"]:
         # Only when pilots are pooled, so that runs made before --is-pool-from keep their identity.
@@ -183,6 +203,15 @@ def kinematics_of(config: Any, scenario: str) -> Kinematics:
     )
 
 
+def low_contrast_of(config: Any) -> tuple[tuple[int, ...], ...]:
+    """The V2I factor's table L (sampling/joint.py): the scenarios' clothing against their car colours at
+    the roadside camera's delta E threshold of the run's parameters."""
+    from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
+
+    threshold = float(config.params["perception"]["roadside_camera"]["delta_e_threshold"])
+    return low_contrast_table(CLOTHING_COLOURS_RGB, CAR_COLOURS_RGB, threshold)
+
+
 def _joint_stage(
     plan: Any,
     identity: dict[str, Any],
@@ -203,9 +232,16 @@ def _joint_stage(
     rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in earlier])
     kinematics = kinematics_of(plan.config, scenario) if identity["sampler"].get(JOINT_FEATURES_KEY) else None
     pilot_stage = stage < int(identity["sampler"]["pilot_stages"])
+    low_contrast = low_contrast_of(plan.config) if identity["sampler"].get(V2I_FACTOR_KEY) else None
     proposal, n_collisions, guard = joint_update(
-        rows, ADAPT_CONDITION, float(identity["sampler"]["defensive_share"]), kinematics, pilot_stage
+        rows,
+        ADAPT_CONDITION,
+        float(identity["sampler"]["defensive_share"]),
+        kinematics,
+        pilot_stage,
+        low_contrast,
     )
+    factor = proposal.v2i_factor if proposal else None
     levels.setdefault(scenario, []).append(
         {
             "after_stage": stage - 1,
@@ -216,6 +252,11 @@ def _joint_stage(
             "norm": proposal.norm if proposal else None,
             "mean_tries": proposal.bound if proposal else None,
             "guard": guard,
+            **(
+                {"v2i_factor": factor.coefficients, "v2i_target_share": factor.target_share}
+                if factor is not None
+                else {}
+            ),
         }
     )
     return proposal.to_json() if proposal else ""

@@ -16,7 +16,7 @@ from scipy import special
 
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
-from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, pi_hat_of_inputs, stage_control
+from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
 from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage
@@ -85,7 +85,9 @@ def table_one_weighted(
         stage_of_row = ok["sampler_stage"].to_numpy(dtype=int)
         stage_numbers = sorted(set(stage_of_row.tolist()))
         controls = {
-            stage: _stage_control_values(ok, stage_of_row == stage, (proposals or {}).get(scenario), stage)
+            stage: _stage_control_values(
+                ok, stage_of_row == stage, (proposals or {}).get(scenario), stage, str(condition)
+            )
             for stage in stage_numbers
         }
         est, kept_plain = {}, []
@@ -131,15 +133,15 @@ def table_one_weighted(
 
 
 def _stage_control_values(
-    rows: pd.DataFrame, in_stage: np.ndarray, proposals: Sequence[str] | None, stage: int
+    rows: pd.DataFrame, in_stage: np.ndarray, proposals: Sequence[str] | None, stage: int, condition: str
 ) -> tuple[np.ndarray | None, float, float]:
-    """pi_hat at the stage's rows with its nominal mean and that mean's standard error, where the stage
-    drew from a joint proposal that can serve as a control variate (stage_control); else (None, nan, nan)."""
+    """The control at the stage's rows of `condition` with its nominal mean and that mean's standard
+    error (condition_control: pi_hat, or pi_hat r for V2I under the V2I factor), where the stage drew from
+    a joint proposal that can serve as a control variate (stage_control); else (None, nan, nan)."""
     control = stage_control(proposals, stage)
     if control is None or not in_stage.any():
         return None, math.nan, math.nan
-    g = pi_hat_of_inputs(control, rows.loc[in_stage, "sampler_inputs"].tolist())
-    return g, control.mean_pi_hat, control.mean_pi_hat_se
+    return condition_control(control, rows.loc[in_stage, "sampler_inputs"].tolist(), condition)
 
 
 def _estimator_label(has_control: bool, kept_plain: list[str], indexes: list[str]) -> str:

@@ -15,7 +15,9 @@ is consistent (its bias is O(1/n), from estimating beta) and its variance is nev
 mean(Y). s^2 is the regression's residual variance (two fitted coefficients, hence n - 2); the second term
 is the known mean's own error, which the estimate carries through beta_hat mu_g.
 
-SV and V2I share the draws and weights of an episode, so both conditions use the same C.
+SV and V2I share the draws and weights of an episode. V2I's control is pi_hat too, except where the
+stage's proposal carries the V2I factor (sampling/joint.py): then it is the factor's model of V2I's
+collision, pi_hat r, with its own stored nominal mean `mean_pi_v2i` (session 12; condition_control).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import numpy as np
 from scipy import special
 
 from pedsafe_sumo.sampling.importance import Estimate
-from pedsafe_sumo.sampling.joint import JointProposal, is_joint_json
+from pedsafe_sumo.sampling.joint import V2I_CONDITION, JointProposal, is_joint_json
 
 #: The label of Table I's `estimator` column for a row whose indexes use the control variate.
 ESTIMATOR_CV = "is+cv"
@@ -70,6 +72,24 @@ def pi_hat_of_inputs(proposal: JointProposal, sampler_inputs: Sequence[str]) -> 
         raise ValueError(f"rows of a joint stage lack the proposal's inputs {', '.join(missing)}")
     x = {name: np.array([r[name] for r in records], dtype=float) for name in proposal.names}
     return np.asarray(proposal.pi_hat(x), dtype=float)
+
+
+def condition_control(
+    proposal: JointProposal, sampler_inputs: Sequence[str], condition: str
+) -> tuple[np.ndarray, float, float]:
+    """The control of `condition`'s rows (their sampler_inputs) under a stage's joint proposal: (g at the
+    rows, its nominal mean, that mean's standard error). pi_hat r for V2I where the proposal carries the
+    V2I factor with a stored mean, else pi_hat."""
+    if (
+        condition == V2I_CONDITION
+        and proposal.v2i_factor is not None
+        and math.isfinite(proposal.mean_pi_v2i)
+        and math.isfinite(proposal.mean_pi_v2i_se)
+    ):
+        records = [json.loads(text)["inputs"] for text in sampler_inputs]
+        x = {name: np.array([r[name] for r in records], dtype=float) for name in proposal.names}
+        return np.asarray(proposal.pi_v2i_hat(x), dtype=float), proposal.mean_pi_v2i, proposal.mean_pi_v2i_se
+    return pi_hat_of_inputs(proposal, sampler_inputs), proposal.mean_pi_hat, proposal.mean_pi_hat_se
 
 
 def cv_parts(

@@ -45,6 +45,29 @@ on v5_full's rows 75 of 75 crossing collisions, 220 of 220 right_turn, 293 of 29
 on the pooled pilot rows (which the guard's stage makes rich in collisions). Pilot rows only train pi_hat,
 so a guard that misses collisions costs efficiency, never bias.
 
+The V2I factor (session 12; EXPERIMENTS.md, "Importance sampling, session 12"). V2I's collisions lie inside
+SV's region, but there the proposable inputs leave V2I's outcome largely to chance: on jaywalking 84% of
+V2I's collisions (4% of the SV-only ones) have the pedestrian's clothing within the roadside camera's
+contrast threshold of the parked car behind them, which the camera's colour rule then cannot tell apart
+(perception/sensors.py). So where the pilots' SV collisions hold at least GUARD_MIN_COLLISIONS V2I
+collisions, the proposal also draws the clothing and the vehicles' colours (uniform categories, as the
+scenarios draw them) and aims at V2I's collisions too, modelled as pi_v2i = pi_hat r(z) with
+
+    r(z) = P(V2I collision | SV collision, z) = expit(b_0 + sum_k b_k L[clothing, colour_k]),
+
+L[i, j] = 1 where clothing colour i and car colour j differ by less than the roadside camera's
+delta_e_threshold (CIE76), b a ridge logistic (RIDGE) on the pilots' pairs whose SV episode collided.
+Then sqrt(pi_hat) becomes
+
+    h(x, z) = sqrt(a pi_hat(x) + (1 - a) pi_hat(x) r(z)),    a = m_v2i^2 / (m_sv^2 + m_v2i^2),
+
+m = the nominal means E_p[pi_hat] and E_p[pi_hat r]: the proposal ∝ p sqrt(pi_sv / P_sv^2 + pi_v2i /
+P_v2i^2) that minimises the sum of the two rates' relative variances (Owen 2013, section 9.1, applied to
+the sum), with the fits for the pi and m for the P. h <= 1, so the envelope B is unchanged; pi_hat r is
+V2I's control variate (`mean_pi_v2i`). Where the clothing does not vary the contrast (background blending
+dresses the pedestrian in the waiting car's colour) the fit leaves r nearly constant and the proposal
+nearly the SV one.
+
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
 Dask rebuild the very proposal. The estimate's relative error (stored as `norm_rel_se`) is the relative
@@ -78,6 +101,11 @@ NORM_DRAWS = 1_000_000
 NORM_SEED = 17_2026
 #: Nominal draws per block of that estimate.
 NORM_BLOCK = 100_000
+#: The condition whose collisions the V2I factor models (module docstring), and the inputs it draws: the
+#: pedestrian's clothing and every vehicle colour the scenario draws (names ending in COLOUR_SUFFIX).
+V2I_CONDITION = "v2i"
+CLOTHING_INPUT = "clothing"
+COLOUR_SUFFIX = ".colour"
 #: The inputs the kinematic features need (module docstring); a scenario without one of them fits on x alone.
 KINEMATIC_INPUTS = ("conflict_offset_s", "ego_speed_log", "ped_age_group", "ped_walking_speed_z")
 #: An assumption, not a measurement: SUMO's default lane width 3.2 m less half a car's width 0.9 m, the
@@ -191,6 +219,74 @@ class Kinematics:
 
 
 @dataclass(frozen=True)
+class ContrastFactor:
+    """The V2I factor r(z) = expit(b_0 + sum_k b_k L[clothing, colour_k]) and the share a of pi_hat in h
+    (module docstring)."""
+
+    #: The vehicle colour inputs, sorted; the clothing is CLOTHING_INPUT.
+    colour_inputs: tuple[str, ...]
+    #: L[clothing][car colour]: 1 where the two are within the roadside camera's contrast threshold.
+    low_contrast: tuple[tuple[int, ...], ...]
+    #: b_0, then one b_k per colour input.
+    coefficients: tuple[float, ...]
+    #: a of h = sqrt(a pi_hat + (1 - a) pi_hat r); NaN until the proposal is normalised.
+    target_share: float = math.nan
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return (CLOTHING_INPUT, *self.colour_inputs)
+
+    def nominal(self) -> dict[str, Family]:
+        """The factor's inputs' nominal laws: n equally likely categories, as Draws.index draws them."""
+        n_clothing, n_cars = len(self.low_contrast), len(self.low_contrast[0])
+        laws: dict[str, Family] = {CLOTHING_INPUT: Categorical((1.0 / n_clothing,) * n_clothing)}
+        return laws | {name: Categorical((1.0 / n_cars,) * n_cars) for name in self.colour_inputs}
+
+    def design(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        table = np.asarray(self.low_contrast, dtype=float)
+        clothing = np.atleast_1d(np.asarray(x[CLOTHING_INPUT], dtype=float)).astype(int)
+        columns = [np.ones(len(clothing))]
+        for name in self.colour_inputs:
+            columns.append(table[clothing, np.atleast_1d(np.asarray(x[name], dtype=float)).astype(int)])
+        return np.column_stack(columns)
+
+    def r(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        """P(V2I collision | SV collision) at the inputs `x`."""
+        return special.expit(self.design(x) @ np.asarray(self.coefficients))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "colour_inputs": list(self.colour_inputs),
+            "low_contrast": [list(row) for row in self.low_contrast],
+            "coefficients": list(self.coefficients),
+            "target_share": self.target_share,
+        }
+
+    @staticmethod
+    def from_dict(data: Mapping[str, Any]) -> ContrastFactor:
+        return ContrastFactor(
+            tuple(str(v) for v in data["colour_inputs"]),
+            tuple(tuple(int(v) for v in row) for row in data["low_contrast"]),
+            tuple(float(v) for v in data["coefficients"]),
+            float(data["target_share"]),
+        )
+
+
+def low_contrast_table(
+    clothing_rgb: Any, car_rgb: Any, delta_e_threshold: float
+) -> tuple[tuple[int, ...], ...]:
+    """L[i][j] = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
+    the cameras' rule: perception/sensors.py)."""
+    from pedsafe_sumo.perception.sensors import delta_e_cie76
+
+    clothing, cars = np.asarray(clothing_rgb, dtype=float), np.asarray(car_rgb, dtype=float)
+    return tuple(
+        tuple(int(delta_e_cie76(colour[None, :], car[None, :])[0] < delta_e_threshold) for car in cars)
+        for colour in clothing
+    )
+
+
+@dataclass(frozen=True)
 class JointProposal:
     """q ∝ lambda p + (1 - lambda) p sqrt(pi_hat) / c over the inputs of `nominal` (module docstring)."""
 
@@ -206,12 +302,24 @@ class JointProposal:
     #: The kinematic features' maps (module docstring); None: the design of x alone (proposals stored
     #: before session 8, scenarios that lack a KINEMATIC_INPUTS input).
     kinematics: Kinematics | None = None
+    #: The V2I factor (module docstring); None: h = sqrt(pi_hat), the proposal of SV alone.
+    v2i_factor: ContrastFactor | None = None
+    #: E_p[pi_hat r] and its standard error, V2I's control variate's known mean; NaN without the factor.
+    mean_pi_v2i: float = math.nan
+    mean_pi_v2i_se: float = math.nan
 
     is_joint = True
 
     @property
     def names(self) -> list[str]:
+        """Every input the proposal draws (pi_hat's and the V2I factor's), sorted."""
         return sorted(self.nominal)
+
+    @property
+    def design_names(self) -> list[str]:
+        """The inputs of pi_hat's design: every drawn input but the V2I factor's."""
+        factor = set(self.v2i_factor.names) if self.v2i_factor is not None else set()
+        return [name for name in self.names if name not in factor]
 
     @property
     def bound(self) -> float:
@@ -220,7 +328,7 @@ class JointProposal:
 
     def features(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
         blocks: list[Block] = []
-        for name in self.names:
+        for name in self.design_names:
             family = self.nominal[name]
             v = np.atleast_1d(np.asarray(x[name], dtype=float))
             if isinstance(family, Categorical):
@@ -230,14 +338,25 @@ class JointProposal:
                 blocks.append((v - mean) / sd)
         if self.kinematics is not None:
             blocks += self.kinematics.blocks(x)
-        return quadratic_design(len(np.atleast_1d(x[self.names[0]])), blocks)
+        return quadratic_design(len(np.atleast_1d(x[self.design_names[0]])), blocks)
 
     def pi_hat(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
         """The fitted P(SV collision | x) at the inputs `x` (name -> values on the drawn scales)."""
         return special.expit(self.features(x) @ np.asarray(self.coefficients))
 
+    def pi_v2i_hat(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        """pi_hat r at the inputs `x`: the modelled P(V2I collision | x, z) (the V2I factor's)."""
+        if self.v2i_factor is None:
+            raise ValueError("this proposal has no V2I factor")
+        return self.pi_hat(x) * self.v2i_factor.r(x)
+
     def root_pi(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        return np.sqrt(self.pi_hat(x))
+        """h: sqrt(pi_hat), or with the V2I factor sqrt(a pi_hat + (1 - a) pi_hat r) (module docstring)."""
+        pi = self.pi_hat(x)
+        if self.v2i_factor is None:
+            return np.sqrt(pi)
+        share = self.v2i_factor.target_share
+        return np.sqrt(pi * (share + (1 - share) * self.v2i_factor.r(x)))
 
     def q_over_p(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
         lam = self.defensive_share
@@ -273,6 +392,15 @@ class JointProposal:
                 "defensive_share": self.defensive_share,
                 "ridge": RIDGE,
                 **({"kinematics": self.kinematics.to_dict()} if self.kinematics is not None else {}),
+                **(
+                    {
+                        "v2i_factor": self.v2i_factor.to_dict(),
+                        "mean_pi_v2i": self.mean_pi_v2i,
+                        "mean_pi_v2i_se": self.mean_pi_v2i_se,
+                    }
+                    if self.v2i_factor is not None
+                    else {}
+                ),
             },
             sort_keys=True,
         )
@@ -293,6 +421,9 @@ class JointProposal:
             float(data.get("mean_pi_hat", math.nan)),
             float(data.get("mean_pi_hat_se", math.nan)),
             Kinematics.from_dict(data["kinematics"]) if "kinematics" in data else None,
+            ContrastFactor.from_dict(data["v2i_factor"]) if "v2i_factor" in data else None,
+            float(data.get("mean_pi_v2i", math.nan)),
+            float(data.get("mean_pi_v2i_se", math.nan)),
         )
 
 
@@ -377,21 +508,39 @@ def normalised(
     coefficients: Any,
     defensive_share: float,
     kinematics: Kinematics | None = None,
+    v2i_factor: ContrastFactor | None = None,
 ) -> JointProposal:
-    """The proposal of these coefficients with c = E_p[sqrt(pi_hat)] and E_p[pi_hat] estimated on
-    NORM_DRAWS nominal draws of NORM_SEED (in blocks, so that the design matrix of a million draws is
-    never held at once)."""
+    """The proposal of these coefficients with c = E_p[h] and E_p[pi_hat] estimated on NORM_DRAWS nominal
+    draws of NORM_SEED (in blocks, so that the design matrix of a million draws is never held at once);
+    with `v2i_factor` (whose inputs `nominal` holds), also E_p[pi_hat r] and from both the share a."""
     shell = JointProposal(
-        dict(nominal), tuple(float(v) for v in coefficients), 1.0, defensive_share, kinematics=kinematics
+        dict(nominal),
+        tuple(float(v) for v in coefficients),
+        1.0,
+        defensive_share,
+        kinematics=kinematics,
+        v2i_factor=v2i_factor,
     )
     draws = shell.sample_nominal(np.random.default_rng(NORM_SEED), NORM_DRAWS)
-    pi = np.concatenate(
-        [
-            shell.pi_hat({name: values[start : start + NORM_BLOCK] for name, values in draws.items()})
-            for start in range(0, NORM_DRAWS, NORM_BLOCK)
-        ]
-    )
-    root = np.sqrt(pi)
+    blocks = [
+        {name: values[start : start + NORM_BLOCK] for name, values in draws.items()}
+        for start in range(0, NORM_DRAWS, NORM_BLOCK)
+    ]
+    pi = np.concatenate([shell.pi_hat(block) for block in blocks])
+    factor_means: dict[str, Any] = {}
+    if v2i_factor is None:
+        root = np.sqrt(pi)
+    else:
+        r = np.concatenate([v2i_factor.r(block) for block in blocks])
+        pi_v2i = pi * r
+        mean_sv, mean_v2i = float(np.mean(pi)), float(np.mean(pi_v2i))
+        share = mean_v2i**2 / (mean_sv**2 + mean_v2i**2) if mean_sv > 0 else 1.0
+        root = np.sqrt(pi * (share + (1 - share) * r))
+        factor_means = {
+            "v2i_factor": dataclasses.replace(v2i_factor, target_share=float(share)),
+            "mean_pi_v2i": mean_v2i,
+            "mean_pi_v2i_se": float(np.std(pi_v2i) / math.sqrt(len(pi_v2i))),
+        }
     norm = float(np.mean(root))
     rel_se = float(np.std(root) / math.sqrt(len(root)) / norm) if norm > 0 else math.inf
     return JointProposal(
@@ -403,7 +552,43 @@ def normalised(
         float(np.mean(pi)),
         float(np.std(pi) / math.sqrt(len(pi))),
         kinematics,
+        **factor_means,
     )
+
+
+def with_v2i_factor(
+    proposal: JointProposal, rows: pd.DataFrame, low_contrast: tuple[tuple[int, ...], ...]
+) -> JointProposal | None:
+    """`proposal` with the V2I factor (module docstring) fitted on the pairs of `rows` (pilot rows of both
+    conditions) whose SV episode collided; None where they hold fewer than GUARD_MIN_COLLISIONS V2I
+    collisions, the scenario draws no clothing or no vehicle colour in every pilot episode, or the
+    envelope would be too loose (the proposal of SV alone then stands)."""
+    from pedsafe_sumo.sampling.stages import ADAPT_CONDITION
+
+    ok = rows[rows["status"] == "ok"]
+    sv = ok[ok["condition"] == ADAPT_CONDITION].set_index("episode")
+    v2i = ok[ok["condition"] == V2I_CONDITION].set_index("episode")
+    pairs = sv[["collision", "sampler_inputs"]].join(
+        v2i[["collision"]].rename(columns={"collision": "collision_v2i"}), how="inner"
+    )
+    hit = pairs[pairs["collision"].astype(bool)]
+    y = hit["collision_v2i"].astype(float).to_numpy()
+    if y.sum() < GUARD_MIN_COLLISIONS:
+        return None
+    records = [json.loads(text)["inputs"] for text in pairs["sampler_inputs"]]
+    colour_inputs = sorted(
+        name for name in records[0] if name.endswith(COLOUR_SUFFIX) and all(name in r for r in records)
+    )
+    if not colour_inputs or not all(CLOTHING_INPUT in r for r in records):
+        return None
+    factor = ContrastFactor(tuple(colour_inputs), low_contrast, ())
+    hit_records = [json.loads(text)["inputs"] for text in hit["sampler_inputs"]]
+    z = {name: np.array([r[name] for r in hit_records], dtype=float) for name in factor.names}
+    coefficients = fit_logistic(factor.design(z), y, RIDGE)
+    factor = dataclasses.replace(factor, coefficients=tuple(float(b) for b in coefficients))
+    nominal = {**proposal.nominal, **factor.nominal()}
+    fitted = normalised(nominal, proposal.coefficients, proposal.defensive_share, proposal.kinematics, factor)
+    return fitted if fitted.norm > 0 and fitted.bound <= MAX_MEAN_TRIES else None
 
 
 def joint_update(
@@ -412,12 +597,16 @@ def joint_update(
     defensive_share: float,
     kinematics: Kinematics | None = None,
     pilot_stage: bool = False,
+    low_contrast: tuple[tuple[int, ...], ...] | None = None,
 ) -> tuple[JointProposal | None, int, bool]:
     """The proposal of the next stage from every pilot row so far of `condition` (status ok), their
     collisions, and whether it is the guard's region proposal (a `pilot_stage` with fewer than
-    GUARD_MIN_COLLISIONS collisions, where the scenario has the kinematic inputs) rather than the fit."""
+    GUARD_MIN_COLLISIONS collisions, where the scenario has the kinematic inputs) rather than the fit.
+    With `low_contrast` (the V2I factor's table L), the fit gains the V2I factor where with_v2i_factor
+    finds it can (the pairs of `rows` with both conditions)."""
     from pedsafe_sumo.sampling.stages import _inputs_and_nominal
 
+    both = rows
     rows = rows[(rows["condition"] == condition) & (rows["status"] == "ok")]
     inputs, nominal = _inputs_and_nominal(rows)
     y = rows["collision"].astype(float).to_numpy()
@@ -426,7 +615,10 @@ def joint_update(
         region = region_proposal(nominal.families, kinematics, defensive_share)
         if region is not None:
             return region, n_collisions, True
-    return fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics), n_collisions, False
+    proposal = fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics)
+    if proposal is not None and low_contrast is not None:
+        proposal = with_v2i_factor(proposal, both, low_contrast) or proposal
+    return proposal, n_collisions, False
 
 
 def proposal_of_json(text: str) -> Any:
