@@ -55,6 +55,10 @@ PRODUCT = ["--is-family", "product"]
             "--is-pool-from must lie in 0..5",
         ),
         (["--sampler", "is", "--is-proposal", "X", "--is-pool-from", "2"], "leave out the other --is-*"),
+        (["--is-v2i-factor", "none"], "--is-v2i-factor: need --sampler is"),
+        (["--sampler", "is", "--is-v2i-factor", "colour"], "invalid choice"),
+        (["--sampler", "is", *PRODUCT, "--is-v2i-factor", "contrast"], "--is-v2i-factor: used only by"),
+        (["--sampler", "is", "--is-proposal", "X", "--is-v2i-factor", "none"], "leave out the other --is-*"),
     ],
 )
 def test_bad_sampler_flags_are_refused_in_one_line(capsys, tmp_path, extra, message):
@@ -158,6 +162,23 @@ def test_table_one_pools_from_stage_2_by_default_and_older_runs_resume_with_the_
     older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
     assert resumed_arguments(older, {})["is_pool_from"] is None
     assert resumed_arguments({**older, "is_pool_from": 2}, {})["is_pool_from"] == 2
+
+
+def test_the_v2i_factor_is_on_for_new_joint_runs_and_older_runs_resume_without_it(tmp_path):
+    """Since session 12 the joint proposal may aim at V2I's collisions too (--is-v2i-factor contrast,
+    recorded in the sampler's identity); 'none', the product family and runs recorded before the flag
+    keep the identity they had."""
+
+    def sampler_of(*extra: str) -> dict:
+        args = parse_args(["--scenario", "crossing", "--sampler", "is", *extra, "--out", str(tmp_path / "r")])
+        return prepare(args).identity["sampler"]
+
+    assert "v2i_factor" in sampler_of()
+    assert "v2i_factor" not in sampler_of("--is-v2i-factor", "none")
+    assert "v2i_factor" not in sampler_of(*PRODUCT)
+    older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
+    assert resumed_arguments(older, {})["is_v2i_factor"] == "none"
+    assert resumed_arguments({**older, "is_v2i_factor": "contrast"}, {})["is_v2i_factor"] == "contrast"
 
 
 #: --is-inputs all: 20 pilot pairs (an elite of 2) are too few for the input screen to select anything,

@@ -232,3 +232,55 @@ def test_the_paired_table_of_an_importance_sampling_run_is_weighted():
     # a plain MC run keeps McNemar's table, without the column
     plain = episodes.assign(sampler_stage=0, weight=1.0)
     assert "test" not in paired_of_run(plain).columns
+
+
+def test_v2i_takes_pi_hat_r_as_its_control_under_the_v2i_factor():
+    """A final stage drawn from a proposal with the V2I factor (sampling/joint.py): Table I's V2I row is
+    the regression on C = w pi_hat r - E_p[pi_hat r], r = expit(b_0 + b_1 L[clothing, car colour]) written
+    out here; the SV row keeps pi_hat."""
+    from pedsafe_sumo.sampling.joint import ContrastFactor
+
+    table_l = ((1, 0), (0, 1))  # two clothing colours, two car colours: low contrast on the diagonal
+    b0, b1, mean_v2i = -1.0, 2.5, 0.05
+    factor = ContrastFactor(("waiting_0.colour",), table_l, (b0, b1), 0.3)
+    nominal = {**NOMINAL, **factor.nominal()}
+    proposal = JointProposal(
+        nominal,
+        COEFFICIENTS,
+        0.25,
+        0.1,
+        1e-3,
+        MEAN_PI_HAT,
+        MEAN_PI_HAT_SE,
+        None,
+        factor,
+        mean_v2i,
+        MEAN_PI_HAT_SE,
+    )
+    episodes = _episodes()
+    rng = np.random.default_rng(43)
+    colours = {e: (float(rng.integers(2)), float(rng.integers(2))) for e in episodes["episode"].unique()}
+
+    def with_colours(row: pd.Series) -> str:
+        record = json.loads(row["sampler_inputs"])
+        record["inputs"]["clothing"], record["inputs"]["waiting_0.colour"] = colours[row["episode"]]
+        return json.dumps(record)
+
+    episodes["sampler_inputs"] = episodes.apply(with_colours, axis=1)
+    table = table_one_of_run(episodes, proposals={"right_turn": ["", proposal.to_json()]})
+    for condition in ("sv", "v2i"):
+        final = episodes[(episodes.sampler_stage == 1) & (episodes.condition == condition)]
+        final = final[final.status == "ok"]
+        w = final["weight"].to_numpy()
+        inputs = [json.loads(t)["inputs"] for t in final["sampler_inputs"]]
+        g = np.array([_pi_hat_by_hand(x) for x in inputs])
+        if condition == "v2i":
+            low = np.array([table_l[int(x["clothing"])][int(x["waiting_0.colour"])] for x in inputs])
+            g = g * special.expit(b0 + b1 * low)
+        mean, low_end, high = _regression(
+            w * final["collision"].to_numpy(dtype=float),
+            w * g - (mean_v2i if condition == "v2i" else MEAN_PI_HAT),
+        )
+        row = table[table.condition == condition].iloc[0]
+        assert row["collision_rate"] == pytest.approx(mean, rel=1e-10), condition
+        assert row["collision_high"] == pytest.approx(high, rel=1e-10), condition
