@@ -4,10 +4,12 @@ against the efficiency worked out by numerical integration (no SUMO)."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import sys
 
 import numpy as np
+import pandas as pd
 from scipy import integrate, stats
 
 from pedsafe_sumo import REPO_ROOT
@@ -60,3 +62,30 @@ def test_a_control_equal_to_the_outcome_leaves_no_variance() -> None:
     w = stats.norm.pdf(x) / stats.norm.pdf(x, 2.0)
     p_hat, plain, with_cv = tool.reweighted_efficiency(f, w, w, f, float(np.mean(w * f)))
     assert with_cv > 1e6 * plain
+
+
+def test_the_contrast_table_separates_v2i_collisions_decided_by_one_cars_colour() -> None:
+    """is_v2i_contrast.contrast_table on pairs whose V2I collides exactly where the clothing matches car 1's
+    colour (red on red, L = 1) and never otherwise: AUC 1 and all/none below the threshold for car 1;
+    car 0's colour, drawn independently, tells nothing (its AUC near 1/2)."""
+    spec = importlib.util.spec_from_file_location(
+        "is_v2i_contrast", REPO_ROOT / "tools" / "experiments" / "is_v2i_contrast.py"
+    )
+    contrast = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = contrast
+    spec.loader.exec_module(contrast)
+    rng = np.random.default_rng(3)
+    rows = []
+    for _ in range(600):
+        car_1 = int(rng.integers(6))
+        match = rng.random() < 0.3
+        record = {"clothing": 0, "car_0.colour": int(rng.integers(6)), "car_1.colour": 4 if match else car_1}
+        low = record["car_1.colour"] == 4  # clothing 0 is red; car colour 4 the red car
+        rows.append(
+            {"collision": True, "collision_v2i": bool(low), "sampler_inputs": json.dumps({"inputs": record})}
+        )
+    table = contrast.contrast_table(pd.DataFrame(rows), 15.0).set_index("colour input")
+    assert table.loc["car_1.colour", "AUC of -delta E"] == 1.0
+    assert table.loc["car_1.colour", "V2I too: below threshold"] == 1.0
+    assert table.loc["car_1.colour", "SV only: below threshold"] == 0.0
+    assert abs(table.loc["car_0.colour", "AUC of -delta E"] - 0.5) < 0.1
