@@ -68,9 +68,11 @@ def contrast_table(pairs: pd.DataFrame, threshold: float) -> pd.DataFrame:
     return pd.DataFrame(table)
 
 
-def factor_scores(run: Path, low_contrast: tuple[tuple[int, ...], ...]) -> pd.DataFrame:
-    """Part 2 of the docstring: the stored proposal and the one with the V2I factor, scored."""
-    pilot, pairs, stored = final_pairs(run)
+def factor_scores(
+    pilot: pd.DataFrame, pairs: pd.DataFrame, stored: JointProposal, low_contrast: tuple[tuple[int, ...], ...]
+) -> pd.DataFrame:
+    """Part 2 of the docstring: the stored proposal and the one with the V2I factor (fitted on `pilot`),
+    scored on the final stage's `pairs`."""
     with_factor = with_v2i_factor(stored, pilot, low_contrast)
     w = pairs["weight"].to_numpy(float)
     outcome = {
@@ -115,16 +117,18 @@ def main(argv: list[str] | None = None) -> int:
                 f"{run}: made with the V2I factor; give runs made with --is-v2i-factor none", file=sys.stderr
             )
             return 2
-        _, pairs, stored = final_pairs(run)
-        if not isinstance(stored, JointProposal):  # pragma: no cover - final_pairs reads a joint proposal
-            return 2
+        pilot, pairs, stored = final_pairs(run)
         print(
             f"\n{run}: final stage {len(pairs)} pairs, SV collisions {int(pairs['collision'].sum())}, "
             f"V2I too {int((pairs['collision'] & pairs['collision_v2i']).sum())}"
         )
         with pd.option_context("display.width", 200, "display.max_columns", 20):
             print(contrast_table(pairs, threshold).to_string(index=False, float_format=lambda v: f"{v:.3g}"))
-            print(factor_scores(run, low_contrast).to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+            print(
+                factor_scores(pilot, pairs, stored, low_contrast).to_string(
+                    index=False, float_format=lambda v: f"{v:.3g}"
+                )
+            )
     return 0
 
 

@@ -36,8 +36,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pedsafe_sumo.sampling.joint import NORM_SEED, RIDGE, JointProposal, fit_logistic
-from pedsafe_sumo.sampling.stages import _inputs_and_nominal
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from is_v2i_within_sv import stage_pairs  # noqa: E402
+
+from pedsafe_sumo.sampling.joint import NORM_SEED, RIDGE, JointProposal, fit_logistic  # noqa: E402
+from pedsafe_sumo.sampling.stages import _inputs_and_nominal  # noqa: E402
 
 #: Nominal draws for c_alpha and m (a relative error of about 1e-3 on c, as the sampler's NORM_DRAWS / 2.5).
 NOMINAL_DRAWS = 400_000
@@ -67,7 +71,7 @@ def reweighted_efficiency(
 
 
 def final_pairs(run: Path) -> tuple[pd.DataFrame, pd.DataFrame, JointProposal]:
-    """The pilot rows (both conditions, ok), the final stage's pairs (weight, inputs, both collisions) and
+    """The pilot rows (both conditions, ok), the final stage's pairs (is_v2i_within_sv.stage_pairs) and
     the final stage's stored joint proposal."""
     rows = pd.read_parquet(run / "episodes.parquet")
     info = json.loads((run / "run.json").read_text())
@@ -75,12 +79,7 @@ def final_pairs(run: Path) -> tuple[pd.DataFrame, pd.DataFrame, JointProposal]:
     rows = rows[rows["status"] == "ok"]
     final = int(rows["sampler_stage"].max())
     recorded = JointProposal.from_json(proposals[final])
-    last = rows[rows["sampler_stage"] == final]
-    sv = last[last["condition"] == "sv"].set_index("episode")
-    v2i = last[last["condition"] == "v2i"].set_index("episode")
-    pairs = sv[["weight", "collision", "sampler_inputs"]].join(
-        v2i[["collision"]].rename(columns={"collision": "collision_v2i"}), how="inner"
-    )
+    pairs = stage_pairs(rows[rows["sampler_stage"] == final])
     return rows[rows["sampler_stage"] < final], pairs, recorded
 
 

@@ -23,17 +23,22 @@ from scipy.special import expit
 from pedsafe_sumo.sampling.control_variate import pi_hat_of_inputs, stage_control
 
 
-def final_pairs(run: str) -> tuple[pd.DataFrame, list[str]]:
-    """The final stage's pairs with both conditions ok (weight, SV inputs, both collisions), and the
-    scenario's stored proposals."""
-    rows = pd.read_parquet(f"{run}/episodes.parquet")
-    info = json.loads(open(f"{run}/run.json").read())
-    final = rows[(rows["sampler_stage"] == rows["sampler_stage"].max()) & (rows["status"] == "ok")]
-    sv = final[final["condition"] == "sv"].set_index("episode")
-    v2i = final[final["condition"] == "v2i"].set_index("episode")
-    pairs = sv[["weight", "collision", "sampler_inputs", "sampler_stage"]].merge(
+def stage_pairs(rows: pd.DataFrame) -> pd.DataFrame:
+    """The pairs of `rows` with both conditions ok, by episode: SV's weight, inputs, stage and collision,
+    and V2I's collision (`collision_v2i`)."""
+    ok = rows[rows["status"] == "ok"]
+    sv = ok[ok["condition"] == "sv"].set_index("episode")
+    v2i = ok[ok["condition"] == "v2i"].set_index("episode")
+    return sv[["weight", "collision", "sampler_inputs", "sampler_stage"]].merge(
         v2i[["collision"]], left_index=True, right_index=True, suffixes=("", "_v2i")
     )
+
+
+def final_pairs(run: str) -> tuple[pd.DataFrame, list[str]]:
+    """The final stage's pairs (stage_pairs), and the scenario's stored proposals."""
+    rows = pd.read_parquet(f"{run}/episodes.parquet")
+    info = json.loads(open(f"{run}/run.json").read())
+    pairs = stage_pairs(rows[rows["sampler_stage"] == rows["sampler_stage"].max()])
     return pairs, info["sampler_proposals"][str(rows["scenario"].iloc[0])]
 
 
