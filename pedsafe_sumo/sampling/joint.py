@@ -288,7 +288,8 @@ def low_contrast_table(
 
 @dataclass(frozen=True)
 class JointProposal:
-    """q ∝ lambda p + (1 - lambda) p sqrt(pi_hat) / c over the inputs of `nominal` (module docstring)."""
+    """q ∝ lambda p + (1 - lambda) p h / c over the inputs of `nominal`, h = sqrt(pi_hat) or, with the V2I
+    factor, sqrt(a pi_hat + (1 - a) pi_hat r) (module docstring)."""
 
     nominal: Mapping[str, Family]
     coefficients: tuple[float, ...]
