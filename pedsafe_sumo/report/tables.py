@@ -19,7 +19,7 @@ from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
-from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage
+from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage, stage_max_weight
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -93,7 +93,12 @@ def table_one_weighted(
         est, kept_plain = {}, []
         for index, v in values.items():
             stages = [
-                StageRows(v[stage_of_row == stage], weights[stage_of_row == stage], *controls[stage])
+                StageRows(
+                    v[stage_of_row == stage],
+                    weights[stage_of_row == stage],
+                    *controls[stage],
+                    max_weight=stage_max_weight((proposals or {}).get(scenario), stage),
+                )
                 for stage in stage_numbers
             ]
             result = pooled_estimate(stages, confidence)

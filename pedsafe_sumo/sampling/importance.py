@@ -26,7 +26,7 @@ Everything here is pure numpy/scipy over arrays: the batch (episodes), the toy p
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -209,14 +209,43 @@ class Estimate:
     ess: float
 
 
-def is_estimate(values: np.ndarray, weights: np.ndarray | None = None, confidence: float = 0.95) -> Estimate:
+def no_event_bound(samples: Sequence[tuple[int, float]], confidence: float = 0.95) -> float:
+    """Upper bound on E_p[f], f in [0, 1], when none of the draws of `samples` had f != 0: each sample is
+    (n_t, W_t), n_t draws from a proposal q_t whose weight p/q_t never exceeds W_t (1 for the nominal,
+    1/lambda for a defensive mixture of share lambda). NaN where some W_t is unknown (NaN or infinite).
+
+    Under q_t the event {f != 0} has probability at least P / W_t (P = P_p(f != 0) >= E_p[f]), so no event
+    in all the draws has probability at most exp(-P sum_t n_t / W_t), whatever the stages' proposals were
+    adapted from (the bound holds given each stage's past). Setting that to alpha/2 gives
+
+        P <= -ln(alpha/2) / sum_t (n_t / W_t),
+
+    the rule of three (Hanley & Lippman-Hand 1983) on n_t / W_t equivalent nominal draws. With every weight
+    1 it is the rule of three on n.
+    """
+    alpha = 1.0 - confidence
+    total = 0.0
+    for n, max_weight in samples:
+        if not (math.isfinite(max_weight) and max_weight > 0):
+            return math.nan
+        total += n / max_weight
+    return -math.log(alpha / 2) / total if total > 0 else math.nan
+
+
+def is_estimate(
+    values: np.ndarray,
+    weights: np.ndarray | None = None,
+    confidence: float = 0.95,
+    max_weight: float = math.nan,
+) -> Estimate:
     """Unbiased estimate (1/n) sum w f, a central-limit interval on the products w f, and the ESS.
 
     With every weight 1 this is plain Monte Carlo. When no draw has f != 0, the sample variance is 0
-    and the central-limit interval would be [0, 0] as if certain; then the upper end is the
-    rule-of-three bound -ln(alpha/2) / ESS, the bound of a rate with no event in ESS equivalent draws
-    (Hanley & Lippman-Hand 1983), scaled by the largest value f can take (1 for indicators and
-    probabilities).
+    and the central-limit interval would be [0, 0] as if certain; then the upper end is
+    no_event_bound's -ln(alpha/2) W / n, with `max_weight` W a known bound on the weights p/q (f takes
+    values in [0, 1]: indicators and probabilities). Without one (NaN), it is -ln(alpha/2) / ESS, the
+    rule of three on the effective sample: the bound of earlier runs, which can fall below the truth when
+    the event lies where q/p is lower than n / ESS (docs/sampling.md, "No event").
     """
     f = np.asarray(values, dtype=float)
     w = np.ones_like(f) if weights is None else np.asarray(weights, dtype=float)
@@ -232,7 +261,8 @@ def is_estimate(values: np.ndarray, weights: np.ndarray | None = None, confidenc
         return Estimate(mean, math.nan, math.nan, 1, ess)
     alpha = 1.0 - confidence
     if not np.any(products != 0):
-        return Estimate(0.0, 0.0, -math.log(alpha / 2) / ess, n, ess)
+        bound = no_event_bound([(n, max_weight)], confidence)
+        return Estimate(0.0, 0.0, bound if math.isfinite(bound) else -math.log(alpha / 2) / ess, n, ess)
     z = float(special.ndtri(1.0 - alpha / 2))
     half = z * float(np.std(products, ddof=1)) / math.sqrt(n)
     return Estimate(mean, mean - half, mean + half, n, ess)

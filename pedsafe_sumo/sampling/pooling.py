@@ -22,6 +22,8 @@ downward bias. Only the run's layout sets the shares.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,7 +33,8 @@ import numpy as np
 from scipy import special
 
 from pedsafe_sumo.sampling.control_variate import cv_estimate, cv_parts
-from pedsafe_sumo.sampling.importance import Estimate, is_estimate
+from pedsafe_sumo.sampling.importance import Estimate, is_estimate, no_event_bound
+from pedsafe_sumo.sampling.joint import is_joint_json
 
 #: run.json's sampler key of the first stage Table I pools (absent: the final stage alone).
 POOL_FROM_KEY = "estimate_from_stage"
@@ -52,6 +55,22 @@ def first_estimated_stage(run_info: dict[str, Any] | None) -> int | None:
     return int(sampler[POOL_FROM_KEY])
 
 
+def stage_max_weight(proposals: Sequence[str] | None, stage: int) -> float:
+    """The bound on stage `stage`'s weights p/q from a scenario's stored proposals (run.json's
+    sampler_proposals, one JSON text per stage): 1 for the nominal (an empty text), 1/lambda for a joint
+    proposal of defensive share lambda (sampling/joint.py: p/q = 1 / (lambda + (1 - lambda) h / c)); NaN
+    where it is not known (no proposals; a product proposal, whose share only run.json's sampler holds)."""
+    if proposals is None or not 0 <= stage < len(proposals):
+        return math.nan
+    text = proposals[stage]
+    if not text:
+        return 1.0
+    if not is_joint_json(text):
+        return math.nan
+    share = float(json.loads(text)["defensive_share"])
+    return 1.0 / share if share > 0 else math.nan
+
+
 @dataclass(frozen=True)
 class StageRows:
     """One stage's rows of one index: values f, weights w, and where the stage drew from a joint
@@ -63,6 +82,9 @@ class StageRows:
     control: np.ndarray | None = None
     control_mean: float = math.nan
     control_mean_se: float = math.nan
+    #: A known bound on the stage's weights p/q (1 for the nominal, 1/lambda for a defensive mixture of
+    #: share lambda): the bound with no event (importance.no_event_bound); NaN where unknown.
+    max_weight: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -95,12 +117,18 @@ def pooled_estimate(stages: Sequence[StageRows], confidence: float = 0.95) -> Po
 
     Stages with fewer than 2 rows are left out (no variance can be estimated from them; a stage is never
     planned that small, so only errors can make one). Where no row of any stage has w f != 0, the
-    estimate is is_estimate's on all the rows: 0 with the rule-of-three bound on their ESS.
+    estimate is 0 and the upper end importance.no_event_bound over the stages, where each stage's weights
+    have a known bound (`max_weight`); else is_estimate's on all the rows (the rule of three on their ESS).
     """
     used = [s for s in stages if len(np.asarray(s.values)) >= 2]
     values, weights = _joined(used or stages)
     if not used or not np.any(values * weights != 0):
-        return PooledEstimate(is_estimate(values, weights, confidence), 0)
+        estimate = is_estimate(values, weights, confidence)
+        samples = [(len(np.asarray(s.values)), s.max_weight) for s in used or stages]
+        bound = no_event_bound(samples, confidence)
+        if not np.any(values * weights != 0) and len(values) > 1 and math.isfinite(bound):
+            estimate = dataclasses.replace(estimate, high=bound)
+        return PooledEstimate(estimate, 0)
     if len(used) == 1:  # one stage: the one-stage estimators themselves, to the last bit
         return _one_stage(used[0], confidence)
     n_total = len(values)
@@ -125,7 +153,7 @@ def _one_stage(stage: StageRows, confidence: float) -> PooledEstimate:
         )
         if cv is not None:
             return PooledEstimate(cv, 1)
-    return PooledEstimate(is_estimate(stage.values, stage.weights, confidence), 0)
+    return PooledEstimate(is_estimate(stage.values, stage.weights, confidence, stage.max_weight), 0)
 
 
 def _joined(stages: Sequence[StageRows]) -> tuple[np.ndarray, np.ndarray]:

@@ -160,11 +160,18 @@ def test_constant_control_or_too_few_rows_keep_the_plain_estimates():
         both = pd.concat([episodes, _episodes(scenario="crossing")], ignore_index=True)
         table = table_one_weighted(both, proposals={"right_turn": ["", joint], "crossing": ["", joint]})
         plain = table_one_weighted(both)
-        ours = table[table.scenario == "right_turn"]
-        pd.testing.assert_frame_equal(
-            ours.drop(columns="estimator"), plain[plain.scenario == "right_turn"], check_exact=True
-        )
-        assert (ours["estimator"] == "is").all()
+        ours = table[table.scenario == "right_turn"].drop(columns="estimator")
+        theirs = plain[plain.scenario == "right_turn"].copy()
+        # An index with no event in the stage: the bound from the joint proposal's weight bound (10), which
+        # the plain table, without the proposals, does not know (test_a_condition_with_no_collision_...).
+        for rate, high in (("collision_rate", "collision_high"), ("injury_mean", "injury_high")):
+            none = (theirs[rate] == 0.0).to_numpy()
+            assert ours.loc[none, high].to_numpy() == pytest.approx(
+                -math.log(0.025) * 10 / ours.loc[none, "n"]
+            )
+            theirs.loc[none, high] = ours.loc[none, high]
+        pd.testing.assert_frame_equal(ours, theirs, check_exact=True)
+        assert (table[table.scenario == "right_turn"]["estimator"] == "is").all()
         assert (table[table.scenario == "crossing"]["estimator"] == "is+cv").all()
 
 
@@ -284,3 +291,30 @@ def test_v2i_takes_pi_hat_r_as_its_control_under_the_v2i_factor():
         row = table[table.condition == condition].iloc[0]
         assert row["collision_rate"] == pytest.approx(mean, rel=1e-10), condition
         assert row["collision_high"] == pytest.approx(high, rel=1e-10), condition
+
+
+def test_a_condition_with_no_collision_is_bounded_by_its_stages_weight_bounds():
+    """No V2I collision anywhere: the upper end is -ln(0.025) / (n_0 / 1 + n_1 / 10), the nominal stage's
+    rows counted whole and the joint stage's (defensive share 0.1: weights at most 10) at a tenth; without
+    the proposals, the rule of three on the ESS of the weights, as before."""
+    episodes = _episodes()
+    v2i = episodes["condition"] == "v2i"
+    episodes.loc[v2i, "collision"] = False
+    episodes.loc[v2i & (episodes.status == "ok"), "injury_probability"] = 0.0
+    proposals = {"right_turn": ["", PROPOSAL.to_json()]}
+    rows = episodes[v2i & (episodes.status == "ok")]
+    n0, n1 = int((rows.sampler_stage == 0).sum()), int((rows.sampler_stage == 1).sum())
+    pooled = table_one_of_run(episodes, proposals=proposals, first_stage=0)
+    row = pooled[pooled.condition == "v2i"].iloc[0]
+    assert row["collision_rate"] == 0.0 and row["collision_low"] == 0.0
+    assert row["collision_high"] == pytest.approx(-math.log(0.025) / (n0 + n1 / 10))
+    assert row["injury_high"] == pytest.approx(-math.log(0.025) / (n0 + n1 / 10))
+    final = table_one_of_run(episodes, proposals=proposals)
+    assert final[final.condition == "v2i"].iloc[0]["collision_high"] == pytest.approx(
+        -math.log(0.025) * 10 / n1
+    )
+    w = rows["weight"].to_numpy()
+    without = table_one_of_run(episodes, first_stage=0)
+    assert without[without.condition == "v2i"].iloc[0]["collision_high"] == pytest.approx(
+        -math.log(0.025) / (w.sum() ** 2 / (w**2).sum())
+    )

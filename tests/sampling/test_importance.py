@@ -16,6 +16,7 @@ from pedsafe_sumo.sampling.importance import (
     cross_entropy,
     is_estimate,
     likelihood_ratio,
+    no_event_bound,
 )
 
 GAMMA = 4.0
@@ -121,3 +122,43 @@ def test_plain_monte_carlo_interval_is_the_normal_one():
     assert estimate.mean == pytest.approx(0.3)
     assert estimate.low == pytest.approx(0.3 - half, rel=1e-5)
     assert estimate.high == pytest.approx(0.3 + half, rel=1e-5)
+
+
+def test_no_event_with_a_known_weight_bound_worked_by_hand():
+    # 2,000 draws whose weights never exceed 10 (a defensive share of 0.1): -ln(0.025) x 10 / 2,000.
+    weights = np.r_[np.full(1000, 0.05), np.full(1000, 1.9)]
+    estimate = is_estimate(np.zeros(2000), weights, max_weight=10.0)
+    assert estimate.mean == 0.0 and estimate.low == 0.0
+    assert estimate.high == pytest.approx(-math.log(0.025) * 10.0 / 2000)
+    # stages of 200 nominal draws (bound 1) and 2,000 from a defensive mixture (bound 10): 200 + 200
+    # equivalent nominal draws.
+    assert no_event_bound([(200, 1.0), (2000, 10.0)]) == pytest.approx(-math.log(0.025) / 400)
+    assert math.isnan(no_event_bound([(200, 1.0), (2000, math.nan)]))
+
+
+def test_the_no_event_bound_covers_where_the_rule_of_three_on_the_ess_does_not():
+    """An event that lies where the proposal has q/p at its defensive floor. p = U(0, 1); q/p = 0.1 on
+    [0, 0.3) and (1 - 0.03) / 0.7 on [0.3, 1); the event is [0, 0.008), P = 0.008, and q draws it with
+    probability 0.0008. E_p[p/q] = 3 + 0.7^2 / 0.97, so the ESS of 2,000 draws is about 570 and the
+    rule of three on it, 3.69 / 570 = 0.0065, lies below P; no event in 2,000 draws happens with
+    probability (1 - 0.0008)^2000 = 0.20, so that bound fails in about 20% of runs, not 2.5%. The bound
+    on the weights (W = 10: 3.69 x 10 / 2,000 = 0.018) never does."""
+    rng = np.random.default_rng(21)
+    share, low_mass, rate, n, runs = 0.1, 0.3, 0.008, 2000, 2000
+    high_ratio = (1 - share * low_mass) / (1 - low_mass)
+    fails = {"ess": 0, "bound": 0}
+    empty = 0
+    for _ in range(runs):
+        in_low = rng.random(n) < share * low_mass  # q's mass on [0, 0.3) is 0.03
+        u = np.where(in_low, rng.random(n) * low_mass, low_mass + rng.random(n) * (1 - low_mass))
+        weights = np.where(in_low, 1 / share, 1 / high_ratio)
+        f = (u < rate).astype(float)
+        if f.any():
+            continue
+        empty += 1
+        ess = weights.sum() ** 2 / np.sum(weights**2)
+        fails["ess"] += int(-math.log(0.025) / ess < rate)
+        fails["bound"] += int(is_estimate(f, weights, max_weight=1 / share).high < rate)
+    assert 0.15 < empty / runs < 0.25  # (1 - 0.0008)^2000 = 0.202
+    assert fails["ess"] == empty  # every empty run's ESS bound lies below the truth
+    assert fails["bound"] == 0

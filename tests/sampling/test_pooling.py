@@ -13,7 +13,13 @@ from scipy import stats
 
 from pedsafe_sumo.sampling.control_variate import cv_estimate
 from pedsafe_sumo.sampling.importance import is_estimate
-from pedsafe_sumo.sampling.pooling import StageRows, first_estimated_stage, pooled_estimate, pooled_from_stage
+from pedsafe_sumo.sampling.pooling import (
+    StageRows,
+    first_estimated_stage,
+    pooled_estimate,
+    pooled_from_stage,
+    stage_max_weight,
+)
 
 Z95 = 1.959963984540054
 
@@ -122,3 +128,33 @@ def test_the_first_stage_pooled_is_recorded_and_capped_at_the_final_stage():
     assert first_estimated_stage({"sampler": {"kind": "is"}}) is None
     assert first_estimated_stage({"sampler": None}) is None
     assert first_estimated_stage(None) is None
+
+
+def test_no_event_with_known_weight_bounds_gives_the_bound_on_equivalent_nominal_draws():
+    # a nominal stage of 50 (bound 1) and a joint stage of 30 with defensive share 0.1 (bound 10):
+    # -ln(0.025) / (50 + 3); the ESS stays that of all the weights.
+    stages = [
+        StageRows(np.zeros(50), np.ones(50), max_weight=1.0),
+        StageRows(np.zeros(30), np.full(30, 2.0), max_weight=10.0),
+    ]
+    pooled = pooled_estimate(stages).estimate
+    weights = np.r_[np.ones(50), np.full(30, 2.0)]
+    assert pooled.mean == 0.0 and pooled.low == 0.0
+    assert pooled.high == pytest.approx(-math.log(0.025) / 53)
+    assert pooled.ess == pytest.approx(weights.sum() ** 2 / np.sum(weights**2))
+    # one stage: is_estimate with its bound, -ln(0.025) x 10 / 30
+    one = pooled_estimate([stages[1]]).estimate
+    assert one.high == pytest.approx(-math.log(0.025) * 10 / 30)
+
+
+def test_stage_max_weight_from_the_stored_proposals():
+    from pedsafe_sumo.sampling.importance import Normal
+    from pedsafe_sumo.sampling.joint import JointProposal
+
+    joint = JointProposal({"x": Normal(0.0, 1.0)}, (0.0, 0.0, 0.0), 0.5, 0.25).to_json()
+    proposals = ["", joint, '{"x": {"family": "normal", "mean": 1.0, "sd": 1.0}}']
+    assert stage_max_weight(proposals, 0) == 1.0
+    assert stage_max_weight(proposals, 1) == 4.0
+    assert math.isnan(stage_max_weight(proposals, 2))  # a product proposal: its share is not stored in it
+    assert math.isnan(stage_max_weight(None, 0))
+    assert math.isnan(stage_max_weight(proposals, 3))
