@@ -33,7 +33,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,7 +44,8 @@ from scipy import optimize, special
 from pedsafe_sumo.report.html import replay_commands
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, load_run_per_approach
 from pedsafe_sumo.safety.conflict import conflict_without_collision
-from pedsafe_sumo.sampling.importance import is_estimate
+from pedsafe_sumo.sampling.importance import is_estimate, no_event_bound
+from pedsafe_sumo.sampling.pooling import stage_max_weight
 
 #: Indexes compared, each "higher is worse", with default non-inferiority margins (absolute
 #: differences of the rate or mean). The margins are a decision of the user, not a fact: these
@@ -96,15 +97,25 @@ def tango_interval(b_only: int, a_only: int, n: int, confidence: float) -> Diffe
     return Difference(estimate, low, high)
 
 
-def weighted_difference(a: np.ndarray, b: np.ndarray, weights: np.ndarray, confidence: float) -> Difference:
-    """Unbiased estimate of E_p[B - A] from paired draws with likelihood ratios, and its interval."""
+def weighted_difference(
+    a: np.ndarray,
+    b: np.ndarray,
+    weights: np.ndarray,
+    confidence: float,
+    no_difference_bound: float = math.nan,
+) -> Difference:
+    """Unbiased estimate of E_p[B - A] from paired draws with likelihood ratios, and its interval.
+    `no_difference_bound`: the bound on the share of differing pairs where none differs, from the stages'
+    known weight bounds (sampling.importance.no_event_bound); NaN: the rule of three on the ESS."""
     diff = b - a
     estimate = is_estimate(diff, weights, confidence)
     if np.any(diff * weights != 0):
         return Difference(estimate.mean, estimate.low, estimate.high)
     # No pair differs: |B - A| <= 1 for indexes in [0, 1], so the difference is bounded by the share
-    # of differing pairs, whose bound with none seen is the rule of three on the effective sample.
-    bound = is_estimate(np.zeros_like(diff), weights, confidence).high
+    # of differing pairs, whose bound with none seen is the rule of three on the equivalent nominal draws.
+    bound = no_difference_bound
+    if not math.isfinite(bound):
+        bound = is_estimate(np.zeros_like(diff), weights, confidence).high
     return Difference(0.0, -bound, bound)
 
 
@@ -151,14 +162,24 @@ def compare_runs(
     episodes_b: pd.DataFrame,
     margins: dict[str, float],
     confidence: float = 0.95,
+    proposals: Mapping[str, Sequence[str]] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per scenario, condition and index: n, A's and B's estimates, the difference B - A with its
-    interval, the margin and PASS/FAIL; and the episodes where B did worse than A."""
+    interval, the margin and PASS/FAIL; and the episodes where B did worse than A. `proposals` (run A's
+    run.json sampler_proposals, which B shares) bound the weights of each stage for the interval where no
+    pair differs (docs/sampling.md, "No event")."""
     pairs = pair_runs(episodes_a, episodes_b)
     rows, worse = [], []
     for (scenario, condition), group in pairs.groupby(["scenario", "condition"], sort=False):
         weights = group["weight"].to_numpy(dtype=float)
         plain = bool(np.all(weights == 1.0))
+        no_difference_bound = math.nan
+        if proposals is not None and "sampler_stage_a" in group:
+            stages = group["sampler_stage_a"].astype(int).value_counts().sort_index()
+            no_difference_bound = no_event_bound(
+                [(int(n), stage_max_weight(proposals.get(str(scenario)), int(s))) for s, n in stages.items()],
+                confidence,
+            )
         side_a = pd.DataFrame({c[:-2]: group[c] for c in group.columns if c.endswith("_a")})
         side_b = pd.DataFrame({c[:-2]: group[c] for c in group.columns if c.endswith("_b")})
         for index, margin in margins.items():
@@ -168,7 +189,7 @@ def compare_runs(
                 a_only = int(np.sum((values_a > 0) & (values_b == 0)))
                 diff = tango_interval(b_only, a_only, len(group), confidence)
             else:
-                diff = weighted_difference(values_a, values_b, weights, confidence)
+                diff = weighted_difference(values_a, values_b, weights, confidence, no_difference_bound)
             rows.append(
                 {
                     "scenario": scenario,
@@ -296,7 +317,13 @@ def main(argv: list[str] | None = None) -> int:
         margins = _parse_margins(args.margin)
         tables, worse_lists, run_b_of = [], [], {}
         for arm, run_a, run_b in runs_by_approach(args.run_a, args.run_b, args.approach):
-            arm_table, arm_worse = compare_runs(run_a.episodes, run_b.episodes, margins, args.confidence)
+            arm_table, arm_worse = compare_runs(
+                run_a.episodes,
+                run_b.episodes,
+                margins,
+                args.confidence,
+                (run_a.run_info or {}).get("sampler_proposals"),
+            )
             tables.append(arm_table.assign(approach=arm))
             worse_lists.append(arm_worse.assign(approach=arm))
             run_b_of[arm] = run_b

@@ -92,6 +92,27 @@ def test_weighted_runs_use_the_weighted_difference():
     assert row["b"] == pytest.approx(0.025)
 
 
+def test_no_differing_pair_is_bounded_by_the_stages_weight_bounds():
+    """Identical runs of a nominal stage 0 (50 pairs) and a joint stage 1 (300 pairs, defensive share 0.1:
+    weights at most 10): the interval is +-(-ln(0.025) / (50 + 300 / 10)) given the proposals
+    (docs/sampling.md, "No event"), the rule of three on the ESS without them."""
+    from pedsafe_sumo.sampling.importance import Normal
+    from pedsafe_sumo.sampling.joint import JointProposal
+
+    weights = np.r_[np.ones(50), np.full(150, 0.2), np.full(150, 4.0)]
+    table = _table([0] * 350, weights=weights)
+    table["sampler_stage"] = np.r_[np.zeros(50, dtype=int), np.ones(300, dtype=int)]
+    joint = JointProposal({"x": Normal(0.0, 1.0)}, (0.0, 0.0, 0.0), 0.5, 0.1).to_json()
+    result, _ = compare_runs(table, table.copy(), {"collision": 0.5}, proposals={"crossing": ["", joint]})
+    row = result.set_index("index").loc["collision"]
+    assert row["difference"] == 0.0
+    assert row["high"] == pytest.approx(-math.log(0.025) / 80)
+    assert row["low"] == pytest.approx(math.log(0.025) / 80)
+    without, _ = compare_runs(table, table.copy(), {"collision": 0.5})
+    ess = weights.sum() ** 2 / (weights**2).sum()
+    assert without.set_index("index").loc["collision", "high"] == pytest.approx(-math.log(0.025) / ess)
+
+
 def test_bad_margin_is_one_line_and_exit_2(capsys, tmp_path):
     assert main([str(tmp_path), str(tmp_path), "--margin", "collision=-1"]) == 2
     err = capsys.readouterr().err
