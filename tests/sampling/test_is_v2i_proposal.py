@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pandas as pd
+import pytest
 from scipy import integrate, stats
 
 from pedsafe_sumo import REPO_ROOT
@@ -89,3 +90,16 @@ def test_the_contrast_table_separates_v2i_collisions_decided_by_one_cars_colour(
     assert table.loc["car_1.colour", "V2I too: below threshold"] == 1.0
     assert table.loc["car_1.colour", "SV only: below threshold"] == 0.0
     assert abs(table.loc["car_0.colour", "AUC of -delta E"] - 0.5) < 0.1
+
+
+def test_a_constant_fit_gives_the_nominal_and_one_try() -> None:
+    # pi_hat constant: sqrt(pi) / c = 1 everywhere, so q/p = share + (1 - share) = 1 and one try per draw.
+    from pedsafe_sumo.sampling.importance import Normal
+    from pedsafe_sumo.sampling.joint import JointProposal
+
+    model = JointProposal({"x": Normal(0.0, 1.0)}, (-2.0, 0.0, 0.0), 1.0, 0.1)
+    rng = np.random.default_rng(4)
+    nominal_x, x = {"x": rng.normal(size=1000)}, {"x": rng.normal(size=50)}
+    q_over_p, tries = tool._q_over_p_and_tries(model, nominal_x, x, 0.1)
+    assert np.allclose(q_over_p, 1.0)
+    assert tries == pytest.approx(1.0)

@@ -100,26 +100,62 @@ def fitted(rows: pd.DataFrame, recorded: JointProposal, ridge: float = RIDGE) ->
     )
 
 
-def score(run: Path, oracle: bool = False) -> pd.DataFrame:
+def _q_over_p_and_tries(
+    model: JointProposal, nominal_x: dict[str, np.ndarray], x: dict[str, np.ndarray], share: float
+) -> tuple[np.ndarray, float]:
+    """q/p at `x` of p (share + (1 - share) sqrt(pi_hat) / c) for `model`'s pi_hat, and its mean tries."""
+    root_nominal = np.sqrt(model.pi_hat(nominal_x))
+    norm = float(np.mean(root_nominal))
+    return share + (1 - share) * np.sqrt(model.pi_hat(x)) / norm, share + (1 - share) * float(
+        root_nominal.max()
+    ) / norm
+
+
+def score(run: Path, oracle: bool = False, mc: Path | None = None) -> pd.DataFrame:
     pilot, pairs, recorded = final_pairs(run)
-    x = {
-        name: np.array([json.loads(t)["inputs"][name] for t in pairs["sampler_inputs"]])
-        for name in recorded.names
-    }
-    w = pairs["weight"].to_numpy(float)
-    outcome = {
+    final_outcome = {
         "sv": pairs["collision"].astype(float).to_numpy(),
         "v2i": pairs["collision_v2i"].astype(float).to_numpy(),
     }
+    if mc is not None:  # score on a plain MC run's nominal pairs instead: E_p[w' f], w = 1
+        mc_rows = pd.read_parquet(mc / "episodes.parquet")
+        evaluated = stage_pairs(mc_rows[mc_rows["scenario"] == pilot["scenario"].iloc[0]])
+        w = np.ones(len(evaluated))
+    else:
+        evaluated = pairs
+        w = pairs["weight"].to_numpy(float)
+    x = {
+        name: np.array([json.loads(t)["inputs"][name] for t in evaluated["sampler_inputs"]])
+        for name in recorded.names
+    }
+    outcome = {
+        "sv": evaluated["collision"].astype(float).to_numpy(),
+        "v2i": evaluated["collision_v2i"].astype(float).to_numpy(),
+    }
     final_rows = (
-        pd.DataFrame({"sampler_inputs": pairs["sampler_inputs"], "collision": outcome["sv"]}),
-        pd.DataFrame({"sampler_inputs": pairs["sampler_inputs"], "collision": outcome["v2i"]}),
+        pd.DataFrame({"sampler_inputs": pairs["sampler_inputs"], "collision": final_outcome["sv"]}),
+        pd.DataFrame({"sampler_inputs": pairs["sampler_inputs"], "collision": final_outcome["v2i"]}),
     )
     source = {
         "sv": final_rows[0] if oracle else pilot[pilot["condition"] == "sv"],
         "v2i": final_rows[1] if oracle else pilot[pilot["condition"] == "v2i"],
     }
+    pilot_pairs = stage_pairs(pilot)
+    either = pd.DataFrame(
+        {
+            "sampler_inputs": pilot_pairs["sampler_inputs"],
+            "collision": pilot_pairs["collision"].astype(bool) | pilot_pairs["collision_v2i"].astype(bool),
+        }
+    )
     model = {condition: fitted(rows, recorded) for condition, rows in source.items()}
+    either_model = fitted(either, recorded)
+    v2i_only = pd.DataFrame(
+        {
+            "sampler_inputs": pilot_pairs["sampler_inputs"],
+            "collision": ~pilot_pairs["collision"].astype(bool) & pilot_pairs["collision_v2i"].astype(bool),
+        }
+    )
+    v2i_only_model = fitted(v2i_only, recorded)
     if not oracle and not np.allclose(model["sv"].coefficients, recorded.coefficients, atol=1e-4):
         raise SystemExit(f"{run}: the refitted pi_sv differs from the stored proposal's")
     nominal_x = recorded.sample_nominal(np.random.default_rng(NORM_SEED), NOMINAL_DRAWS)
@@ -129,6 +165,36 @@ def score(run: Path, oracle: bool = False) -> pd.DataFrame:
     rule = mean["v2i"] ** 2 / (mean["sv"] ** 2 + mean["v2i"] ** 2)
     lam = recorded.defensive_share
     table = []
+    variants = [
+        ("as run", recorded.q_over_p(x), recorded.bound),
+        ("sv or v2i", *_q_over_p_and_tries(either_model, nominal_x, x, lam)),
+    ]
+    if recorded.v2i_factor is not None:
+        # V2I as pi_sv r + pi_vo: the factor's model of V2I inside SV's collisions, plus a fit of the V2I
+        # collisions where SV does not collide (pi_vo), a by the relative-variance rule on their means.
+        def v2i_model(at: dict[str, np.ndarray]) -> np.ndarray:
+            return recorded.pi_v2i_hat(at) + v2i_only_model.pi_hat(at)
+
+        m_sv, m_v2i = float(np.mean(recorded.pi_hat(nominal_x))), float(np.mean(v2i_model(nominal_x)))
+        share = m_v2i**2 / (m_sv**2 + m_v2i**2)
+        root_nominal = np.sqrt(share * recorded.pi_hat(nominal_x) + (1 - share) * v2i_model(nominal_x))
+        norm = float(np.mean(root_nominal))
+        root = np.sqrt(share * recorded.pi_hat(x) + (1 - share) * v2i_model(x))
+        variants.append(
+            (
+                f"factor + v2i-only ({int(v2i_only['collision'].sum())})",
+                lam + (1 - lam) * root / norm,
+                lam + (1 - lam) * float(root_nominal.max()) / norm,
+            )
+        )
+    for label, q_over_p, tries in variants:
+        row = {"proposal": label, "alpha": math.nan, "mean tries": tries}
+        for condition in ("sv", "v2i"):
+            _, plain, with_cv = reweighted_efficiency(
+                outcome[condition], w, 1.0 / q_over_p, pi_rows[condition], mean[condition]
+            )
+            row[f"{condition} plain"], row[f"{condition} cv"] = plain, with_cv
+        table.append(row)
     for label, alpha in (("sv (sampler)", 1.0), ("half", 0.5), ("relative variance", rule), ("v2i", 0.0)):
         root_nominal = np.sqrt(alpha * pi_nominal["sv"] + (1 - alpha) * pi_nominal["v2i"])
         norm = float(np.mean(root_nominal))
@@ -158,9 +224,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--oracle", action="store_true", help="fit on the final stage's rows (in-sample)")
+    parser.add_argument(
+        "--mc", type=Path, help="score on this plain MC run's pairs (E_p[w' f]) instead of the final stage"
+    )
     args = parser.parse_args(argv)
     for run in args.runs:
-        table = score(run, args.oracle)
+        table = score(run, args.oracle, args.mc)
         print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     return 0
 
