@@ -51,7 +51,7 @@ from pedsafe_sumo.batch.sampled import (
     PROPOSALS_KEY,
     SAMPLER_IS,
     SAMPLER_MC,
-    V2I_FACTOR_CONTRAST,
+    V2I_FACTOR_CONTRAST_V2I_ONLY,
     V2I_FACTOR_NONE,
     V2I_FACTORS,
     SamplerError,
@@ -134,8 +134,9 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     # since session 11: Table I pools the pilot stages from stage 2 with the final one (docs/sampling.md).
     "is_pool_from": DEFAULT_POOL_FROM_STAGE,
     # since session 12: the joint proposal also aims at V2I's collisions where the pilots hold enough of
-    # them (sampling/joint.py, "The V2I factor"; EXPERIMENTS.md, session 12).
-    "is_v2i_factor": V2I_FACTOR_CONTRAST,
+    # them (sampling/joint.py, "The V2I factor"; EXPERIMENTS.md, session 12); since session 13 also at
+    # those where SV does not collide ("The V2I-only term"; EXPERIMENTS.md, session 13).
+    "is_v2i_factor": V2I_FACTOR_CONTRAST_V2I_ONLY,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a
 #: key missing from an older run.json with this, not with today's default, so the run stays the same run.
@@ -356,8 +357,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         dest="is_v2i_factor",
         help="--sampler is, --is-family joint: 'contrast' = the proposal also aims at V2I's collisions, "
         "modelled from the pilots by the contrast between the clothing and the vehicles' colours, where "
-        "the pilots' SV collisions hold at least 5 V2I ones (docs/sampling.md, 'The V2I factor'); 'none' "
-        f"= fitted on SV's collisions alone [{V2I_FACTOR_CONTRAST}]",
+        "the pilots' SV collisions hold at least 5 V2I ones (docs/sampling.md, 'The V2I factor'); "
+        "'contrast+v2i-only' = also at V2I's collisions where SV does not collide, where the pilots hold at "
+        "least 5 of those; 'none' "
+        f"= fitted on SV's collisions alone [{V2I_FACTOR_CONTRAST_V2I_ONLY}]",
     )
     parser.add_argument(
         "--is-pool-from",

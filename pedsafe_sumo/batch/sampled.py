@@ -56,9 +56,17 @@ FAMILIES = (FAMILY_PRODUCT, FAMILY_JOINT)
 #: --is-v2i-factor: whether the joint proposal also aims at V2I's collisions (sampling/joint.py, "The V2I
 #: factor"), and run.json's record of it (the key only when on, so that runs before it keep their identity).
 V2I_FACTOR_CONTRAST = "contrast"
+#: since session 13: the factor with its V2I-only term (sampling/joint.py, "The V2I-only term").
+V2I_FACTOR_CONTRAST_V2I_ONLY = "contrast+v2i-only"
 V2I_FACTOR_NONE = "none"
-V2I_FACTORS = (V2I_FACTOR_CONTRAST, V2I_FACTOR_NONE)
+V2I_FACTORS = (V2I_FACTOR_CONTRAST_V2I_ONLY, V2I_FACTOR_CONTRAST, V2I_FACTOR_NONE)
 V2I_FACTOR_KEY = "v2i_factor"
+#: run.json's record of the V2I-only term (the key only when on, so that runs of 'contrast' keep theirs).
+V2I_ONLY_KEY = "v2i_only"
+V2I_ONLY_RECORD = (
+    f"plus pi_vo, a ridge logistic over pi_hat's design of V2I's collisions whose SV episode did not "
+    f"collide, where the pilot pairs hold at least {GUARD_MIN_COLLISIONS}; pi_v2i = min(1, pi_hat r + pi_vo)"
+)
 V2I_FACTOR_RECORD = (
     "pi_hat r, r a ridge logistic of V2I's collision on the pilots' SV collisions over low-contrast "
     f"indicators (clothing against each vehicle colour, the roadside camera's delta E threshold), at least "
@@ -106,8 +114,11 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
         identity.update(family=arguments["is_family"], ridge=JOINT_RIDGE, norm_draws=NORM_DRAWS)
         # Runs recorded before the kinematic features lack this key: their resume is refused (another fit).
         identity[JOINT_FEATURES_KEY] = JOINT_FEATURES
-        if arguments.get("is_v2i_factor", V2I_FACTOR_NONE) == V2I_FACTOR_CONTRAST:
+        factor = arguments.get("is_v2i_factor", V2I_FACTOR_NONE)
+        if factor in (V2I_FACTOR_CONTRAST, V2I_FACTOR_CONTRAST_V2I_ONLY):
             identity[V2I_FACTOR_KEY] = V2I_FACTOR_RECORD
+        if factor == V2I_FACTOR_CONTRAST_V2I_ONLY:
+            identity[V2I_ONLY_KEY] = V2I_ONLY_RECORD
     first_pooled = pooled_from_stage(arguments.get("is_pool_from"), identity["pilot_stages"])
     if first_pooled < identity["pilot_stages"]:
         # Only when pilots are pooled, so that runs made before --is-pool-from keep their identity.
@@ -240,6 +251,7 @@ def _joint_stage(
         kinematics,
         pilot_stage,
         low_contrast,
+        bool(identity["sampler"].get(V2I_ONLY_KEY)),
     )
     factor = proposal.v2i_factor if proposal else None
     levels.setdefault(scenario, []).append(
@@ -255,6 +267,11 @@ def _joint_stage(
             **(
                 {"v2i_factor": factor.coefficients, "v2i_target_share": factor.target_share}
                 if factor is not None
+                else {}
+            ),
+            **(
+                {"v2i_only_terms": len(factor.v2i_only_coefficients)}
+                if factor is not None and factor.v2i_only_coefficients
                 else {}
             ),
         }

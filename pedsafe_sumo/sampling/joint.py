@@ -68,6 +68,19 @@ V2I's control variate (`mean_pi_v2i`). Where the clothing does not vary the cont
 dresses the pedestrian in the waiting car's colour) the fit leaves r nearly constant and the proposal
 nearly the SV one.
 
+The V2I-only term (session 13; EXPERIMENTS.md, "Importance sampling, session 13", part 3). The factor
+models V2I's collisions as a subset of SV's. On Xueqing that holds (V2I-only collisions are 0-8% of V2I's
+rate), but on the zhixin junction 41% of V2I's jaywalking collisions happen where SV does not collide, and
+the proposal drew them at about its defensive floor (V2I 0.15x against MC). So where the pilot pairs hold at
+least GUARD_MIN_COLLISIONS V2I collisions whose SV episode did not collide (`--is-v2i-factor
+contrast+v2i-only`), the factor also carries pi_vo, a ridge logistic of "V2I collides, SV does not" on every
+pilot pair over pi_hat's design, and V2I is modelled as
+
+    pi_v2i = min(1, pi_hat r + pi_vo),    h = sqrt(a pi_hat + (1 - a) pi_v2i),
+
+a by the same rule on m_v2i = E_p[pi_v2i]; pi_v2i is V2I's control variate. The factor then applies where
+either count reaches the threshold (r fitted on what SV collisions there are). h <= 1 still, so B stands.
+
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
 Dask rebuild the very proposal. The estimate's relative error (stored as `norm_rel_se`) is the relative
@@ -231,6 +244,8 @@ class ContrastFactor:
     coefficients: tuple[float, ...]
     #: a of h = sqrt(a pi_hat + (1 - a) pi_hat r); NaN until the proposal is normalised.
     target_share: float = math.nan
+    #: The V2I-only term (module docstring): coefficients of pi_vo on pi_hat's design; () without it.
+    v2i_only_coefficients: tuple[float, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -260,6 +275,12 @@ class ContrastFactor:
             "low_contrast": [list(row) for row in self.low_contrast],
             "coefficients": list(self.coefficients),
             "target_share": self.target_share,
+            # Only with the term, so that a factor without it serialises as before (session 12).
+            **(
+                {"v2i_only_coefficients": list(self.v2i_only_coefficients)}
+                if self.v2i_only_coefficients
+                else {}
+            ),
         }
 
     @staticmethod
@@ -269,6 +290,7 @@ class ContrastFactor:
             tuple(tuple(int(v) for v in row) for row in data["low_contrast"]),
             tuple(float(v) for v in data["coefficients"]),
             float(data["target_share"]),
+            tuple(float(v) for v in data.get("v2i_only_coefficients", ())),
         )
 
 
@@ -345,19 +367,34 @@ class JointProposal:
         """The fitted P(SV collision | x) at the inputs `x` (name -> values on the drawn scales)."""
         return special.expit(self.features(x) @ np.asarray(self.coefficients))
 
-    def pi_v2i_hat(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        """pi_hat r at the inputs `x`: the modelled P(V2I collision | x, z) (the V2I factor's)."""
+    def _pi_and_v2i(self, x: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(pi_hat, the modelled P(V2I collision)) at `x`, the design built once: pi_hat r, or with the
+        V2I-only term min(1, pi_hat r + pi_vo)."""
         if self.v2i_factor is None:
             raise ValueError("this proposal has no V2I factor")
-        return self.pi_hat(x) * self.v2i_factor.r(x)
+        design = self.features(x)
+        pi = special.expit(design @ np.asarray(self.coefficients))
+        v2i = pi * self.v2i_factor.r(x)
+        if self.v2i_factor.v2i_only_coefficients:
+            v2i_only = special.expit(design @ np.asarray(self.v2i_factor.v2i_only_coefficients))
+            v2i = np.minimum(1.0, v2i + v2i_only)
+        return pi, v2i
+
+    def pi_v2i_hat(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The modelled P(V2I collision | x, z) at the inputs `x` (the V2I factor's): pi_hat r, plus pi_vo
+        with the V2I-only term."""
+        return self._pi_and_v2i(x)[1]
 
     def root_pi(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        """h: sqrt(pi_hat), or with the V2I factor sqrt(a pi_hat + (1 - a) pi_hat r) (module docstring)."""
-        pi = self.pi_hat(x)
+        """h: sqrt(pi_hat), or with the V2I factor sqrt(a pi_hat + (1 - a) pi_v2i) (module docstring)."""
         if self.v2i_factor is None:
-            return np.sqrt(pi)
+            return np.sqrt(self.pi_hat(x))
         share = self.v2i_factor.target_share
-        return np.sqrt(pi * (share + (1 - share) * self.v2i_factor.r(x)))
+        if not self.v2i_factor.v2i_only_coefficients:  # session 12's expression, to the last bit
+            pi = self.pi_hat(x)
+            return np.sqrt(pi * (share + (1 - share) * self.v2i_factor.r(x)))
+        pi, v2i = self._pi_and_v2i(x)
+        return np.sqrt(share * pi + (1 - share) * v2i)
 
     def q_over_p(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
         lam = self.defensive_share
@@ -531,12 +568,18 @@ def normalised(
     factor_means: dict[str, Any] = {}
     if v2i_factor is None:
         root = np.sqrt(pi)
-    else:
+    elif not v2i_factor.v2i_only_coefficients:
         r = np.concatenate([v2i_factor.r(block) for block in blocks])
         pi_v2i = pi * r
         mean_sv, mean_v2i = float(np.mean(pi)), float(np.mean(pi_v2i))
         share = mean_v2i**2 / (mean_sv**2 + mean_v2i**2) if mean_sv > 0 else 1.0
         root = np.sqrt(pi * (share + (1 - share) * r))
+    else:
+        pi_v2i = np.concatenate([shell.pi_v2i_hat(block) for block in blocks])
+        mean_sv, mean_v2i = float(np.mean(pi)), float(np.mean(pi_v2i))
+        share = mean_v2i**2 / (mean_sv**2 + mean_v2i**2) if mean_sv > 0 else 1.0
+        root = np.sqrt(share * pi + (1 - share) * pi_v2i)
+    if v2i_factor is not None:
         factor_means = {
             "v2i_factor": dataclasses.replace(v2i_factor, target_share=float(share)),
             "mean_pi_v2i": mean_v2i,
@@ -558,12 +601,20 @@ def normalised(
 
 
 def with_v2i_factor(
-    proposal: JointProposal, rows: pd.DataFrame, low_contrast: tuple[tuple[int, ...], ...]
+    proposal: JointProposal,
+    rows: pd.DataFrame,
+    low_contrast: tuple[tuple[int, ...], ...],
+    v2i_only: bool = False,
 ) -> JointProposal | None:
     """`proposal` with the V2I factor (module docstring) fitted on the pairs of `rows` (pilot rows of both
     conditions) whose SV episode collided; None where they hold fewer than GUARD_MIN_COLLISIONS V2I
     collisions, the scenario draws no clothing or no vehicle colour in every pilot episode, or the
-    envelope would be too loose (the proposal of SV alone then stands)."""
+    envelope would be too loose (the proposal of SV alone then stands).
+
+    With `v2i_only`, where the pairs hold at least GUARD_MIN_COLLISIONS V2I collisions whose SV episode
+    did not collide, the factor also carries the V2I-only term pi_vo, a ridge logistic of those on every
+    pair over pi_hat's design (module docstring); the factor then applies where either count reaches the
+    threshold."""
     from pedsafe_sumo.sampling.stages import ADAPT_CONDITION
 
     ok = rows[rows["status"] == "ok"]
@@ -574,7 +625,9 @@ def with_v2i_factor(
     )
     hit = pairs[pairs["collision"].astype(bool)]
     y = hit["collision_v2i"].astype(float).to_numpy()
-    if y.sum() < GUARD_MIN_COLLISIONS:
+    y_only = (~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).to_numpy(dtype=float)
+    with_only = v2i_only and y_only.sum() >= GUARD_MIN_COLLISIONS
+    if y.sum() < GUARD_MIN_COLLISIONS and not with_only:
         return None
     records = [json.loads(text)["inputs"] for text in pairs["sampler_inputs"]]
     colour_inputs = sorted(
@@ -587,6 +640,10 @@ def with_v2i_factor(
     z = {name: np.array([r[name] for r in hit_records], dtype=float) for name in factor.names}
     coefficients = fit_logistic(factor.design(z), y, RIDGE)
     factor = dataclasses.replace(factor, coefficients=tuple(float(b) for b in coefficients))
+    if with_only:
+        x = {name: np.array([r[name] for r in records], dtype=float) for name in proposal.names}
+        only = fit_logistic(proposal.features(x), y_only, RIDGE)
+        factor = dataclasses.replace(factor, v2i_only_coefficients=tuple(float(b) for b in only))
     nominal = {**proposal.nominal, **factor.nominal()}
     fitted = normalised(nominal, proposal.coefficients, proposal.defensive_share, proposal.kinematics, factor)
     return fitted if fitted.norm > 0 and fitted.bound <= MAX_MEAN_TRIES else None
@@ -599,12 +656,13 @@ def joint_update(
     kinematics: Kinematics | None = None,
     pilot_stage: bool = False,
     low_contrast: tuple[tuple[int, ...], ...] | None = None,
+    v2i_only: bool = False,
 ) -> tuple[JointProposal | None, int, bool]:
     """The proposal of the next stage from every pilot row so far of `condition` (status ok), their
     collisions, and whether it is the guard's region proposal (a `pilot_stage` with fewer than
     GUARD_MIN_COLLISIONS collisions, where the scenario has the kinematic inputs) rather than the fit.
     With `low_contrast` (the V2I factor's table L), the fit gains the V2I factor where with_v2i_factor
-    finds it can (the pairs of `rows` with both conditions)."""
+    finds it can (the pairs of `rows` with both conditions), with `v2i_only` its V2I-only term."""
     from pedsafe_sumo.sampling.stages import _inputs_and_nominal
 
     both = rows
@@ -618,7 +676,7 @@ def joint_update(
             return region, n_collisions, True
     proposal = fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics)
     if proposal is not None and low_contrast is not None:
-        proposal = with_v2i_factor(proposal, both, low_contrast) or proposal
+        proposal = with_v2i_factor(proposal, both, low_contrast, v2i_only) or proposal
     return proposal, n_collisions, False
 
 

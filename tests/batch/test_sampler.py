@@ -166,16 +166,21 @@ def test_table_one_pools_from_stage_2_by_default_and_older_runs_resume_with_the_
 
 def test_the_v2i_factor_is_on_for_new_joint_runs_and_older_runs_resume_without_it(tmp_path):
     """Since session 12 the joint proposal may aim at V2I's collisions too (--is-v2i-factor contrast,
-    recorded in the sampler's identity); 'none', the product family and runs recorded before the flag
-    keep the identity they had."""
+    recorded in the sampler's identity), since session 13 by default with the V2I-only term
+    (contrast+v2i-only, a key of its own); 'none', the product family and runs recorded before the flag
+    keep the identity they had, and runs of 'contrast' theirs."""
 
     def sampler_of(*extra: str) -> dict:
         args = parse_args(["--scenario", "crossing", "--sampler", "is", *extra, "--out", str(tmp_path / "r")])
         return prepare(args).identity["sampler"]
 
-    assert "v2i_factor" in sampler_of()
-    assert "v2i_factor" not in sampler_of("--is-v2i-factor", "none")
-    assert "v2i_factor" not in sampler_of(*PRODUCT)
+    # since session 13 the default also carries the V2I-only term (its own key); 'contrast' is session 12's
+    assert "v2i_factor" in sampler_of() and "v2i_only" in sampler_of()
+    contrast = sampler_of("--is-v2i-factor", "contrast")
+    assert "v2i_factor" in contrast and "v2i_only" not in contrast
+    assert contrast == {k: v for k, v in sampler_of().items() if k != "v2i_only"}
+    for identity in (sampler_of("--is-v2i-factor", "none"), sampler_of(*PRODUCT)):
+        assert "v2i_factor" not in identity and "v2i_only" not in identity
     older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
     assert resumed_arguments(older, {})["is_v2i_factor"] == "none"
     assert resumed_arguments({**older, "is_v2i_factor": "contrast"}, {})["is_v2i_factor"] == "contrast"

@@ -3,6 +3,7 @@ worked out here, h and the weights by hand, exact sampling through Draws, the fi
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -222,3 +223,89 @@ def test_json_round_trip_keeps_the_factor_and_a_proposal_without_it_has_no_new_k
     plain = json.loads(normalised(NOMINAL, COEFFICIENTS, DEFENSIVE_SHARE).to_json())
     assert not {"v2i_factor", "mean_pi_v2i", "mean_pi_v2i_se"} & set(plain)
     assert isinstance(proposal.nominal["clothing"], Categorical)
+
+
+# ---------------------------------------------------------------- the V2I-only term (session 13)
+#: The toy's V2I also collides where SV does not: a slow ego (below 3 m/s) with the offset below -0.8 s.
+TOY_V2I_ONLY_P = stats.norm.cdf((math.log(3.0) - LOG_MU) / LOG_SIGMA) * 0.2 / 2.5
+#: pi_vo's coefficients on pi_hat's design (1, z_o, z_o^2, z_e, z_e^2, z_o z_e).
+ONLY = (-4.0, -1.5, 0.0, -2.0, 0.0, 0.3)
+
+
+def _episode_with_v2i_only(rng: np.random.Generator, proposal) -> tuple[dict, float, bool, bool]:
+    record, weight, sv, v2i = _episode(rng, proposal)
+    speed, offset = math.exp(record["inputs"]["ego_speed_log"]), record["inputs"]["conflict_offset_s"]
+    return record, weight, sv, bool(v2i or (speed < 3.0 and offset < -0.8))
+
+
+def test_the_v2i_only_term_by_hand_and_its_json() -> None:
+    factor = dataclasses.replace(_factor(), v2i_only_coefficients=ONLY)
+    proposal = normalised({**NOMINAL, **factor.nominal()}, COEFFICIENTS, DEFENSIVE_SHARE, None, factor)
+    x = {"ego_speed_log": np.array([2.6, 0.9]), "conflict_offset_s": np.array([1.0, -0.9])}
+    x |= {"clothing": np.array([0.0, 2.0]), CAR: np.array([4.0, 4.0])}
+    z_o = (x["conflict_offset_s"] - 0.25) / (2.5 / math.sqrt(12))
+    z_e = (x["ego_speed_log"] - LOG_MU) / LOG_SIGMA
+    pi = special.expit(-5.0 + z_o + 2.0 * z_e + 0.5 * z_o * z_e)
+    r = special.expit(np.array([-3.0 + 4.0, -3.0]))
+    only = special.expit(-4.0 - 1.5 * z_o - 2.0 * z_e + 0.3 * z_o * z_e)
+    a = proposal.v2i_factor.target_share
+    assert proposal.pi_v2i_hat(x) == pytest.approx(np.minimum(1.0, pi * r + only))
+    assert proposal.root_pi(x) == pytest.approx(np.sqrt(a * pi + (1 - a) * (pi * r + only)))
+    rng = np.random.default_rng(9)
+    draws = {name: family.sample(rng, 400_000) for name, family in {**NOMINAL, **factor.nominal()}.items()}
+    assert proposal.mean_pi_v2i == pytest.approx(float(np.mean(proposal.pi_v2i_hat(draws))), rel=0.02)
+    assert a == pytest.approx(proposal.mean_pi_v2i**2 / (proposal.mean_pi_hat**2 + proposal.mean_pi_v2i**2))
+    assert proposal.bound == pytest.approx(DEFENSIVE_SHARE + (1 - DEFENSIVE_SHARE) / proposal.norm)
+    assert JointProposal.from_json(proposal.to_json()) == proposal
+    assert json.loads(proposal.to_json())["v2i_factor"]["v2i_only_coefficients"] == list(ONLY)
+    assert "v2i_only_coefficients" not in json.loads(_proposal().to_json())["v2i_factor"]
+    texts = [json.dumps({"inputs": {k: float(v[1]) for k, v in x.items()}, "nominal": {}, "log_weight": 0.0})]
+    g_v2i, mean_v2i, _ = condition_control(proposal, texts, "v2i")
+    assert g_v2i == pytest.approx([pi[1] * r[1] + only[1]]) and mean_v2i == proposal.mean_pi_v2i
+
+
+def test_the_v2i_only_term_is_fitted_where_the_pilots_hold_enough_and_aims_at_those_collisions() -> None:
+    """Nominal pilots of the toy with a V2I-only region: contrast+v2i-only fits pi_vo (high in the slow,
+    early corner), 'contrast' does not; drawn from it, both rates are recovered within their intervals
+    and V2I's variance falls below half that of the factor without the term."""
+    rng = np.random.default_rng(23)
+    pilot = _rows([_episode_with_v2i_only(rng, None) for _ in range(6000)], 0)
+    table = low_contrast_table(CLOTHING_COLOURS_RGB, CAR_COLOURS_RGB, 15.0)
+    with_only, _, _ = joint_update(pilot, "sv", DEFENSIVE_SHARE, None, False, table, v2i_only=True)
+    contrast, _, _ = joint_update(pilot, "sv", DEFENSIVE_SHARE, None, False, table)
+    assert with_only.v2i_factor.v2i_only_coefficients and not contrast.v2i_factor.v2i_only_coefficients
+    assert with_only.v2i_factor.coefficients == contrast.v2i_factor.coefficients  # r is the same fit
+    corner = {
+        "ego_speed_log": np.array([math.log(2.5), math.log(12.0)]),
+        "conflict_offset_s": np.array([-0.9, 1.0]),
+    }
+    corner |= {"clothing": np.array([2.0, 2.0]), CAR: np.array([4.0, 4.0])}
+    assert with_only.pi_v2i_hat(corner)[0] > 0.2 > contrast.pi_v2i_hat(corner)[0]
+    v2i_p = TOY_SV_P * 4 / 36 + TOY_V2I_ONLY_P
+    variances = {}
+    for label, proposal in (("v2i-only", with_only), ("contrast", contrast)):
+        final = [_episode_with_v2i_only(rng, proposal) for _ in range(4000)]
+        w = np.array([e[1] for e in final])
+        for index, truth in ((2, TOY_SV_P), (3, v2i_p)):
+            f = np.array([e[index] for e in final], dtype=float)
+            mean, se = float(np.mean(w * f)), float(np.std(w * f) / math.sqrt(len(w)))
+            assert abs(mean - truth) < 4 * se, (label, index, mean, truth, se)
+            variances[label, index] = se**2
+    assert variances["v2i-only", 3] < 0.5 * variances["contrast", 3]
+
+
+def test_too_few_v2i_only_collisions_leave_the_factor_without_the_term() -> None:
+    rng = np.random.default_rng(24)
+    rows = _rows([_episode_with_v2i_only(rng, None) for _ in range(3000)], 0)
+    base = normalised(NOMINAL, COEFFICIENTS, DEFENSIVE_SHARE)
+    table = low_contrast_table(CLOTHING_COLOURS_RGB, CAR_COLOURS_RGB, 15.0)
+    pairs = rows.pivot(index="episode", columns="condition", values="collision")
+    only = pairs.index[~pairs["sv"] & pairs["v2i"]]
+    assert len(only) >= GUARD_MIN_COLLISIONS
+    few = rows.copy()
+    few.loc[(few.condition == "v2i") & few["episode"].isin(only[GUARD_MIN_COLLISIONS - 1 :]), "collision"] = (
+        False
+    )
+    fitted = with_v2i_factor(base, few, table, v2i_only=True)
+    assert fitted is not None and not fitted.v2i_factor.v2i_only_coefficients
+    assert fitted == with_v2i_factor(base, few, table)
