@@ -170,17 +170,24 @@ def test_the_fit_finds_the_contrast_and_the_final_stage_recovers_both_rates() ->
     intercept, slope = with_factor.v2i_factor.coefficients
     assert slope > 2.0 and intercept < -2.0
     assert with_factor.coefficients == without.coefficients  # pi_hat is the same fit
-    v2i_p = TOY_SV_P * 4 / 36
+    proposals = {"factor": with_factor, "sv alone": without}
+    variances = _final_stage_variances(rng, _episode, proposals, TOY_SV_P * 4 / 36)
+    assert variances["factor", 3] < 0.5 * variances["sv alone", 3]
+
+
+def _final_stage_variances(rng, episode, proposals: dict, v2i_p: float) -> dict:
+    """4,000 episodes from each proposal: SV's and V2I's weighted means within 4 standard errors of the
+    toy's rates (TOY_SV_P, v2i_p); the squared standard errors by (label, 2 for SV / 3 for V2I)."""
     variances = {}
-    for label, proposal in (("factor", with_factor), ("sv alone", without)):
-        final = [_episode(rng, proposal) for _ in range(4000)]
+    for label, proposal in proposals.items():
+        final = [episode(rng, proposal) for _ in range(4000)]
         w = np.array([e[1] for e in final])
         for index, truth in ((2, TOY_SV_P), (3, v2i_p)):
             f = np.array([e[index] for e in final], dtype=float)
             mean, se = float(np.mean(w * f)), float(np.std(w * f) / math.sqrt(len(w)))
             assert abs(mean - truth) < 4 * se, (label, index, mean, truth, se)
             variances[label, index] = se**2
-    assert variances["factor", 3] < 0.5 * variances["sv alone", 3]
+    return variances
 
 
 def test_too_few_v2i_collisions_or_no_colours_leave_the_proposal_of_sv_alone() -> None:
@@ -281,16 +288,9 @@ def test_the_v2i_only_term_is_fitted_where_the_pilots_hold_enough_and_aims_at_th
     }
     corner |= {"clothing": np.array([2.0, 2.0]), CAR: np.array([4.0, 4.0])}
     assert with_only.pi_v2i_hat(corner)[0] > 0.2 > contrast.pi_v2i_hat(corner)[0]
+    proposals = {"v2i-only": with_only, "contrast": contrast}
     v2i_p = TOY_SV_P * 4 / 36 + TOY_V2I_ONLY_P
-    variances = {}
-    for label, proposal in (("v2i-only", with_only), ("contrast", contrast)):
-        final = [_episode_with_v2i_only(rng, proposal) for _ in range(4000)]
-        w = np.array([e[1] for e in final])
-        for index, truth in ((2, TOY_SV_P), (3, v2i_p)):
-            f = np.array([e[index] for e in final], dtype=float)
-            mean, se = float(np.mean(w * f)), float(np.std(w * f) / math.sqrt(len(w)))
-            assert abs(mean - truth) < 4 * se, (label, index, mean, truth, se)
-            variances[label, index] = se**2
+    variances = _final_stage_variances(rng, _episode_with_v2i_only, proposals, v2i_p)
     assert variances["v2i-only", 3] < 0.5 * variances["contrast", 3]
 
 
