@@ -929,7 +929,7 @@ def run(plan: Plan, backend: Backend, argv: list[str]) -> int:
 def print_table(table: pd.DataFrame, run_info: dict[str, Any] | None = None) -> None:
     """Table I of the rows; `run_info` (run.json) for an importance-sampling run's stages pooled and the
     control variates of joint proposals (report/tables.py: table_one_weighted)."""
-    from pedsafe_sumo.report.tables import is_weighted, table_one_of_run
+    from pedsafe_sumo.report.tables import is_weighted, table_one_of_run, v2i_only_note
     from pedsafe_sumo.safety.stats import table_one
 
     proposals = (run_info or {}).get(PROPOSALS_KEY)
@@ -953,6 +953,8 @@ def print_table(table: pd.DataFrame, run_info: dict[str, Any] | None = None) -> 
             "rates):"
         )
     _print_rows(summary)
+    if is_weighted(table) and v2i_only_note(run_info):
+        print(v2i_only_note(run_info))
     arms = [arm for arm in table["approach"].unique() if arm] if "approach" in table else []
     if len(arms) > 1:  # --approach all: the same table per approach
         for arm in arms:

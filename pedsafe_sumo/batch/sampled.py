@@ -26,6 +26,7 @@ from pedsafe_sumo.sampling.joint import (
     Kinematics,
     joint_update,
     low_contrast_table,
+    v2i_only_count,
 )
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
 from pedsafe_sumo.sampling.pooling import POOL_FROM_KEY, pooled_from_stage
@@ -274,6 +275,8 @@ def _joint_stage(
                 if factor is not None and factor.v2i_only_coefficients
                 else {}
             ),
+            # What report/tables.py's v2i_only_note reads: V2I-only collisions the proposal may not aim at.
+            "v2i_only_pilot_collisions": v2i_only_count(rows) if len(rows) else 0,
         }
     )
     return proposal.to_json() if proposal else ""

@@ -42,6 +42,7 @@ from pedsafe_sumo.report.tables import (
     table_one_of_run,
     table_one_rows,
     text_table,
+    v2i_only_note,
     write_tables,
 )
 from pedsafe_sumo.sampling.pooling import first_estimated_stage
@@ -222,6 +223,8 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say(text_table(*table_one_rows(table)))
     if estimator_note(table):
         say(estimator_note(table))
+    if v2i_only_note(run.run_info):
+        say(v2i_only_note(run.run_info))
     say("")
     say(paired_title(paired))
     say(text_table(*paired_rows(paired)))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -19,6 +20,7 @@ from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS
 from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage, stage_max_weight
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
@@ -427,6 +429,26 @@ def estimator_note(table: pd.DataFrame) -> str:
     if "stages" in table.columns:
         notes.append(STAGES_NOTE)
     return "\n\n".join(notes)
+
+
+def v2i_only_note(run_info: Mapping[str, Any] | None) -> str:
+    """One line per scenario of an importance-sampling run whose final proposal does not aim at V2I's
+    collisions where SV does not collide although its pilots drew some (run.json's sampler_levels: the
+    last stage's `v2i_only_pilot_collisions` > 0 without `v2i_only_terms`): V2I's interval may then be
+    too narrow (docs/sampling.md, Limits, "Another junction"); "" otherwise, and for runs recorded before
+    the count."""
+    levels = (run_info or {}).get("sampler_levels") or {}
+    notes = []
+    for scenario, stages in levels.items():
+        last = stages[-1] if stages else {}
+        seen = int(last.get("v2i_only_pilot_collisions", 0) or 0)
+        if seen > 0 and not last.get("v2i_only_terms"):
+            notes.append(
+                f"note: {scenario}: V2I collided where SV did not in {seen} pilot pair(s), fewer than the "
+                f"{GUARD_MIN_COLLISIONS} the proposal needs to aim there: V2I's interval may be too narrow; "
+                "check it against a plain MC run (docs/sampling.md, Limits)"
+            )
+    return "\n".join(notes)
 
 
 PAIRED_TITLE = (

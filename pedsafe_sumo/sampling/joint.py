@@ -600,6 +600,25 @@ def normalised(
     )
 
 
+def sv_v2i_pairs(rows: pd.DataFrame) -> pd.DataFrame:
+    """The pairs of `rows` (both conditions, status ok on both sides) by episode: SV's collision and
+    sampler_inputs, V2I's collision as `collision_v2i`."""
+    from pedsafe_sumo.sampling.stages import ADAPT_CONDITION
+
+    ok = rows[rows["status"] == "ok"]
+    sv = ok[ok["condition"] == ADAPT_CONDITION].set_index("episode")
+    v2i = ok[ok["condition"] == V2I_CONDITION].set_index("episode")
+    return sv[["collision", "sampler_inputs"]].join(
+        v2i[["collision"]].rename(columns={"collision": "collision_v2i"}), how="inner"
+    )
+
+
+def v2i_only_count(rows: pd.DataFrame) -> int:
+    """How many pairs of `rows` have a V2I collision and no SV collision (the V2I-only term's data)."""
+    pairs = sv_v2i_pairs(rows)
+    return int((~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).sum())
+
+
 def with_v2i_factor(
     proposal: JointProposal,
     rows: pd.DataFrame,
@@ -615,14 +634,7 @@ def with_v2i_factor(
     did not collide, the factor also carries the V2I-only term pi_vo, a ridge logistic of those on every
     pair over pi_hat's design (module docstring); the factor then applies where either count reaches the
     threshold."""
-    from pedsafe_sumo.sampling.stages import ADAPT_CONDITION
-
-    ok = rows[rows["status"] == "ok"]
-    sv = ok[ok["condition"] == ADAPT_CONDITION].set_index("episode")
-    v2i = ok[ok["condition"] == V2I_CONDITION].set_index("episode")
-    pairs = sv[["collision", "sampler_inputs"]].join(
-        v2i[["collision"]].rename(columns={"collision": "collision_v2i"}), how="inner"
-    )
+    pairs = sv_v2i_pairs(rows)
     hit = pairs[pairs["collision"].astype(bool)]
     y = hit["collision_v2i"].astype(float).to_numpy()
     y_only = (~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).to_numpy(dtype=float)

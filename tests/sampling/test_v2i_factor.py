@@ -309,3 +309,30 @@ def test_too_few_v2i_only_collisions_leave_the_factor_without_the_term() -> None
     fitted = with_v2i_factor(base, few, table, v2i_only=True)
     assert fitted is not None and not fitted.v2i_factor.v2i_only_coefficients
     assert fitted == with_v2i_factor(base, few, table)
+
+
+def test_the_v2i_only_pilot_count_and_the_tables_note() -> None:
+    """v2i_only_count against the pairs counted here; Table I's note where the last stage's pilots saw
+    V2I-only collisions and the proposal has no term for them, and none otherwise or before the count."""
+    from pedsafe_sumo.report.tables import v2i_only_note
+    from pedsafe_sumo.sampling.joint import v2i_only_count
+
+    rng = np.random.default_rng(25)
+    rows = _rows([_episode_with_v2i_only(rng, None) for _ in range(800)], 0)
+    pairs = rows.pivot(index="episode", columns="condition", values="collision")
+    assert v2i_only_count(rows) == int((~pairs["sv"] & pairs["v2i"]).sum()) > 0
+    rows.loc[
+        (rows.condition == "v2i") & (rows.episode == int(pairs.index[~pairs["sv"] & pairs["v2i"]][0])),
+        "status",
+    ] = "error"
+    assert v2i_only_count(rows) == int((~pairs["sv"] & pairs["v2i"]).sum()) - 1  # a failed side: no pair
+    levels = {
+        "jaywalking": [{"after_stage": 0}, {"after_stage": 1, "v2i_only_pilot_collisions": 3}],
+        "crossing": [{"after_stage": 1, "v2i_only_pilot_collisions": 0}],
+        "right_turn": [{"after_stage": 1, "v2i_only_pilot_collisions": 7, "v2i_only_terms": 28}],
+    }
+    note = v2i_only_note({"sampler_levels": levels})
+    assert note.startswith("note: jaywalking: V2I collided where SV did not in 3 pilot pair(s)")
+    assert "crossing" not in note and "right_turn" not in note and len(note.splitlines()) == 1
+    assert v2i_only_note({"sampler_levels": {"jaywalking": [{"after_stage": 1}]}}) == ""
+    assert v2i_only_note(None) == ""
