@@ -564,7 +564,12 @@ def normalised(
         {name: values[start : start + NORM_BLOCK] for name, values in draws.items()}
         for start in range(0, NORM_DRAWS, NORM_BLOCK)
     ]
-    pi = np.concatenate([shell.pi_hat(block) for block in blocks])
+    with_only = v2i_factor is not None and bool(v2i_factor.v2i_only_coefficients)
+    if with_only:  # pi_hat and pi_v2i from one design per block
+        both = [shell._pi_and_v2i(block) for block in blocks]
+        pi = np.concatenate([b[0] for b in both])
+    else:
+        pi = np.concatenate([shell.pi_hat(block) for block in blocks])
     factor_means: dict[str, Any] = {}
     if v2i_factor is None:
         root = np.sqrt(pi)
@@ -575,7 +580,7 @@ def normalised(
         share = mean_v2i**2 / (mean_sv**2 + mean_v2i**2) if mean_sv > 0 else 1.0
         root = np.sqrt(pi * (share + (1 - share) * r))
     else:
-        pi_v2i = np.concatenate([shell.pi_v2i_hat(block) for block in blocks])
+        pi_v2i = np.concatenate([b[1] for b in both])
         mean_sv, mean_v2i = float(np.mean(pi)), float(np.mean(pi_v2i))
         share = mean_v2i**2 / (mean_sv**2 + mean_v2i**2) if mean_sv > 0 else 1.0
         root = np.sqrt(share * pi + (1 - share) * pi_v2i)
