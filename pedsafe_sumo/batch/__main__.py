@@ -359,7 +359,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "modelled from the pilots by the contrast between the clothing and the vehicles' colours, where "
         "the pilots' SV collisions hold at least 5 V2I ones (docs/sampling.md, 'The V2I factor'); "
         "'contrast+v2i-only' = also at V2I's collisions where SV does not collide, where the pilots hold at "
-        "least 5 of those; 'none' "
+        "least 5 of those, or 2 that make up a tenth of their V2I collisions; 'none' "
         f"= fitted on SV's collisions alone [{V2I_FACTOR_CONTRAST_V2I_ONLY}]",
     )
     parser.add_argument(

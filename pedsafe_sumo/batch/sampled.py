@@ -22,6 +22,7 @@ from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
 from pedsafe_sumo.sampling.joint import (
     GUARD_MIN_COLLISIONS,
     NORM_DRAWS,
+    V2I_ONLY_MIN_COLLISIONS,
     VISIBLE_M,
     Kinematics,
     joint_update,
@@ -66,7 +67,8 @@ V2I_FACTOR_KEY = "v2i_factor"
 V2I_ONLY_KEY = "v2i_only"
 V2I_ONLY_RECORD = (
     f"plus pi_vo, a ridge logistic over pi_hat's design of V2I's collisions whose SV episode did not "
-    f"collide, where the pilot pairs hold at least {GUARD_MIN_COLLISIONS}; pi_v2i = min(1, pi_hat r + pi_vo)"
+    f"collide, where the pilot pairs hold at least {GUARD_MIN_COLLISIONS}, or {V2I_ONLY_MIN_COLLISIONS} "
+    f"that make up the defensive share of their V2I collisions; pi_v2i = min(1, pi_hat r + pi_vo)"
 )
 V2I_FACTOR_RECORD = (
     "pi_hat r, r a ridge logistic of V2I's collision on the pilots' SV collisions over low-contrast "

@@ -20,8 +20,9 @@ from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
-from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, V2I_ONLY_MIN_COLLISIONS
 from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage, stage_max_weight
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -444,8 +445,9 @@ def v2i_only_note(run_info: Mapping[str, Any] | None) -> str:
         seen = int(last.get("v2i_only_pilot_collisions", 0) or 0)
         if seen > 0 and not last.get("v2i_only_terms"):
             notes.append(
-                f"note: {scenario}: V2I collided where SV did not in {seen} pilot pair(s), fewer than the "
-                f"{GUARD_MIN_COLLISIONS} the proposal needs to aim there: V2I's interval may be too narrow; "
+                f"note: {scenario}: V2I collided where SV did not in {seen} pilot pair(s), too few for the "
+                f"proposal to aim there ({GUARD_MIN_COLLISIONS}, or {V2I_ONLY_MIN_COLLISIONS} making up "
+                f"{DEFENSIVE_SHARE:g} of the pilots' V2I collisions): V2I's interval may be too narrow; "
                 "check it against a plain MC run (docs/sampling.md, Limits)"
             )
     return "\n".join(notes)

@@ -71,15 +71,25 @@ nearly the SV one.
 The V2I-only term (session 13; EXPERIMENTS.md, "Importance sampling, session 13", part 3). The factor
 models V2I's collisions as a subset of SV's. On Xueqing that holds (V2I-only collisions are 0-8% of V2I's
 rate), but on the zhixin junction 41% of V2I's jaywalking collisions happen where SV does not collide, and
-the proposal drew them at about its defensive floor (V2I 0.15x against MC). So where the pilot pairs hold at
-least GUARD_MIN_COLLISIONS V2I collisions whose SV episode did not collide (`--is-v2i-factor
+the proposal drew them at about its defensive floor (V2I 0.15x against MC). So where the pilot pairs hold
+enough V2I collisions whose SV episode did not collide (`v2i_only_engages`; `--is-v2i-factor
 contrast+v2i-only`), the factor also carries pi_vo, a ridge logistic of "V2I collides, SV does not" on every
 pilot pair over pi_hat's design, and V2I is modelled as
 
     pi_v2i = min(1, pi_hat r + pi_vo),    h = sqrt(a pi_hat + (1 - a) pi_v2i),
 
 a by the same rule on m_v2i = E_p[pi_v2i]; pi_v2i is V2I's control variate. The factor then applies where
-either count reaches the threshold (r fitted on what SV collisions there are). h <= 1 still, so B stands.
+either count is enough (r fitted on what SV collisions there are). h <= 1 still, so B stands.
+
+Enough (session 14; EXPERIMENTS.md, "Importance sampling, session 14"): GUARD_MIN_COLLISIONS V2I-only
+collisions, or V2I_ONLY_MIN_COLLISIONS that make up at least the defensive share lambda of the pilots' V2I
+collisions. The second arm is the case where leaving them out costs most: a share s of V2I's rate drawn at the
+floor lambda p adds s / lambda times plain Monte Carlo's variance to V2I's, so from s = lambda on, that
+region alone makes V2I's estimate no better than MC. Session 13's zhixin seeds held 2-3 such pilot
+collisions at shares of 0.15-0.30 and, without the term, V2I's interval missed MC's estimate in two seeds of
+three. Xueqing's pilots (21 runs of sessions 11-13) hold 0-13 at shares of 0-0.11, none with 2-4 at a share
+of 0.1 or more; there a term fitted on 1-3 would cost efficiency (blending's SV 18% offline). The share is
+of the pilots' draws, which lean towards SV's collisions, so it understates the nominal one.
 
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
@@ -131,6 +141,8 @@ MOMENT_DRAWS = 100_000
 #: region proposal (margin_s < 0) instead of a fit on a handful of collisions (the `adaptive` variant's
 #: threshold of EXPERIMENTS.md, session 7, fixed there before its scores).
 GUARD_MIN_COLLISIONS = 5
+#: The V2I-only term's lower count (module docstring, "Enough"): a fit needs more than one point.
+V2I_ONLY_MIN_COLLISIONS = 2
 #: The guard's step: pi_hat = expit(-GUARD_STEEPNESS margin_s / sd(margin_s)).
 GUARD_STEEPNESS = 200.0
 #: Candidates drawn per block of the rejection step (the episode's Generator draws whole blocks).
@@ -624,6 +636,14 @@ def v2i_only_count(rows: pd.DataFrame) -> int:
     return int((~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).sum())
 
 
+def v2i_only_engages(n_v2i_only: int, n_v2i: int, defensive_share: float) -> bool:
+    """Whether pilot pairs holding `n_v2i_only` V2I-only collisions among `n_v2i` V2I collisions are enough
+    for the V2I-only term (module docstring, "Enough")."""
+    if n_v2i_only >= GUARD_MIN_COLLISIONS:
+        return True
+    return n_v2i_only >= V2I_ONLY_MIN_COLLISIONS and n_v2i_only >= defensive_share * n_v2i
+
+
 def with_v2i_factor(
     proposal: JointProposal,
     rows: pd.DataFrame,
@@ -635,15 +655,16 @@ def with_v2i_factor(
     collisions, the scenario draws no clothing or no vehicle colour in every pilot episode, or the
     envelope would be too loose (the proposal of SV alone then stands).
 
-    With `v2i_only`, where the pairs hold at least GUARD_MIN_COLLISIONS V2I collisions whose SV episode
-    did not collide, the factor also carries the V2I-only term pi_vo, a ridge logistic of those on every
-    pair over pi_hat's design (module docstring); the factor then applies where either count reaches the
-    threshold."""
+    With `v2i_only`, where the pairs hold enough V2I collisions whose SV episode did not collide
+    (`v2i_only_engages`), the factor also carries the V2I-only term pi_vo, a ridge logistic of those on
+    every pair over pi_hat's design (module docstring); the factor then applies where either count is
+    enough."""
     pairs = sv_v2i_pairs(rows)
     hit = pairs[pairs["collision"].astype(bool)]
     y = hit["collision_v2i"].astype(float).to_numpy()
     y_only = (~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).to_numpy(dtype=float)
-    with_only = v2i_only and y_only.sum() >= GUARD_MIN_COLLISIONS
+    n_v2i = int(pairs["collision_v2i"].astype(bool).sum())
+    with_only = v2i_only and v2i_only_engages(int(y_only.sum()), n_v2i, proposal.defensive_share)
     if y.sum() < GUARD_MIN_COLLISIONS and not with_only:
         return None
     records = [json.loads(text)["inputs"] for text in pairs["sampler_inputs"]]

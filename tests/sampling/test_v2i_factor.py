@@ -22,6 +22,7 @@ from pedsafe_sumo.sampling.joint import (
     joint_update,
     low_contrast_table,
     normalised,
+    v2i_only_engages,
     with_v2i_factor,
 )
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
@@ -294,21 +295,45 @@ def test_the_v2i_only_term_is_fitted_where_the_pilots_hold_enough_and_aims_at_th
     assert variances["v2i-only", 3] < 0.5 * variances["contrast", 3]
 
 
+def test_enough_v2i_only_collisions_by_hand() -> None:
+    """5 always; 2 to 4 where they make up at least the defensive share of the V2I collisions; never 1."""
+    assert v2i_only_engages(GUARD_MIN_COLLISIONS, 1000, 0.1)
+    assert v2i_only_engages(2, 20, 0.1) and not v2i_only_engages(2, 21, 0.1)
+    assert v2i_only_engages(4, 40, 0.1) and not v2i_only_engages(4, 41, 0.1)
+    assert not v2i_only_engages(1, 1, 0.1) and not v2i_only_engages(0, 0, 0.1)
+    assert v2i_only_engages(3, 100, 0.03) and not v2i_only_engages(3, 100, 0.031)
+
+
 def test_too_few_v2i_only_collisions_leave_the_factor_without_the_term() -> None:
+    """The toy's pilots cut down to k V2I-only collisions: one is never enough; two are where they make up
+    at least the defensive share of V2I's collisions (2 of 10 here), not where SV's collisions all carry a V2I
+    one too (2 of 55); without the term the factor is 'contrast''s."""
     rng = np.random.default_rng(24)
     rows = _rows([_episode_with_v2i_only(rng, None) for _ in range(3000)], 0)
     base = normalised(NOMINAL, COEFFICIENTS, DEFENSIVE_SHARE)
     table = low_contrast_table(CLOTHING_COLOURS_RGB, CAR_COLOURS_RGB, 15.0)
     pairs = rows.pivot(index="episode", columns="condition", values="collision")
     only = pairs.index[~pairs["sv"] & pairs["v2i"]]
-    assert len(only) >= GUARD_MIN_COLLISIONS
-    few = rows.copy()
-    few.loc[(few.condition == "v2i") & few["episode"].isin(only[GUARD_MIN_COLLISIONS - 1 :]), "collision"] = (
-        False
-    )
-    fitted = with_v2i_factor(base, few, table, v2i_only=True)
+
+    def keeping(k: int, every_sv_collision_in_v2i: bool = False) -> pd.DataFrame:
+        few = rows.copy()
+        v2i = few.condition == "v2i"
+        few.loc[v2i & few["episode"].isin(only[k:]), "collision"] = False
+        if every_sv_collision_in_v2i:
+            few.loc[v2i & few["episode"].isin(pairs.index[pairs["sv"]]), "collision"] = True
+        return few
+
+    assert len(only) > GUARD_MIN_COLLISIONS and int((pairs["sv"] & pairs["v2i"]).sum()) == 8
+    one = with_v2i_factor(base, keeping(1), table, v2i_only=True)
+    assert one is not None and not one.v2i_factor.v2i_only_coefficients
+    assert one == with_v2i_factor(base, keeping(1), table)
+    two = with_v2i_factor(base, keeping(2), table, v2i_only=True)  # 2 of 10
+    assert two is not None and two.v2i_factor.v2i_only_coefficients
+    diluted = keeping(2, every_sv_collision_in_v2i=True)
+    assert int(pairs["sv"].sum()) == 53  # 2 of 55
+    fitted = with_v2i_factor(base, diluted, table, v2i_only=True)
     assert fitted is not None and not fitted.v2i_factor.v2i_only_coefficients
-    assert fitted == with_v2i_factor(base, few, table)
+    assert fitted == with_v2i_factor(base, diluted, table)
 
 
 def test_the_v2i_only_pilot_count_and_the_tables_note() -> None:

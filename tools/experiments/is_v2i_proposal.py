@@ -45,6 +45,8 @@ from pedsafe_sumo.sampling.stages import _inputs_and_nominal  # noqa: E402
 
 #: Nominal draws for c_alpha and m (a relative error of about 1e-3 on c, as the sampler's NORM_DRAWS / 2.5).
 NOMINAL_DRAWS = 400_000
+#: Shares of the draws given to the V2I-only mixture component (session 14).
+MIXTURE_SHARES = (0.05, 0.1, 0.2)
 
 
 def reweighted_efficiency(
@@ -187,6 +189,26 @@ def score(run: Path, oracle: bool = False, mc: Path | None = None) -> pd.DataFra
                 lam + (1 - lam) * float(root_nominal.max()) / norm,
             )
         )
+    n_only = int(v2i_only["collision"].sum())
+    if n_only:
+        # The V2I-only fit as a mixture component of its own, with a fixed share mu of the draws:
+        # q/p = lambda + mu pi_vo / E_p[pi_vo] + (1 - lambda - mu) h / c, h the run's own. Whatever pi_vo
+        # fitted on a few collisions looks like, it takes at most mu of the draws from the run's proposal.
+        only_nominal = v2i_only_model.pi_hat(nominal_x)
+        only_mean = float(np.mean(only_nominal))
+        as_run_nominal = recorded.q_over_p(nominal_x)
+        as_run_x = recorded.q_over_p(x)
+        for mu in MIXTURE_SHARES:
+            # recorded.q_over_p = lam + (1 - lam) h / c: rescale its aimed part to (1 - lam - mu).
+            aimed_x = (as_run_x - lam) * (1 - lam - mu) / (1 - lam)
+            aimed_max = (float(as_run_nominal.max()) - lam) * (1 - lam - mu) / (1 - lam)
+            variants.append(
+                (
+                    f"mixture v2i-only ({n_only}), mu {mu}",
+                    lam + mu * v2i_only_model.pi_hat(x) / only_mean + aimed_x,
+                    lam + mu * float(only_nominal.max()) / only_mean + aimed_max,
+                )
+            )
     for label, q_over_p, tries in variants:
         row = {"proposal": label, "alpha": math.nan, "mean tries": tries}
         for condition in ("sv", "v2i"):
