@@ -115,3 +115,51 @@ def test_the_cautious_stack_keeps_its_gap_to_the_vehicle_ahead():
     # min(gap / headway, sqrt(2 a gap)), and never harder than its maximum braking in one step.
     wanted = min(gap / HEADWAY_S, math.sqrt(2 * 3.0 * gap))
     assert command.target_speed_mps == pytest.approx(max(wanted, 10.0 - 6.0 * 0.05))
+
+
+def _walking_into_the_path(time_s: float, perceived: bool):
+    """The ego at the origin heading east at 10 m/s; a pedestrian 30 m ahead, 6 m to its right at t = 0,
+    walking north at 1.5 m/s into its path (the corridor's edge, 0.9 + 0.5 m off centre, at t = 3.07 s)."""
+    from pedsafe_sumo.control.agent import EgoState, Observation, PerceivedPedestrian
+
+    ego = EgoState(0.0, 0.0, 0.0, 10.0, 4.5, 1.8)
+    pedestrians = (PerceivedPedestrian("p", 30.0, -6.0 + 1.5 * time_s, "v2i"),) if perceived else ()
+    return Observation(ego, pedestrians, 0.05)
+
+
+def test_the_tracking_stack_keeps_braking_for_a_pedestrian_it_lost_where_the_reference_forgets():
+    """Perceived for 0.6 s, then lost: the reference stack drives on 0.5 s after the loss; the tracking
+    stack keeps her where she walks (by hand) and brakes until 2 s after the loss, then the 0.5 s hold."""
+    from examples.tracking_stack import COAST_S, TrackingStack
+    from pedsafe_sumo.control.reference import CLEAR_HOLD_S, ReferenceStack
+
+    stacks = {"reference": ReferenceStack(), "tracking": TrackingStack()}
+    for stack in stacks.values():
+        stack.setup({"initial_speed_mps": 10.0})
+    lost_at_s = 0.65
+    commands = {name: {} for name in stacks}
+    for k in range(0, 81):
+        time_s = round(k * 0.05, 2)
+        for name, stack in stacks.items():
+            commands[name][time_s] = stack.run_step(
+                _walking_into_the_path(time_s, time_s < lost_at_s), time_s
+            )
+        if time_s == 1.6:
+            (kept,) = stacks["tracking"].coasted(_walking_into_the_path(time_s, False), time_s)
+            # Last seen at 0.6 s at y = -6 + 0.9, moving north at 1.5 m/s: 1.0 s later, 1.5 m further.
+            assert (kept.x_m, kept.y_m) == pytest.approx((30.0, -5.1 + 1.5 * 1.0), abs=1e-6)
+    braking = {
+        name: {t for t, c in by_time.items() if c.info.get("braking")} for name, by_time in commands.items()
+    }
+    # Both brake from the reaction time (0.4 s) after the threat (from 0.05 s: the tracker's second point).
+    assert {0.45, 0.6} <= braking["reference"] and {0.45, 0.6} <= braking["tracking"]
+    last_seen_s = 0.6
+    # The threat clears once more than the hold has passed without one (to within a step: the times are
+    # floats), and the stack drives on. The reference: 0.5 s after the last sighting.
+    step_s = 0.05 + 1e-9
+    assert max(braking["reference"]) + 0.05 == pytest.approx(last_seen_s + CLEAR_HOLD_S, abs=step_s)
+    assert commands["reference"][1.3].target_speed_mps == pytest.approx(10.0)
+    # The tracking stack: she is kept for 2 s after the last sighting, then the same 0.5 s hold.
+    assert max(braking["tracking"]) + 0.05 == pytest.approx(last_seen_s + COAST_S + CLEAR_HOLD_S, abs=step_s)
+    assert commands["tracking"][1.3].target_speed_mps < 10.0
+    assert commands["tracking"][3.3].target_speed_mps == pytest.approx(10.0)
