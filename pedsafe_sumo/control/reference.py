@@ -17,6 +17,11 @@ Its tracker estimates each pedestrian's velocity by a least-squares line through
 the last `track_window_s` (a one-step difference of V2I positions with 0.2 m noise would be off by
 several m/s). Signals and other vehicles are not its business: the scenarios put nothing else in its
 path.
+
+It has no object permanence: a pedestrian not detected this step is not in its world, so a gap in the
+detections longer than `clear_hold_s` drops the threat, and the next detection starts the reaction time
+over. That gap is how V2I's jaywalking collisions happen (the roadside camera loses the pedestrian behind
+the queue; docs/engine.md); examples/tracking_stack.py is the same stack with a memory.
 """
 
 from __future__ import annotations

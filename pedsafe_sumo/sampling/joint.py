@@ -86,10 +86,12 @@ collisions, or V2I_ONLY_MIN_COLLISIONS that make up at least the defensive share
 collisions. The second arm is the case where leaving them out costs most: a share s of V2I's rate drawn at the
 floor lambda p adds s / lambda times plain Monte Carlo's variance to V2I's, so from s = lambda on, that
 region alone makes V2I's estimate no better than MC. Session 13's zhixin seeds held 2-3 such pilot
-collisions at shares of 0.15-0.30 and, without the term, V2I's interval missed MC's estimate in two seeds of
-three. Xueqing's pilots (21 runs of sessions 11-13) hold 0-13 at shares of 0-0.11, none with 2-4 at a share
-of 0.1 or more; there a term fitted on 1-3 would cost efficiency (blending's SV 18% offline). The share is
-of the pilots' draws, which lean towards SV's collisions, so it understates the nominal one.
+collisions at shares of 0.15-0.30; the term fitted on their 2 collisions takes V2I from 1.7 and 2.6 to 4.0
+and 4.7 per final episode (offline, scored on MC pairs), and without it V2I's interval missed the pooled MC
+reference in one seed of three. Xueqing's pilots (21 runs of sessions 11-13) hold 0-13 at shares of
+0-0.11, none with 2-4 at a share of 0.1 or more; there a term fitted on 1-3 would cost efficiency
+(blending's SV 18% offline). The share is of the pilots' draws, which lean towards SV's collisions, so it
+understates the nominal one.
 
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
