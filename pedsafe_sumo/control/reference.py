@@ -20,8 +20,8 @@ path.
 
 It has no object permanence: a pedestrian not detected this step is not in its world, so a gap in the
 detections longer than `clear_hold_s` drops the threat, and the next detection starts the reaction time
-over. That gap is how V2I's jaywalking collisions happen (the roadside camera loses the pedestrian behind
-the queue; docs/engine.md); examples/tracking_stack.py is the same stack with a memory.
+over. That gap is how most of V2I's jaywalking collisions happen (the roadside camera loses the pedestrian
+behind the queue; docs/engine.md); examples/tracking_stack.py is the same stack with a memory.
 """
 
 from __future__ import annotations

@@ -9,7 +9,9 @@ given x). This tool fits pi_v2i on the same pilot rows with the same design and 
     q_alpha ∝ p (lambda + (1 - lambda) sqrt(alpha pi_sv + (1 - alpha) pi_v2i) / c_alpha)
 
 for alpha = 1 (the sampler's, a check: its pi_sv must equal the stored one), 1/2, the relative-variance
-rule alpha = m_v2i^2 / (m_sv^2 + m_v2i^2) (m = E_p[pi_hat] on nominal draws) and 0 (V2I alone).
+rule alpha = m_v2i^2 / (m_sv^2 + m_v2i^2) (m = E_p[pi_hat] on nominal draws) and 0 (V2I alone); and
+(session 13) "factor + v2i-only", the V2I factor plus a fit of the V2I-only collisions inside h, and
+(session 14) "mixture v2i-only", that fit as a mixture component of its own with a share mu of the draws.
 
 Scoring without new episodes: the run's final stage drew x from its proposal q with weights w = p/q, so
 for any q' with weights w' = p/q' (q' > 0 where q is: the defensive share keeps q >= lambda p)
