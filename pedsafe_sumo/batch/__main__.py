@@ -953,8 +953,9 @@ def print_table(table: pd.DataFrame, run_info: dict[str, Any] | None = None) -> 
             "rates):"
         )
     _print_rows(summary)
-    if is_weighted(table) and v2i_only_note(run_info):
-        print(v2i_only_note(run_info))
+    note = v2i_only_note(run_info) if is_weighted(table) else ""
+    if note:
+        print(note)
     arms = [arm for arm in table["approach"].unique() if arm] if "approach" in table else []
     if len(arms) > 1:  # --approach all: the same table per approach
         for arm in arms:

@@ -223,8 +223,9 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say(text_table(*table_one_rows(table)))
     if estimator_note(table):
         say(estimator_note(table))
-    if v2i_only_note(run.run_info):
-        say(v2i_only_note(run.run_info))
+    note = v2i_only_note(run.run_info)
+    if note:
+        say(note)
     say("")
     say(paired_title(paired))
     say(text_table(*paired_rows(paired)))
