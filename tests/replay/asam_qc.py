@@ -4,7 +4,10 @@ it; a test run without it builds it here the same way (`make .venv-qc/.installed
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import subprocess
+import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +15,10 @@ from pathlib import Path
 from pedsafe_sumo import REPO_ROOT
 
 QC_VENV = REPO_ROOT / ".venv-qc"
+#: Held while .venv-qc is checked or built: test workers that ask for it at once build it once.
+QC_VENV_LOCK = (
+    Path(tempfile.gettempdir()) / f"pedsafe-qc-venv-{hashlib.sha256(bytes(QC_VENV)).hexdigest()[:12]}.lock"
+)
 BUNDLES = {"xosc": ("xoscBundle", "qc_openscenario"), "xodr": ("xodrBundle", "qc_opendrive")}
 
 
@@ -24,11 +31,17 @@ class CheckerResult:
 
 
 def qc_venv() -> Path:
-    if not (QC_VENV / ".installed").is_file():
-        proc = subprocess.run(
-            ["make", "-s", ".venv-qc/.installed"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600
-        )
-        assert proc.returncode == 0, f"could not build .venv-qc: {proc.stderr[-2000:]}"
+    with QC_VENV_LOCK.open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (QC_VENV / ".installed").is_file():
+            proc = subprocess.run(
+                ["make", "-s", ".venv-qc/.installed"],
+                cwd=REPO_ROOT,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
+            assert proc.returncode == 0, f"could not build .venv-qc: {proc.stderr[-2000:]}"
     return QC_VENV
 
 
