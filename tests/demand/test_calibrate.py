@@ -96,7 +96,7 @@ def test_a_one_point_real_calibration_writes_the_ks_of_sumos_loops_and_a_file_th
 def test_bad_input_is_one_line_and_exit_2(args, message):
     proc = subprocess.run(
         [sys.executable, "-m", "pedsafe_sumo.demand.calibrate", *args],
-        capture_output=True, text=True, cwd=REPO_ROOT, timeout=60,
+        capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 2
     assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr

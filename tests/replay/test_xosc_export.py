@@ -187,7 +187,7 @@ def test_bad_export_arguments_are_one_line_and_exit_2(replay_run, tmp_path):
         ),
     ):
         proc = run_cli(
-            "pedsafe_sumo.replay", str(replay_run), "--episode", "0", "--condition", "sv", *extra, timeout=60
+            "pedsafe_sumo.replay", str(replay_run), "--episode", "0", "--condition", "sv", *extra, timeout=300
         )
         assert proc.returncode == 2, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1 and says in proc.stderr

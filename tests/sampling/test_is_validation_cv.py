@@ -97,8 +97,8 @@ def test_plain_flag_gives_the_earlier_columns(tmp_path):
         str(mc_dir),
         "--markdown",
     ]
-    cv = subprocess.run(tool, capture_output=True, text=True, timeout=60)
-    plain = subprocess.run([*tool, "--plain"], capture_output=True, text=True, timeout=60)
+    cv = subprocess.run(tool, capture_output=True, text=True, timeout=300)
+    plain = subprocess.run([*tool, "--plain"], capture_output=True, text=True, timeout=300)
     assert cv.returncode == 0 and plain.returncode == 0, cv.stderr + plain.stderr
     cv_header, plain_header = cv.stdout.splitlines()[0], plain.stdout.splitlines()[0]
     assert "| estimator |" in cv_header and "plain_efficiency_final" in cv_header
