@@ -89,7 +89,10 @@ def compile_numba_kernels() -> None:
     origin = np.array([[0.0, 0.0, 1.6], [0.0, 0.0, 1.6]])
     direction = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     ones = np.ones(2, dtype=np.int64)
-    cast_rays(snapshot, origin, direction, np.full(2, 50.0), np.arange(2), ones, np.full(2, -1), 0)
+    for skip_vehicle in (0, np.full(2, -1)):  # one for all groups; one per group (read-only once broadcast)
+        cast_rays(
+            snapshot, origin, direction, np.full(2, 50.0), np.arange(2), ones, np.full(2, -1), skip_vehicle
+        )
     rectangle_circle_clearance_m(0.0, 0.0, 0.0, 4.5, 1.8, 3.0, 1.0, 0.25)
     walks_into_body(
         *(np.array([v]) for v in (0.0, 0.0, 0.0, 4.5, 1.8, 2.4)), 5.0, 0.0, 4.0, 0.0, 0.25, 0.3, 0.05
