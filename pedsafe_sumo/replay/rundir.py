@@ -3,7 +3,7 @@
 A run directory (DESIGN section 3) holds episodes.parquet, run.json and cases/. Replaying episode N of
 a scenario under a condition takes, from the run and never from today's defaults:
 - the episode seed: episodes.parquet's `seed` of (scenario, episode, condition);
-- the scenario: run.json["scenarios"][name], every field of the ScenarioSpec the batch used (with its
+- the scenario: `run.json["scenarios"][name]`, every field of the ScenarioSpec the batch used (with its
   --set overrides applied), rebuilt field by field so a changed default in the registry cannot leak in;
 - the parameters: run.json["parameters"], the full merged parameter file of the run;
 - the AD stack: run.json["algorithm"], loaded like --algorithm;

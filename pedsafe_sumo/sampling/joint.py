@@ -311,7 +311,7 @@ class ContrastFactor:
 def low_contrast_table(
     clothing_rgb: Any, car_rgb: Any, delta_e_threshold: float
 ) -> tuple[tuple[int, ...], ...]:
-    """L[i][j] = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
+    """`L[i][j]` = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
     the cameras' rule: perception/sensors.py)."""
     from pedsafe_sumo.perception.sensors import delta_e_cie76
 
