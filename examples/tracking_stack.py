@@ -1,7 +1,7 @@
 """A user AD stack: the reference pedestrian braking, with object permanence. A pedestrian it stops
 perceiving stays in its world for `coast_s` (2 s), moved on at the velocity last tracked.
 
-Why (EXPERIMENTS.md, "Importance sampling, session 14", part 2): the reference stack forgets a pedestrian
+Why (research/EXPERIMENTS.md, "Importance sampling, session 14", part 2): the reference stack forgets a pedestrian
 as soon as no detection comes. After `clear_hold_s` (0.5 s) without one it drives back to its cruise speed,
 and when the pedestrian is seen again its reaction time starts over. Under V2I the roadside camera sees the
 pedestrian from far off but loses them behind the queued vehicles. The reference stack then first brakes
