@@ -25,7 +25,8 @@
    in 1 on the other half and swapped: what the product family reaches on those inputs when its elite
    is every collision of 5,000 nominal episodes rather than a pilot stage's 20 episodes near the event.
 
-    .venv/bin/python research/is_limits.py MC_RUN [--proposal IS_RUN [--stage S] [--min-spread F]] [--inputs ...]
+    .venv/bin/python research/is_limits.py MC_RUN [--proposal IS_RUN [--stage S] [--min-spread F]] \
+        [--inputs ...]
 """
 
 from __future__ import annotations

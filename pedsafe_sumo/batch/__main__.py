@@ -134,8 +134,8 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     # since session 11: Table I pools the pilot stages from stage 2 with the final one (docs/sampling.md).
     "is_pool_from": DEFAULT_POOL_FROM_STAGE,
     # since session 12: the joint proposal also aims at V2I's collisions where the pilots hold enough of
-    # them (sampling/joint.py, "The V2I factor"; research/EXPERIMENTS.md, session 12); since session 13 also at
-    # those where SV does not collide ("The V2I-only term"; research/EXPERIMENTS.md, session 13).
+    # them (sampling/joint.py, "The V2I factor"; research/EXPERIMENTS.md, session 12); since session 13
+    # also at those where SV does not collide ("The V2I-only term"; research/EXPERIMENTS.md, session 13).
     "is_v2i_factor": V2I_FACTOR_CONTRAST_V2I_ONLY,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a

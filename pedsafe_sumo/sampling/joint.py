@@ -2,8 +2,8 @@
 
 The cross-entropy stages fit a product of one family per input; a collision is a joint condition (a fast
 ego with an early, fast pedestrian), and the product puts mass on combinations that do not collide
-(research/EXPERIMENTS.md, "Importance sampling, session 6"). For an event that stays random given the inputs x,
-with pi(x) = P(collision | x), the proposal of least variance is q ∝ p sqrt(pi) (Owen, Monte Carlo theory,
+(research/EXPERIMENTS.md, "Importance sampling, session 6"). For an event that stays random given the inputs
+x, with pi(x) = P(collision | x), the proposal of least variance is q ∝ p sqrt(pi) (Owen, Monte Carlo theory,
 methods and examples, 2013, section 9.1). Here
 
     q(x) = lambda p(x) + (1 - lambda) p(x) sqrt(pi_hat(x)) / c,     c = E_p[sqrt(pi_hat)],
@@ -18,9 +18,9 @@ drawn from the nominal families (in the order of the sorted input names), each k
 (q/p)(x) / B where B = lambda + (1 - lambda) / c >= q/p (sqrt(pi_hat) <= 1); the first kept one is the
 episode's. Its weight is p/q = 1 / (lambda + (1 - lambda) sqrt(pi_hat(x)) / c), at most 1/lambda.
 
-Kinematic features (session 8; measured offline in research/EXPERIMENTS.md, "Session 7: shaping pi_hat at pilot size",
-the `physics` variant): where the scenario draws the ego's speed, the pedestrian's walking speed and the
-conflict offset, three functions of x are appended to the design as further continuous inputs (their
+Kinematic features (session 8; measured offline in research/EXPERIMENTS.md, "Session 7: shaping pi_hat at
+pilot size", the `physics` variant): where the scenario draws the ego's speed, the pedestrian's walking speed
+and the conflict offset, three functions of x are appended to the design as further continuous inputs (their
 squares and their products with every continuous input): the ego's speed v = clip(exp(ego_speed_log)) to the
 scenario's bounds (before the approach's speed-limit scale), the pedestrian's time per metre 1/w with w =
 exp(mu_g + sigma_g z) of the age group's lognormal (before the sex factor), and the braking margin
@@ -45,13 +45,13 @@ on v5_full's rows 75 of 75 crossing collisions, 220 of 220 right_turn, 293 of 29
 on the pooled pilot rows (which the guard's stage makes rich in collisions). Pilot rows only train pi_hat,
 so a guard that misses collisions costs efficiency, never bias.
 
-The V2I factor (session 12; research/EXPERIMENTS.md, "Importance sampling, session 12"). V2I's collisions lie inside
-SV's region, but there the proposable inputs leave V2I's outcome largely to chance: on jaywalking 84% of
-V2I's collisions (4% of the SV-only ones) have the pedestrian's clothing within the roadside camera's
+The V2I factor (session 12; research/EXPERIMENTS.md, "Importance sampling, session 12"). V2I's collisions lie
+inside SV's region, but there the proposable inputs leave V2I's outcome largely to chance: on jaywalking 84%
+of V2I's collisions (4% of the SV-only ones) have the pedestrian's clothing within the roadside camera's
 contrast threshold of the parked car behind them, which the camera's colour rule then cannot tell apart
-(perception/sensors.py). So where the pilots' SV collisions hold at least GUARD_MIN_COLLISIONS V2I
-collisions, the proposal also draws the clothing and the vehicles' colours (uniform categories, as the
-scenarios draw them) and aims at V2I's collisions too, modelled as pi_v2i = pi_hat r(z) with
+(perception/sensors.py). So where the pilots' SV collisions hold at least GUARD_MIN_COLLISIONS V2I collisions,
+the proposal also draws the clothing and the vehicles' colours (uniform categories, as the scenarios draw
+them) and aims at V2I's collisions too, modelled as pi_v2i = pi_hat r(z) with
 
     r(z) = P(V2I collision | SV collision, z) = expit(b_0 + sum_k b_k L[clothing, colour_k]),
 
@@ -161,7 +161,8 @@ Block = np.ndarray | list[np.ndarray]
 def quadratic_design(n_rows: int, blocks: list[Block]) -> np.ndarray:
     """The logistic model's features: an intercept; per input in order, its indicators or its z and z^2;
     then the products of every pair of continuous inputs. Shared with research/is_limits.py and
-    research/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler does."""
+    research/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler
+    does."""
     columns, continuous = [np.ones(n_rows)], []
     for block in blocks:
         if isinstance(block, list):

@@ -72,7 +72,8 @@ INPUT_MODES = (INPUTS_SCREENED, INPUTS_ALL)
 #: 1972's surrogate). On the paper-v5 MC run's 10,000 SV crossing episodes the top 10% by clearance are 93%
 #: yielding pedestrians with a slower ego (4.3 m/s; all: 5.2), who stop about 1 m from the car, while the
 #: collisions are 63% unaware pedestrians and a fast ego (10.3 m/s): the clearance drives the proposal away
-#: from collisions. The top 10% by TTC: ego 7.0 m/s, 53% unaware (research/EXPERIMENTS.md, issue 17 session 5).
+#: from collisions. The top 10% by TTC: ego 7.0 m/s, 53% unaware (research/EXPERIMENTS.md, issue 17
+#: session 5).
 SCORE_CLEARANCE = "clearance"
 SCORE_TTC = "ttc"
 SCORES = (SCORE_CLEARANCE, SCORE_TTC)

@@ -16,8 +16,8 @@ fitted on PILOT-SIZED samples only:
   1 + impact speed for a collision, -min_ttc_s otherwise, -1000 without a TTC) rather than to its few
   collisions: a shape that sees more events, at the price of aiming at near misses.
 
-Each is evaluated, as research/is_limits.py does, on the MC rows neither the pilot nor the rejection step used:
-efficiency per final episode P(1 - P) / (E_p[w f] - P^2), w = p / q. Repeated on `--replicates` disjoint
+Each is evaluated, as research/is_limits.py does, on the MC rows neither the pilot nor the rejection step
+used: efficiency per final episode P(1 - P) / (E_p[w f] - P^2), w = p / q. Repeated on `--replicates` disjoint
 blocks of rows (pilot sets that do not overlap), the median and range reported.
 
     .venv/bin/python research/experiments/is_joint_pilot.py V5_FULL [--ridge 1 3 10]

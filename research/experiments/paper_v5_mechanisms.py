@@ -3,9 +3,9 @@
 Run: PAPER_V5_RUN=RUN_DIR python research/experiments/paper_v5_mechanisms.py build build_all report \
     blending_pairs
 Reads RUN_DIR/{episodes.parquet,cases/} (the paper-v5 full run, research/EXPERIMENTS.md); writes
-$PAPER_V5_ANALYSIS (default: paper_v5_mechanisms in the system temporary folder)/features.parquet (one row per case log of a collision
-episode, plus the conflict-only logs with build_all) and prints every number quoted in research/EXPERIMENTS.md's
-"Why the paper-v5 numbers are what they are". A one-off analysis.
+$PAPER_V5_ANALYSIS/features.parquet (default: paper_v5_mechanisms in the system temporary folder; one row
+per case log of a collision episode, plus the conflict-only logs with build_all) and prints every number
+quoted in research/EXPERIMENTS.md's "Why the paper-v5 numbers are what they are". A one-off analysis.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""research/experiments/is_guard.py: a guarded proposal's variance scored on rows drawn from the unguarded one,
-against the variance worked out by quadrature (no SUMO)."""
+"""research/experiments/is_guard.py: a guarded proposal's variance scored on rows drawn from the unguarded
+one, against the variance worked out by quadrature (no SUMO)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""research/experiments/is_joint_pilot.py's `--ridge cv`: stratified deterministic folds, and a penalty chosen by
-held-out likelihood that goes where theory says (no SUMO)."""
+"""research/experiments/is_joint_pilot.py's `--ridge cv`: stratified deterministic folds, and a penalty chosen
+by held-out likelihood that goes where theory says (no SUMO)."""
 
 from __future__ import annotations
 

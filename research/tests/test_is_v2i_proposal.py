@@ -1,5 +1,5 @@
-"""research/experiments/is_v2i_proposal.py: another proposal's efficiency scored on rows drawn from a first one,
-against the efficiency worked out by numerical integration (no SUMO)."""
+"""research/experiments/is_v2i_proposal.py: another proposal's efficiency scored on rows drawn from a first
+one, against the efficiency worked out by numerical integration (no SUMO)."""
 
 from __future__ import annotations
 

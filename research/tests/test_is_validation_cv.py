@@ -1,5 +1,5 @@
-"""research/is_validation.py on a joint run: the IS estimate with pi_hat as a control variate (the estimate the
-report gives), the plain weighted estimate and its efficiencies beside it, and --plain for the columns of
+"""research/is_validation.py on a joint run: the IS estimate with pi_hat as a control variate (the estimate
+the report gives), the plain weighted estimate and its efficiencies beside it, and --plain for the columns of
 the tables before it; numbers recomputed here from the rows."""
 
 from __future__ import annotations
