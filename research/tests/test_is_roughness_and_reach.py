@@ -1,4 +1,4 @@
-"""The session-8 experiment tools (research/experiments/is_local_roughness.py, is_model_reach.py): their
+"""research/experiments/is_local_roughness.py and is_model_reach.py: their
 arithmetic against values worked by hand (no SUMO)."""
 
 from __future__ import annotations
