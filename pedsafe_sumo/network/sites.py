@@ -52,7 +52,7 @@ class SiteError(ValueError):
     """A site that cannot be found or used; the message is one line naming the problem."""
 
 
-#: The name the commands catch (kept from when sites were entries of a dict).
+#: The name the commands catch for a site they cannot find or use (the same class as SiteError).
 UnknownSiteError = SiteError
 
 

@@ -1,4 +1,4 @@
-"""The Xueqing network is one a traffic engineer would accept (issue 2, point 6), checked with sumolib.
+"""The Xueqing network is one a traffic engineer would accept, checked with sumolib.
 
 Every number here is derived from the network file itself with sumolib or ElementTree, or is a
 property of the real intersection (four arms, Xueqing Road with two lanes per direction); nothing
