@@ -121,7 +121,8 @@ def test_every_arm_has_a_signalised_crosswalk_with_green_time(tree, main_junctio
     for crossing, crossed in crossings.items():
         assert crossing in link_index, f"crosswalk {crossing} is not controlled by the traffic light"
         green_s = sum(d for d, state in phases if state[link_index[crossing]] in "Gg")
-        # Long enough for the slowest group (1.03 m/s over 60, DESIGN 2) to cross a 6.4 m carriageway.
+        # Long enough for the slowest group (over 60: 1.03 m/s, the paper's walking speeds) to cross a 6.4 m
+        # carriageway.
         assert green_s >= 6.4 / 1.03, f"crosswalk {crossing} has {green_s} s green in a {cycle_s} s cycle"
         for edge_id in crossed:
             if edge_id in edge_arm:
