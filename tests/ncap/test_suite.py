@@ -181,7 +181,7 @@ def _second_site(folder: Path) -> Site:
     built with tools/build_network.py into `folder`."""
     from pedsafe_sumo.network.build_cli import main as build_network
 
-    osm = get_site("xueqing").source_osm  # the export the study site was clipped from
+    osm = SITE.source_osm  # the export the study site was clipped from
     if osm is None or not osm.is_file():
         pytest.fail(f"the shared OSM export {osm} is missing")
     code = build_network(
