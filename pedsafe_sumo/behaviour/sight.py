@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from pedsafe_sumo.perception.raycast import KIND_VEHICLE, cast_rays
+from pedsafe_sumo.perception.raycast import cast_rays
+from pedsafe_sumo.perception.surfaces import KIND_VEHICLE
 from pedsafe_sumo.perception.world import WorldSnapshot
 
 #: Points of the vehicle a pedestrian looks for: along its centreline at these fractions of its half

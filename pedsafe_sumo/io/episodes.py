@@ -1,4 +1,4 @@
-"""The episodes.parquet contract (DESIGN section 3): one row per episode and condition.
+"""The episodes.parquet contract (docs/design.md, 'Contracts'): one row per episode and condition.
 
 Written by the batch runner, read by the report; both take the column names and types from here.
 """
@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-#: Columns, in DESIGN section 3 order.
+#: Columns, in the order of docs/design.md, 'Contracts'.
 EPISODE_COLUMNS = (
     "scenario", "condition", "episode", "seed", "ped_age", "ped_gender", "ped_risk", "ped_speed_mps",
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",

@@ -1,4 +1,4 @@
-"""One parameter file for every default of the model (DESIGN section 2 and the sensor settings).
+"""One parameter file for every default of the model (docs/design.md, 'Sources of numbers'; sensor settings).
 
 `defaults.toml` beside this module holds every number with its unit and source. A user points a run at
 their own TOML file, which is laid over the defaults: it may set any subset of keys, but an unknown key

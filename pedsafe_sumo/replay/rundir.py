@@ -1,7 +1,7 @@
 """Find one logged episode of a batch run, with everything needed to run it again as it was run.
 
-A run directory (DESIGN section 3) holds episodes.parquet, run.json and cases/. Replaying episode N of
-a scenario under a condition takes, from the run and never from today's defaults:
+A run directory (docs/design.md, 'Contracts') holds episodes.parquet, run.json and cases/. Replaying
+episode N of a scenario under a condition takes, from the run and never from today's defaults:
 - the episode seed: episodes.parquet's `seed` of (scenario, episode, condition);
 - the scenario: `run.json["scenarios"][name]`, every field of the ScenarioSpec the batch used (with its
   --set overrides applied), rebuilt field by field so a changed default in the registry cannot leak in;

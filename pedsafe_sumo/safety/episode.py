@@ -1,4 +1,5 @@
-"""All safety indexes of one episode, under the column names of `episodes.parquet` (DESIGN section 3)."""
+"""All safety indexes of one episode, under the column names of `episodes.parquet` (docs/design.md,
+'Contracts')."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pedsafe_sumo.safety.injury import episode_injury
 from pedsafe_sumo.safety.proximity import ProximityModel, default_proximity_model, episode_proximity
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
 
-#: The columns of episodes.parquet that `episode_indexes` fills, in DESIGN's order.
+#: The columns of episodes.parquet that `episode_indexes` fills, in the order of docs/design.md, 'Contracts'.
 INDEX_COLUMNS = (
     "collision",
     "impact_speed_mps",

@@ -10,14 +10,14 @@ runs on (checked by ``tests/safety/test_geometry_kernels.py`` on random inputs, 
 ``tools/compare_runs_exact.py``); on a CPU with AVX512_SKX numpy has its own SIMD sin and cos, which may
 differ in the last bit (as the perception kernels may, see :mod:`pedsafe_sumo.perception.kernels`).
 Compiled on first use and cached on disk, as the
-perception kernels (:func:`pedsafe_sumo.perception.kernels._jit`).
+perception kernels (:func:`pedsafe_sumo.perception.raycast_kernels._jit`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from pedsafe_sumo.perception.kernels import _jit, _nmax, _nmin
+from pedsafe_sumo.perception.raycast_kernels import _jit, _nmax, _nmin
 
 
 @_jit  # type: ignore[untyped-decorator]  # numba compiles it; the annotations are for readers

@@ -18,8 +18,8 @@ from pedsafe_sumo.control.reference import ReferenceStack  # noqa: E402
 from pedsafe_sumo.ncap.protocol import load_protocol, select_cells  # noqa: E402
 from pedsafe_sumo.ncap.staging import stage_cell  # noqa: E402
 from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests  # noqa: E402
-from pedsafe_sumo.network.build import main as build_network  # noqa: E402
-from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, SHARED_OSM_SOURCE, Site, get_site  # noqa: E402
+from pedsafe_sumo.network.build_cli import main as build_network  # noqa: E402
+from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, Site, get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
 from pedsafe_sumo.scenarios.geometry import load_approach  # noqa: E402
 
@@ -181,8 +181,8 @@ def test_robustness_variations_stay_on_the_collision_course(never):
 def _second_site(folder: Path) -> Site:
     """Another signalised junction of the shared OSM export (Xueqing Road, 750 m south of the study site),
     built with tools/build_network.py into `folder`."""
-    osm = SHARED_OSM_SOURCE
-    if not osm.is_file():
+    osm = SITE.source_osm  # the export the study site was clipped from
+    if osm is None or not osm.is_file():
         pytest.fail(f"the shared OSM export {osm} is missing")
     code = build_network(
         [
