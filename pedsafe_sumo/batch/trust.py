@@ -2,18 +2,18 @@
 
 The run directory may come from someone else: its files are data. Before the driver locks it, no entry
 the driver writes or deletes (.lock, run.json, manifest.json, parts/, steplogs/, cases/, ...) may be a
-link leading out of it (run_store confines the paths manifest.json names); and the AD stack run.json
-names is imported only under control.stack_source's rule, unless the command names it again.
+link leading out of it (run_store confines the paths manifest.json names). The AD stack that run.json
+or a protocol file names is imported only under control.stack_source's rule, unless the command names
+it (--algorithm, --perception).
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.confine import ConfinementError, check_entries
-from pedsafe_sumo.control.stack_source import recorded_stack_origin
+from pedsafe_sumo.control.stack_source import is_shipped, recorded_stack_origin
 from pedsafe_sumo.io.run_store import (
     CASES_DIR,
     EPISODES_FILE,
@@ -47,9 +47,18 @@ def check_run_entries(run_dir: Path) -> None:
         raise UsageError(str(exc)) from None
 
 
-def check_resumed_stack(args: Any, stack: str, out: Path) -> None:
-    """A resume that takes its AD stack from run.json (no --algorithm, --perception or --protocol given):
-    refuse a stack control.stack_source does not import on a file's word, else say what it imports."""
-    if args.algorithm is not None or args.perception is not None or args.protocol is not None:
+def check_stack_from_file(args: Any, stack: str, arguments: dict[str, Any], resumed: bool) -> None:
+    """A stack no flag of this command names, taken from a file (the protocol's [protocol] algorithm, or
+    run.json on --resume): refuse one control.stack_source does not import on a file's word, else say
+    what it imports."""
+    if args.algorithm is not None or args.perception is not None:
         return
-    print(f"note: the AD stack of {out / RUN_FILE}: {recorded_stack_origin(stack, out)}", file=sys.stderr)
+    if arguments.get("protocol") is not None:
+        source, run_dir = Path(arguments["protocol"]), None
+    elif resumed:
+        source, run_dir = Path(args.out) / RUN_FILE, Path(args.out)
+    else:
+        return
+    origin = recorded_stack_origin(stack, run_dir, str(source))
+    if not is_shipped(stack):  # on stdout: a refusal later stays one line on stderr
+        print(f"the AD stack {source} names: {origin}")

@@ -1,8 +1,9 @@
-"""Where the AD stack a run's run.json names may be imported from (docs/trust.md).
+"""Where an AD stack a file names may be imported from (docs/trust.md).
 
 A replay and a resumed batch read the AD stack ("package.module:Class", with "+perception" after it)
-from run.json, a file that may come from someone else. Importing a module runs its code, so a name from
-a file is imported only when the module is found outside the current directory:
+from run.json, a batch --protocol from the protocol file: files that may come from someone else.
+Importing a module runs its code, so a name from a file is imported only when the module is found
+outside the current directory:
 
 - the stack of the package itself (pedsafe_sumo.*, the shipped reference stack) always is;
 - any other module must be found on the import path without the current directory: an installed
@@ -54,9 +55,17 @@ def _origin(top: str, path: list[str]) -> Path | None:
     return Path(locations[0]) if locations else None
 
 
-def recorded_stack_origin(spec: str, run_dir: Path) -> str:
-    """Check that every module of the stack `spec` (read from run.json of `run_dir`) may be imported
-    (module docstring) and say where each comes from; AlgorithmLoadError (one line) when not."""
+def is_shipped(spec: str) -> bool:
+    """Whether every module of the stack `spec` is pedsafe_sumo's own (the reference stack)."""
+    return all(
+        part.partition(":")[0].split(".")[0] == SHIPPED_PACKAGE for part in spec.split(PERCEPTION_JOIN)
+    )
+
+
+def recorded_stack_origin(spec: str, run_dir: Path | None, named_by: str = "run.json") -> str:
+    """Check that every module of the stack `spec`, read from the file `named_by` (run.json of `run_dir`,
+    or a protocol file with `run_dir` None), may be imported (module docstring) and say where each
+    comes from; AlgorithmLoadError (one line) when not."""
     cwd = Path.cwd().resolve()
     cwd_implicit = not _named_on_pythonpath(cwd)
     found = []
@@ -69,28 +78,30 @@ def recorded_stack_origin(spec: str, run_dir: Path) -> str:
         origin = _origin(top, import_path_without_cwd())
         if origin is None:
             raise AlgorithmLoadError(
-                f"run.json names the AD stack '{spec}', whose module '{top}' is not installed (a module in "
-                f"the current directory is not imported on a file's word): name it with --algorithm "
-                "to run it"
+                f"{named_by} names the AD stack '{spec}', whose module '{top}' is not installed (a module in "
+                f"the current directory is not imported on a file's word): put its folder on PYTHONPATH "
+                "or name it with --algorithm"
             )
-        if is_inside(origin, run_dir):
+        if run_dir is not None and is_inside(origin, run_dir):
             raise AlgorithmLoadError(
-                f"run.json names the AD stack '{spec}', whose module '{top}' lies in the run directory "
+                f"{named_by} names the AD stack '{spec}', whose module '{top}' lies in the run directory "
                 f"{run_dir}: name it with --algorithm to run it"
             )
         if cwd_implicit and _origin(top, [str(cwd)]) is not None:
             raise AlgorithmLoadError(
                 f"the current directory holds a module '{top}' that would be imported in place of the "
-                f"installed one run.json names: run from another directory or name it with --algorithm"
+                f"installed one {named_by} names: run from another directory or name it with --algorithm"
             )
         found.append(f"{module} from {origin}")
     return ", ".join(found)
 
 
 def stack_to_replay(recorded: str, named: str | None, run_dir: Path) -> tuple[str, str]:
-    """The stack a replay imports and a note saying which and from where: `named` (--algorithm) when
-    given, else the `recorded` one if the rule above lets it be imported (AlgorithmLoadError if not)."""
+    """The stack a replay imports and a note saying which and from where ("" for pedsafe_sumo's own
+    stack): `named` (--algorithm) when given, else the `recorded` one if the rule above lets it be
+    imported (AlgorithmLoadError if not)."""
     if named is None:
-        return recorded, f"AD stack from run.json: {recorded_stack_origin(recorded, run_dir)}"
+        origin = recorded_stack_origin(recorded, run_dir)
+        return recorded, "" if is_shipped(recorded) else f"AD stack from run.json: {origin}"
     differs = "" if named == recorded else f"; the run recorded {recorded}"
     return named, f"AD stack named by --algorithm: {named}{differs}"

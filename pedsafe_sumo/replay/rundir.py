@@ -155,7 +155,7 @@ def load_logged_episode(
     params = params_from_record(run_info["parameters"], notes)
     try:  # a stack run.json names is imported only under control.stack_source's rule
         algorithm, stack_note = stack_to_replay(str(run_info["algorithm"]), algorithm, run_dir)
-        notes.append(stack_note)
+        notes += [stack_note] if stack_note else []
         agent_class = load_agent_class(algorithm)
     except AlgorithmLoadError as exc:
         raise ReplayError(f"the run's algorithm cannot be loaded: {exc}") from None

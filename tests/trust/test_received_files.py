@@ -319,6 +319,16 @@ def _recorded_stack(run: Path, spec: str) -> None:
     (run / "run.json").write_text(json.dumps(info))
 
 
+def _protocol_naming(run: Path, module: str) -> None:
+    """A copy of the paper-v7 protocol in `run` whose [protocol] algorithm is `module`:Stack."""
+    text = (REPO_ROOT / "protocols" / "paper-v7.toml").read_text()
+    (run / "received.toml").write_text(
+        text.replace(
+            'algorithm = "pedsafe_sumo.control.reference:ReferenceStack"', f'algorithm = "{module}:Stack"', 1
+        )
+    )
+
+
 REPLAY = (
     "-m",
     "pedsafe_sumo.replay",
@@ -331,6 +341,7 @@ REPLAY = (
     "x.fcd.xml",
 )
 RESUME = ("-m", "pedsafe_sumo.batch", "--resume", "--out", ".")
+PROTOCOL = ("-m", "pedsafe_sumo.batch", "--protocol", "received.toml", "--episodes", "1", "--out", "new")
 
 
 @pytest.mark.slow
@@ -341,19 +352,97 @@ RESUME = ("-m", "pedsafe_sumo.batch", "--resume", "--out", ".")
         (RESUME, "evil_stack", "is not installed"),
         (REPLAY, "pytest", "the current directory holds a module 'pytest'"),
         (RESUME, "pytest", "the current directory holds a module 'pytest'"),
+        (PROTOCOL, "evil_stack", "is not installed"),
     ],
-    ids=["replay-cwd-module", "resume-cwd-module", "replay-shadowing-module", "resume-shadowing-module"],
+    ids=[
+        "replay-cwd-module",
+        "resume-cwd-module",
+        "replay-shadowing-module",
+        "resume-shadowing-module",
+        "protocol-cwd-module",
+    ],
 )
 def test_a_stack_run_json_names_is_not_imported_from_the_current_directory(
     finished_run, tmp_path, cli, module, phrase
 ):
     victim_dir = victim(tmp_path)
     run = stopped_copy(finished_run, tmp_path) if cli is RESUME else tmp_path / "received" / "run"
-    if cli is REPLAY:
+    if cli is not RESUME:
         shutil.copytree(finished_run, run)
+    if cli is PROTOCOL:
+        _protocol_naming(run, module)
     (run / f"{module}.py").write_text(EVIL_MODULE.format(victim=str(victim_dir)))
     _recorded_stack(run, f"{module}:Stack")
+    before_run = {name for name in os.listdir(run)}
     before = snapshot(victim_dir)
     proc = command(*cli, cwd=run)
     assert_refused(proc, phrase, "--algorithm")
     assert snapshot(victim_dir) == before and not (victim_dir / "imported.txt").exists()
+    assert set(os.listdir(run)) == before_run  # nothing written (no new run either)
+
+
+# --------------------------------------------------------------------------- the import rule, in-process
+@pytest.mark.parametrize(
+    ("spec", "named", "expected", "refusal"),
+    [
+        ("pedsafe_sumo.control.reference:ReferenceStack", None, "", None),
+        ("pytest:Stack", None, "AD stack from run.json: pytest from", None),
+        ("evil_stack:Stack", None, None, "is not installed"),
+        ("pytest:Stack", None, None, "holds a module 'pytest'"),
+        ("evil_stack:Stack", "evil_stack:Stack", "AD stack named by --algorithm: evil_stack:Stack", None),
+        ("a:B", "c:D", "AD stack named by --algorithm: c:D; the run recorded a:B", None),
+    ],
+    ids=["shipped", "installed", "cwd-only", "shadowed", "named", "named-other"],
+)
+def test_which_stack_a_replay_imports(tmp_path, monkeypatch, spec, named, expected, refusal):
+    from pedsafe_sumo.control.agent import AlgorithmLoadError
+    from pedsafe_sumo.control.stack_source import stack_to_replay
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("PYTHONPATH", str(REPO_ROOT))
+    (tmp_path / "evil_stack.py").write_text("raise SystemExit('imported')\n")
+    if refusal and "pytest" in refusal:
+        (tmp_path / "pytest.py").write_text("raise SystemExit('imported')\n")
+    if refusal is None:
+        chosen, note = stack_to_replay(spec, named, tmp_path / "run")
+        assert chosen == (named or spec) and note.startswith(expected) and "\n" not in note
+    else:
+        with pytest.raises(AlgorithmLoadError, match=refusal) as info:
+            stack_to_replay(spec, named, tmp_path / "run")
+        assert "\n" not in str(info.value) and "--algorithm" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [
+        ("tripinfo-output", "t.xml"),
+        ("netstate-dump", "n.xml"),
+        ("save-state.files", "s.xml"),
+        ("log", "l.txt"),
+        ("error-log", "e.txt"),
+        ("device.ssm.file", "ssm.xml"),
+        ("configuration-file", "other.sumocfg"),
+        ("route-files", "r.rou.xml"),
+    ],
+)
+def test_every_writing_option_of_a_site_configuration_is_refused(tmp_path, option, value):
+    from pedsafe_sumo.network.sumo_inputs import SumoInputError, config_inputs
+
+    cfg = tmp_path / "x.sumocfg"
+    cfg.write_text(
+        '<configuration><input><net-file value="x.net.xml"/></input>'
+        f'<{option} value="{value}"/></configuration>'
+    )
+    with pytest.raises(SumoInputError, match=f"sets {option}"):
+        config_inputs(cfg)
+
+
+def test_the_shipped_sites_pass_the_sumo_file_checks():
+    from pedsafe_sumo.network.sites import available_sites, resolve_site
+    from pedsafe_sumo.network.sumo_inputs import check_gui_site, config_inputs
+
+    for name in available_sites():
+        site = resolve_site(name)
+        found = config_inputs(site.file("sumocfg"))
+        assert [p.name for p in found["additional"]] == [f"{name}.poly.xml", f"{name}.rsu.add.xml"]
+        check_gui_site(site, site.file("view.xml"))
