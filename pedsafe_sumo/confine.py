@@ -40,8 +40,18 @@ def confined(base: Path, relative: str, what: str) -> Path:
 
 
 def check_entries(base: Path, names: Iterable[str], what: str) -> None:
-    """ConfinementError when one of the entries `names` of `base` that exist is a link leading out."""
+    """ConfinementError when one of the entries `names` of `base` (a file or folder to be, too) would lie
+    outside it once resolved: a link leading out, at the name or at a folder on its way."""
     for name in names:
         path = Path(base) / name
-        if (path.exists() or path.is_symlink()) and not is_inside(path, base):
+        if not is_inside(path, base):
             raise ConfinementError(f"{what}: {path} leads out of {base} (a symbolic link): refused")
+
+
+def check_tree(base: Path, names: Iterable[str], what: str) -> None:
+    """check_entries for the entries `names` of `base` and everything below those that are folders."""
+    check_entries(base, names, what)
+    for name in names:
+        folder = Path(base) / name
+        if folder.is_dir() and not folder.is_symlink():
+            check_tree(base, [str(p.relative_to(base)) for p in folder.iterdir()], what)

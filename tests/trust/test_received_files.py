@@ -137,6 +137,21 @@ def test_a_crafted_run_directory_cannot_make_resume_touch_other_files(finished_r
     assert snapshot(victim_dir) == before
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("entry", ["tables", "figures", "report.html"])
+def test_a_link_in_a_run_directory_cannot_send_the_report_elsewhere(finished_run, tmp_path, entry):
+    victim_dir = victim(tmp_path)
+    run = tmp_path / "received" / "run"
+    shutil.copytree(finished_run, run)
+    shutil.rmtree(run / entry, ignore_errors=True)
+    (run / entry).unlink(missing_ok=True)
+    (run / entry).symlink_to(victim_dir / "important.txt" if entry.endswith(".html") else victim_dir)
+    before = snapshot(victim_dir)
+    proc = command("-m", "pedsafe_sumo.report", str(run))
+    assert_refused(proc, "report", "leads out of", "refused")
+    assert snapshot(victim_dir) == before
+
+
 # ------------------------------------------------------------------------------------------ site folders
 def site_copy(tmp_path: Path, edit) -> Path:
     """networks/xueqing copied to tmp_path/sites/xueqing, its site file edited by `edit(info, folder)`."""
