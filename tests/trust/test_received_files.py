@@ -15,7 +15,10 @@ from pathlib import Path
 import pytest
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
-from pedsafe_sumo.network.sites import content_digest
+from pedsafe_sumo.control.agent import AlgorithmLoadError
+from pedsafe_sumo.control.stack_source import stack_to_replay
+from pedsafe_sumo.network.sites import available_sites, content_digest, resolve_site
+from pedsafe_sumo.network.sumo_inputs import SumoInputError, check_gui_site, config_inputs
 
 TOOLS = REPO_ROOT / "tools"
 #: A module that, once imported, leaves a file in the victim folder {victim}.
@@ -410,9 +413,6 @@ def test_a_stack_run_json_names_is_not_imported_from_the_current_directory(
     ids=["shipped", "installed", "cwd-only", "shadowed", "named", "named-other"],
 )
 def test_which_stack_a_replay_imports(tmp_path, monkeypatch, spec, named, expected, refusal):
-    from pedsafe_sumo.control.agent import AlgorithmLoadError
-    from pedsafe_sumo.control.stack_source import stack_to_replay
-
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("PYTHONPATH", str(REPO_ROOT))
     (tmp_path / "evil_stack.py").write_text("raise SystemExit('imported')\n")
@@ -441,8 +441,6 @@ def test_which_stack_a_replay_imports(tmp_path, monkeypatch, spec, named, expect
     ],
 )
 def test_every_writing_option_of_a_site_configuration_is_refused(tmp_path, option, value):
-    from pedsafe_sumo.network.sumo_inputs import SumoInputError, config_inputs
-
     cfg = tmp_path / "x.sumocfg"
     cfg.write_text(
         '<configuration><input><net-file value="x.net.xml"/></input>'
@@ -453,9 +451,6 @@ def test_every_writing_option_of_a_site_configuration_is_refused(tmp_path, optio
 
 
 def test_the_shipped_sites_pass_the_sumo_file_checks():
-    from pedsafe_sumo.network.sites import available_sites, resolve_site
-    from pedsafe_sumo.network.sumo_inputs import check_gui_site, config_inputs
-
     for name in available_sites():
         site = resolve_site(name)
         found = config_inputs(site.file("sumocfg"))
