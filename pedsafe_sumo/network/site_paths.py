@@ -2,8 +2,8 @@
 
 A site folder may come from someone else, and its site file names OSM data by path (`source_osm`,
 `clip_osm`). A build (`tools/build_network.py --site`, `python -m pedsafe_sumo.network --site`) reads
-such a path only inside the site folder, the repository's osm/ or the team's shared source extract,
-and writes only inside the site folder; the shipped sites under networks/ keep their clip in the
+such a path only inside the site folder or the repository's osm/ (the shipped OSM data), and writes
+only inside the site folder; the shipped sites under networks/ keep their clip in the
 repository's osm/, which their rebuild writes. A path the user gives on the command line (--osm,
 --osm-out, --out) is taken as given. A link planted at the name of a file the build writes (or at its
 temporary name) that leads out of the folder is refused too.
@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR
 from pedsafe_sumo.confine import ConfinementError, check_entries, is_inside
-from pedsafe_sumo.network.sites import OSM_DIR, SHARED_OSM_SOURCE, SITE_FILE_SUFFIXES, Site, SiteError
+from pedsafe_sumo.network.sites import OSM_DIR, SITE_FILE_SUFFIXES, Site, SiteError
 
 #: Every file a build writes in a site folder, by suffix (the clip kept in the folder included).
 BUILT_SUFFIXES = (*SITE_FILE_SUFFIXES, "osm")
@@ -23,11 +23,7 @@ BUILT_SUFFIXES = (*SITE_FILE_SUFFIXES, "osm")
 
 def may_read(site: Site, path: Path) -> bool:
     """Whether a build may read `path`, named by the site file of `site`."""
-    return (
-        is_inside(path, site.directory)
-        or is_inside(path, OSM_DIR)
-        or path.resolve() == SHARED_OSM_SOURCE.resolve()
-    )
+    return is_inside(path, site.directory) or is_inside(path, OSM_DIR)
 
 
 def source_to_read(site: Site, refuse: bool = False) -> Path | None:
