@@ -22,6 +22,7 @@ from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutEr
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.hosting import check_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
+from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
@@ -162,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
         if any(c not in CONDITIONS for c in conditions):
             raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
         site = resolve_site(args.site)
+        if args.gui:  # sumo-gui loads the site's additionals and view settings (docs/trust.md)
+            check_gui_site(site, site.file("view.xml"))
         # --approach is the scenario field `approach` (as in batch).
         set_pairs = [*(args.set or []), *([f"approach={args.approach}"] if args.approach else [])]
         specs, params = configure([args.scenario], args.params, set_pairs)

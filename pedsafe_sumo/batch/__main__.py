@@ -59,6 +59,7 @@ from pedsafe_sumo.batch.sampled import (
     run_sampled,
     sampler_identity,
 )
+from pedsafe_sumo.batch.trust import check_stack_from_file
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
 from pedsafe_sumo.io.run_store import (
@@ -599,6 +600,8 @@ def prepare(args: argparse.Namespace) -> Plan:
     else:
         specs, params = configure(scenarios, params_file, arguments["set"])
     stack = stack_spec(arguments["algorithm"], arguments.get("perception"))
+    # A stack named by run.json or a protocol file alone is imported only from outside the cwd.
+    check_stack_from_file(args, stack, arguments, recorded is not None)
     load_agent_class(stack)
     check_site(site, params)
     check_roadside_units(specs, site)  # after check_site: it reads the site's rsu.add.xml

@@ -17,6 +17,7 @@ import pandas as pd
 from pedsafe_sumo.batch.chunks import Chunk
 from pedsafe_sumo.batch.executors import BatchError
 from pedsafe_sumo.batch.runner import ChunkOutput
+from pedsafe_sumo.batch.trust import check_run_entries
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
@@ -99,6 +100,7 @@ class BatchRunDirectory:
     def reopen(self) -> list[str]:
         """A stopped run: lock it, keep the recorded chunks whose part files are intact, and delete what
         a killed driver left behind (unrecorded parts, temporary files). Returns one note per change."""
+        check_run_entries(self.path)  # no link in the directory leads a write or a deletion out of it
         self._lock()
         try:
             self.manifest = Manifest.load(self.path / MANIFEST_FILE)

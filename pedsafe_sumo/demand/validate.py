@@ -52,6 +52,7 @@ from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
 from pedsafe_sumo.demand.validation_page import measured_markdown, plot_ecdfs, write_report
 from pedsafe_sumo.demand.vehicles import background_speed_scale
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
+from pedsafe_sumo.network.sumo_inputs import config_inputs
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
@@ -137,12 +138,8 @@ def _site_config(site: Site) -> tuple[Path | None, list[str]]:
     cfg = site.files.directory / f"{site.files.name}.sumocfg"
     if not cfg.is_file():
         return None, []
-    additionals: list[str] = []
-    for el in ET.parse(cfg).getroot().iter("additional-files"):
-        additionals = [
-            str(site.files.directory / f.strip()) for f in el.get("value", "").split(",") if f.strip()
-        ]
-    return cfg, additionals
+    # Checked first: a site's files name no SUMO output and no file outside the site (docs/trust.md).
+    return cfg, [str(path) for path in config_inputs(cfg)["additional"]]
 
 
 #: Settings for a network without a .sumocfg (the test networks).

@@ -8,6 +8,7 @@ import sys
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.network.build import BuildError, build_site
 from pedsafe_sumo.network.build_cli import hosting_scorer
+from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
 
@@ -24,10 +25,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.exit(2, f"error: {exc}\n")
     if not args.no_build:
         # Rebuild from the committed clip when the source extract is not beside the checkout.
-        from_source = site.source_osm is not None and site.source_osm.exists()
+        # Only what the site file may name (network/site_paths.py, docs/trust.md).
+        source = source_to_read(site)
+        from_source = source is not None and source.exists()
         try:
+            check_targets(site, site.directory, site.name, site.clip_osm if from_source else None)
             report = build_site(
-                site.source_osm if from_source else site.clip_osm,
+                site.source_osm if from_source else clip_to_read(site),
                 site.center_lat,
                 site.center_lon,
                 site.radius_m,
@@ -42,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
                 source_osm=site.source_osm,
                 hosting_scorer=hosting_scorer,
             )
-        except BuildError as exc:
+        except (BuildError, UnknownSiteError) as exc:
             parser.exit(2, f"error: {exc}\n")
         origin = site.source_osm if from_source else site.clip_osm
         print(

@@ -16,6 +16,7 @@ from pathlib import Path
 from pedsafe_sumo import NETWORKS_DIR
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.hosting import _site_world, hosted_count, hosting_lines
+from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import Site, SiteError, resolve_site
 from pedsafe_sumo.scenarios.geometry import load_approach
 
@@ -49,6 +50,8 @@ def _refresh(parser, folder: Path) -> BuildReport:
         site = resolve_site(folder if "/" in str(folder) else f"./{folder}", verify=False)
     except SiteError as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
+    clip_to_read(site)  # a clip where the site file may name it, and no link out (docs/trust.md)
+    check_targets(None, site.directory, site.name, None)
     if not site.clip_osm.is_file():
         parser.exit(
             2,
@@ -123,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             report = _refresh(parser, args.refresh)
         else:
             report = _build(parser, args)
-    except BuildError as exc:
+    except (BuildError, SiteError) as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
     if report.signal_nodes and len(report.signal_nodes) > 1:
@@ -163,13 +166,17 @@ def _build(parser, args) -> BuildReport:
         parser.exit(2, f"build_network: error: radius must be positive, got {radius_m}\n")
     out_dir = args.out_dir or (site.directory.parent / name if site else NETWORKS_DIR / name)
     if site is not None and args.osm is None:
-        osm = site.clip_osm if args.no_clip else site.source_osm
+        osm = clip_to_read(site) if args.no_clip else source_to_read(site, refuse=True)
         if osm is None:
             parser.exit(2, f"build_network: error: site {site.name} records no source OSM: give --osm\n")
     else:
         osm = args.osm
     # The clip stays where the site keeps it (osm/xueqing.osm for the shipped site), else in its folder.
     default_clip = site.clip_osm if same_site and args.out_dir is None else out_dir / f"{name}.osm"
+    if site is not None and args.out_dir is None and args.name is None:  # what the site file decides
+        check_site_folder(site, out_dir)  # network/site_paths.py, docs/trust.md
+    site_clip = same_site and args.out_dir is None and args.osm_out is None and not args.no_clip
+    check_targets(site, out_dir, name, default_clip if site_clip else None)
     return build_site(
         osm,
         lat,

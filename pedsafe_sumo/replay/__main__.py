@@ -27,6 +27,7 @@ from pathlib import Path
 import pandas as pd
 
 from pedsafe_sumo.ncap.suite import NcapRunner
+from pedsafe_sumo.network.sumo_inputs import SumoInputError, check_gui_site
 from pedsafe_sumo.replay.check import CHECKED_OUTCOME, TrajectoryCheck, outcome_mismatches
 from pedsafe_sumo.replay.fcd import FcdRecorder, write_fcd
 from pedsafe_sumo.replay.rundir import LoggedEpisode, ReplayError, load_logged_episode
@@ -76,6 +77,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--site", help="the run's site (name or folder) when it is not where run.json says [its site_path]"
+    )
+    parser.add_argument(
+        "--algorithm",
+        metavar="MODULE:CLASS",
+        help="the AD stack to import (replaces the run's); needed for a stack run.json names that is not "
+        "installed (docs/trust.md)",
     )
     parser.add_argument(
         "--delay",
@@ -227,9 +234,17 @@ def main(argv: list[str] | None = None) -> int:
     try:
         size_px = check_args(args)
         logged = load_logged_episode(
-            args.run_dir, args.episode, args.condition, args.scenario, args.site, args.approach
+            args.run_dir,
+            args.episode,
+            args.condition,
+            args.scenario,
+            args.site,
+            args.approach,
+            args.algorithm,
         )
-    except (UsageError, ReplayError) as exc:
+        if args.export_fcd is None and args.export_xosc is None:  # sumo-gui loads the site's additionals
+            check_gui_site(logged.site, view=None)
+    except (UsageError, ReplayError, SumoInputError) as exc:
         return error(str(exc))
     if args.export_fcd is not None:
         say_header(logged, print)

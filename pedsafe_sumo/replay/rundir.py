@@ -6,7 +6,8 @@ episode N of a scenario under a condition takes, from the run and never from tod
 - the scenario: `run.json["scenarios"][name]`, every field of the ScenarioSpec the batch used (with its
   --set overrides applied), rebuilt field by field so a changed default in the registry cannot leak in;
 - the parameters: run.json["parameters"], the full merged parameter file of the run;
-- the AD stack: run.json["algorithm"], loaded like --algorithm;
+- the AD stack: run.json["algorithm"], imported only when installed or shipped (control.stack_source),
+  or the one given as --algorithm;
 - the site: the folder run.json["site_path"] names (else the site named run.json["site"]), or the one
   given as --site; its files must be the run's (run.json["site_files_sha256"]);
 - the case, when there is one: cases/<scenario>_<condition>_<seed>.parquet (the per-step log the
@@ -34,6 +35,7 @@ import sumolib
 from pedsafe_sumo import __version__
 from pedsafe_sumo.batch.runner import site_file_digests
 from pedsafe_sumo.control.agent import Agent, AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.stack_source import stack_to_replay
 from pedsafe_sumo.io.cases import case_stem, read_case
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params, validate
@@ -100,11 +102,13 @@ def load_logged_episode(
     scenario: str | None = None,
     site: str | None = None,
     approach: str | None = None,
+    algorithm: str | None = None,
 ) -> LoggedEpisode:
     """Episode `episode` of `scenario` under `condition` in the run at `run_dir`; ReplayError if any of
     them is missing or the run's settings cannot be rebuilt. `site` (a name or folder) replaces the
     site the run recorded, e.g. a copy of its folder on another machine; its files must be the run's.
-    `approach` (N, E, S, W) picks the episode of a batch run with --approach on that arm."""
+    `approach` (N, E, S, W) picks the episode of a batch run with --approach on that arm. `algorithm`
+    (--algorithm) replaces the AD stack the run recorded (control.stack_source)."""
     run_dir = Path(run_dir)
     if not run_dir.exists():
         raise ReplayError(f"run directory {run_dir} does not exist")
@@ -152,8 +156,9 @@ def load_logged_episode(
     resolved_site = run_site(run_info, site)
     spec = scenario_from_record(run_info["scenarios"], unit, notes)
     params = params_from_record(run_info["parameters"], notes)
-    algorithm = str(run_info["algorithm"])
-    try:
+    try:  # a stack run.json names is imported only under control.stack_source's rule
+        algorithm, stack_note = stack_to_replay(str(run_info["algorithm"]), algorithm, run_dir)
+        notes += [stack_note] if stack_note else []
         agent_class = load_agent_class(algorithm)
     except AlgorithmLoadError as exc:
         raise ReplayError(f"the run's algorithm cannot be loaded: {exc}") from None
