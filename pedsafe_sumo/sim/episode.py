@@ -17,9 +17,9 @@ contact with a standing ego is logged and the episode goes on), once both road u
 conflict area (the ego's rear past the pedestrian's path, the pedestrian past the ego's far flank), when
 the ego has left the network, or at the scenario's time limit.
 
-The loop is the hot path (BENCHMARKS.md): its state lives in local variables of `_EpisodeLoop.drive`,
-bound once per episode, so a step reads no attribute it does not need and builds no object it does not
-hand on.
+The loop (`_drive`) is the hot path: what it uses is bound to local variables once per episode, so a
+step looks up no attribute it could have bound before; measure a change to it with
+benchmarks/bench_episode.py (BENCHMARKS.md).
 
 Randomness: the episode seed is split (numpy SeedSequence) into a world stream, drawn identically
 under SV and V2I, and a perception stream; SUMO gets the seed too.
