@@ -129,13 +129,13 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     # crossing; the TTC score agreed with plain MC on all four scenarios (docs/sampling.md).
     "is_score": SCORE_TTC,
     # joint since session 10: against the 10,000-pair MC run it needed fewer episodes than the
-    # product on all four scenarios (EXPERIMENTS.md, sessions 6-8); the product stays one flag away.
+    # product on all four scenarios (research/EXPERIMENTS.md, sessions 6-8); the product stays one flag away.
     "is_family": FAMILY_JOINT,
     # since session 11: Table I pools the pilot stages from stage 2 with the final one (docs/sampling.md).
     "is_pool_from": DEFAULT_POOL_FROM_STAGE,
     # since session 12: the joint proposal also aims at V2I's collisions where the pilots hold enough of
-    # them (sampling/joint.py, "The V2I factor"; EXPERIMENTS.md, session 12); since session 13 also at
-    # those where SV does not collide ("The V2I-only term"; EXPERIMENTS.md, session 13).
+    # them (sampling/joint.py, "The V2I factor"; research/EXPERIMENTS.md, session 12); since session 13
+    # also at those where SV does not collide ("The V2I-only term"; research/EXPERIMENTS.md, session 13).
     "is_v2i_factor": V2I_FACTOR_CONTRAST_V2I_ONLY,
 }
 #: What runs recorded before an argument existed (or before its default changed) had: --resume fills a

@@ -1,7 +1,8 @@
 """Random draws of the demand model: headways, vehicle speeds, pedestrian attributes.
 
 Every function takes an explicit `numpy.random.Generator`; nothing here touches global random state, so one
-seed gives one demand. Distributions follow DESIGN section 2 (paper eqs. 1-3 and section IV-A).
+seed gives one demand. Distributions follow the paper's eqs. 1-3 and section IV-A (docs/design.md,
+'Sources of numbers').
 """
 
 from __future__ import annotations

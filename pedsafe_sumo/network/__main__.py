@@ -7,6 +7,7 @@ import sys
 
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.network.build import BuildError, build_site
+from pedsafe_sumo.network.build_cli import hosting_scorer
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
 
@@ -39,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
                 rsu_watch_arm=site.rsu_watch_arm,
                 description=site.description,
                 source_osm=site.source_osm,
+                hosting_scorer=hosting_scorer,
             )
         except BuildError as exc:
             parser.exit(2, f"error: {exc}\n")

@@ -25,8 +25,8 @@ from pedsafe_sumo.safety.geometry import first_polyline_crossing
 from pedsafe_sumo.safety.stats import wilson_interval
 
 OK_STATUS = "ok"
-#: Below this speed a road user counts as standing at the end of a log, m/s (the ego: DESIGN's 0.1 m/s
-#: for a stationary ego in issue 12; the same for the pedestrian).
+#: Below this speed a road user counts as standing at the end of a log, m/s (the ego: below it a contact is
+#: not a collision, safety.collision.STATIONARY_SPEED_MPS; the same for the pedestrian).
 STANDING_SPEED_MPS = 0.1
 PROXIMITY_COLUMNS = ("min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass")
 

@@ -1,4 +1,4 @@
-"""Reading a batch's run directory (DESIGN section 3) for the report, with every problem as one message.
+"""Reading a batch's run directory (docs/design.md, 'Contracts') for the report, every problem in one message.
 
 DIR/episodes.parquet   one row per episode and condition (required)
 DIR/run.json           the run's global information (optional: only its header line needs it)
@@ -33,7 +33,7 @@ from pedsafe_sumo.io.run_store import (
     read_parts,
 )
 
-#: The episodes.parquet columns the report reads (a subset of DESIGN section 3's).
+#: The episodes.parquet columns the report reads (a subset of those in docs/design.md, 'Contracts').
 REQUIRED_COLUMNS = (
     "scenario",
     "condition",

@@ -37,7 +37,7 @@ ESTIMATOR_CV = "is+cv"
 ESTIMATOR_IS = "is"
 #: Below this many final-stage rows the plain estimate stands: the regression's slope, fitted on a handful
 #: of draws, extrapolates mean(C) to 0 on noise. Measured on the toy of tests/sampling/test_joint.py (a
-#: joint proposal fitted on 2,000 nominal draws, 1,000 replicates per n; EXPERIMENTS.md, "Importance
+#: joint proposal fitted on 2,000 nominal draws, 1,000 replicates per n; research/EXPERIMENTS.md, "Importance
 #: sampling, session 8"): variance over plain IS's, and the 95% interval's coverage (plain's): n = 3
 #: 8.2x, 66% (96%); n = 10 1.25x, 80% (91%); n = 30 0.79x, 90% (92%); n = 100 0.77x, 93% (93%); n = 300
 #: 0.72x, 95% (94%). 30 is also about where Cochran (Sampling Techniques, 1977, chapter 6) takes the

@@ -2,8 +2,8 @@
 
 The cross-entropy stages fit a product of one family per input; a collision is a joint condition (a fast
 ego with an early, fast pedestrian), and the product puts mass on combinations that do not collide
-(EXPERIMENTS.md, "Importance sampling, session 6"). For an event that stays random given the inputs x,
-with pi(x) = P(collision | x), the proposal of least variance is q ∝ p sqrt(pi) (Owen, Monte Carlo theory,
+(research/EXPERIMENTS.md, "Importance sampling, session 6"). For an event that stays random given the inputs
+x, with pi(x) = P(collision | x), the proposal of least variance is q ∝ p sqrt(pi) (Owen, Monte Carlo theory,
 methods and examples, 2013, section 9.1). Here
 
     q(x) = lambda p(x) + (1 - lambda) p(x) sqrt(pi_hat(x)) / c,     c = E_p[sqrt(pi_hat)],
@@ -18,9 +18,9 @@ drawn from the nominal families (in the order of the sorted input names), each k
 (q/p)(x) / B where B = lambda + (1 - lambda) / c >= q/p (sqrt(pi_hat) <= 1); the first kept one is the
 episode's. Its weight is p/q = 1 / (lambda + (1 - lambda) sqrt(pi_hat(x)) / c), at most 1/lambda.
 
-Kinematic features (session 8; measured offline in EXPERIMENTS.md, "Session 7: shaping pi_hat at pilot size",
-the `physics` variant): where the scenario draws the ego's speed, the pedestrian's walking speed and the
-conflict offset, three functions of x are appended to the design as further continuous inputs (their
+Kinematic features (session 8; measured offline in research/EXPERIMENTS.md, "Session 7: shaping pi_hat at
+pilot size", the `physics` variant): where the scenario draws the ego's speed, the pedestrian's walking speed
+and the conflict offset, three functions of x are appended to the design as further continuous inputs (their
 squares and their products with every continuous input): the ego's speed v = clip(exp(ego_speed_log)) to the
 scenario's bounds (before the approach's speed-limit scale), the pedestrian's time per metre 1/w with w =
 exp(mu_g + sigma_g z) of the age group's lognormal (before the sex factor), and the braking margin
@@ -45,13 +45,13 @@ on v5_full's rows 75 of 75 crossing collisions, 220 of 220 right_turn, 293 of 29
 on the pooled pilot rows (which the guard's stage makes rich in collisions). Pilot rows only train pi_hat,
 so a guard that misses collisions costs efficiency, never bias.
 
-The V2I factor (session 12; EXPERIMENTS.md, "Importance sampling, session 12"). V2I's collisions lie inside
-SV's region, but there the proposable inputs leave V2I's outcome largely to chance: on jaywalking 84% of
-V2I's collisions (4% of the SV-only ones) have the pedestrian's clothing within the roadside camera's
+The V2I factor (session 12; research/EXPERIMENTS.md, "Importance sampling, session 12"). V2I's collisions lie
+inside SV's region, but there the proposable inputs leave V2I's outcome largely to chance: on jaywalking 84%
+of V2I's collisions (4% of the SV-only ones) have the pedestrian's clothing within the roadside camera's
 contrast threshold of the parked car behind them, which the camera's colour rule then cannot tell apart
-(perception/sensors.py). So where the pilots' SV collisions hold at least GUARD_MIN_COLLISIONS V2I
-collisions, the proposal also draws the clothing and the vehicles' colours (uniform categories, as the
-scenarios draw them) and aims at V2I's collisions too, modelled as pi_v2i = pi_hat r(z) with
+(perception/sensors.py). So where the pilots' SV collisions hold at least GUARD_MIN_COLLISIONS V2I collisions,
+the proposal also draws the clothing and the vehicles' colours (uniform categories, as the scenarios draw
+them) and aims at V2I's collisions too, modelled as pi_v2i = pi_hat r(z) with
 
     r(z) = P(V2I collision | SV collision, z) = expit(b_0 + sum_k b_k L[clothing, colour_k]),
 
@@ -68,7 +68,7 @@ V2I's control variate (`mean_pi_v2i`). Where the clothing does not vary the cont
 dresses the pedestrian in the waiting car's colour) the fit leaves r nearly constant and the proposal
 nearly the SV one.
 
-The V2I-only term (session 13; EXPERIMENTS.md, "Importance sampling, session 13", part 3). The factor
+The V2I-only term (session 13; research/EXPERIMENTS.md, "Importance sampling, session 13", part 3). The factor
 models V2I's collisions as a subset of SV's. On Xueqing that holds (V2I-only collisions are 0-8% of V2I's
 rate), but on the zhixin junction 41% of V2I's jaywalking collisions happen where SV does not collide, and
 the proposal drew them at about its defensive floor (V2I 0.15x against MC). So where the pilot pairs hold
@@ -81,7 +81,7 @@ pilot pair over pi_hat's design, and V2I is modelled as
 a by the same rule on m_v2i = E_p[pi_v2i]; pi_v2i is V2I's control variate. The factor then applies where
 either count is enough (r fitted on what SV collisions there are). h <= 1 still, so B stands.
 
-Enough (session 14; EXPERIMENTS.md, "Importance sampling, session 14"): GUARD_MIN_COLLISIONS V2I-only
+Enough (session 14; research/EXPERIMENTS.md, "Importance sampling, session 14"): GUARD_MIN_COLLISIONS V2I-only
 collisions, or V2I_ONLY_MIN_COLLISIONS that make up at least the defensive share lambda of the pilots' V2I
 collisions. The second arm is the case where leaving them out costs most: a share s of V2I's rate drawn at the
 floor lambda p adds s / lambda times plain Monte Carlo's variance to V2I's, so from s = lambda on, that
@@ -116,8 +116,8 @@ from scipy import optimize, special
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Family, Normal
 
 KIND = "joint"
-#: Ridge penalty on the standardised features: tools/is_limits.py's value, chosen before the pilot-sized
-#: measurement (EXPERIMENTS.md, "joint proposal"); not tuned on it.
+#: Ridge penalty on the standardised features: research/is_limits.py's value, chosen before the pilot-sized
+#: measurement (research/EXPERIMENTS.md, "joint proposal"); not tuned on it.
 RIDGE = 1.0
 #: Nominal draws that estimate c = E_p[sqrt(pi_hat)]: relative standard error about 1e-3 for the four
 #: Xueqing scenarios (stored per proposal).
@@ -135,13 +135,13 @@ COLOUR_SUFFIX = ".colour"
 KINEMATIC_INPUTS = ("conflict_offset_s", "ego_speed_log", "ped_age_group", "ped_walking_speed_z")
 #: An assumption, not a measurement: SUMO's default lane width 3.2 m less half a car's width 0.9 m, the
 #: distance from an occluder's lane-side flank to the ego lane's centre. Offline the efficiency hardly
-#: moved between 1.6 and 3.2 m (the separate 1/w feature absorbs it; EXPERIMENTS.md, session 7).
+#: moved between 1.6 and 3.2 m (the separate 1/w feature absorbs it; research/EXPERIMENTS.md, session 7).
 VISIBLE_M = 2.3
 #: Nominal draws (of NORM_SEED + 1) that give the kinematic features' means and standard deviations.
 MOMENT_DRAWS = 100_000
 #: The guard: a pilot stage whose pooled pilot rows hold fewer SV collisions than this draws from the
 #: region proposal (margin_s < 0) instead of a fit on a handful of collisions (the `adaptive` variant's
-#: threshold of EXPERIMENTS.md, session 7, fixed there before its scores).
+#: threshold of research/EXPERIMENTS.md, session 7, fixed there before its scores).
 GUARD_MIN_COLLISIONS = 5
 #: The V2I-only term's lower count (module docstring, "Enough"): a fit needs more than one point.
 V2I_ONLY_MIN_COLLISIONS = 2
@@ -160,8 +160,9 @@ Block = np.ndarray | list[np.ndarray]
 
 def quadratic_design(n_rows: int, blocks: list[Block]) -> np.ndarray:
     """The logistic model's features: an intercept; per input in order, its indicators or its z and z^2;
-    then the products of every pair of continuous inputs. Shared with tools/is_limits.py and
-    tools/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler does."""
+    then the products of every pair of continuous inputs. Shared with research/is_limits.py and
+    research/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler
+    does."""
     columns, continuous = [np.ones(n_rows)], []
     for block in blocks:
         if isinstance(block, list):
@@ -311,7 +312,7 @@ class ContrastFactor:
 def low_contrast_table(
     clothing_rgb: Any, car_rgb: Any, delta_e_threshold: float
 ) -> tuple[tuple[int, ...], ...]:
-    """L[i][j] = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
+    """`L[i][j]` = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
     the cameras' rule: perception/sensors.py)."""
     from pedsafe_sumo.perception.sensors import delta_e_cie76
 

@@ -28,7 +28,7 @@ class EpisodeResult:
     condition: str
     #: One row per step (columns of pedsafe_sumo.safety.log plus the command and diagnostics).
     log: pd.DataFrame
-    #: The DESIGN section 3 columns of this episode (one row of episodes.parquet).
+    #: The columns of this episode (one row of episodes.parquet, docs/design.md, 'Contracts').
     outcome: dict[str, Any]
     end_reason: str
     timings_s: dict[str, float] = field(default_factory=dict)

@@ -1,6 +1,7 @@
-"""traffic.desired_speed_law (issue 14 item 6): "fit" keeps today's background bit for bit, "calibrated" draws
-the background's desired speeds from the calibrated lognormal in the route files and in the episodes alike,
-and on the open road at the paper's flow SUMO's loops measure speeds closer to the fit under it."""
+"""traffic.desired_speed_law: "fit" (the default) draws from the fitted lognormal whatever the calibrated
+values; "calibrated" draws the background's desired speeds from the calibrated lognormal in the route files
+and in the episodes alike, and on the open road at the paper's flow SUMO's loops measure speeds closer to the
+fit under it."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Every approach (issue 14 item 3): a pole pair per approach, --approach, the approach column.
+"""Every approach: a pole pair per approach, --approach, the approach column.
 
 Checked on the shipped Xueqing site against the network itself (sumolib), not against the code's output.
 """
@@ -132,7 +132,7 @@ def test_a_one_lane_approach_stages_the_straight_scenarios_with_cars_parked_at_t
     # The turns are staged there (the SUMO crash once seen on a one-lane approach had another cause, a
     # median refuge: tests/network/test_one_lane_turns.py); whether the poles see them is another matter.
     assert problems["right_turn"] is None or problems["right_turn"].startswith("not seen under V2I")
-    # left_turn's oncoming vehicle would come from the E approach's median lane, which only turns (issue 13).
+    # left_turn's oncoming vehicle would come from the E approach's median lane, which only turns.
     assert problems["left_turn"] == (
         "cannot be staged: site xueqing: lane 121399195#0_2 of the E approach (the oncoming lane) has no "
         "straight movement"

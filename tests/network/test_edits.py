@@ -1,6 +1,6 @@
 """Edits a traffic engineer makes to the Xueqing network: each is refused in one line until the derived
 files are re-derived from the edited network (build_network --refresh), and then either adapts or is
-refused in one line (issue 14, item 5; docs/sites.md has the table). The shifted network is in
+refused in one line (docs/sites.md has the table). The shifted network is in
 test_sites.py."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Crossing, jaywalking and background blending on one-lane approaches (issue 14 item 4), on the zhixin clip
+"""Crossing, jaywalking and background blending on one-lane approaches, on the zhixin clip
 (tests/network/data/osm, ODbL) whose north and south approaches have one 3.2 m vehicle lane and a 3.0 m
 sidewalk each.
 

@@ -1,14 +1,14 @@
-"""Turns from one-lane approaches (issue 14 item 4), on the zhixin clip (tests/network/data/osm, ODbL) whose
+"""Turns from one-lane approaches, on the zhixin clip (tests/network/data/osm, ODbL) whose
 north and south approaches have one vehicle lane each.
 
-They were refused after a right_turn episode from the north approach crashed libsumo 1.28 (segmentation
-fault). The mechanism (docs/sites.md): the scenario's pedestrian, moved by person.moveToXY, stepped off the
-crosswalk over the road turned into onto the median refuge of that divided road, a walking area no
-sidewalk reaches; SUMO had rebuilt the person's route to end on that walking area, its pedestrian router
-found no way from the refuge to the route's end (itself), and MSPModel_Striping::getNextLane's fallback for
-that case reads the previous lane, which PState::moveToXY passes as a null pointer. The engine now gives
-the person a walking route that ends on its sidewalk (sim.staging.add_pedestrian) on networks with
-refuges, and the turns are staged there.
+On networks with refuges the engine gives the scenario's pedestrian a walking route that ends on its
+sidewalk (sim.staging.add_pedestrian), because otherwise a right_turn episode from the north approach
+crashes libsumo 1.28 (segmentation fault). The mechanism (docs/sites.md): the pedestrian, moved by
+person.moveToXY, steps off the crosswalk over the road turned into onto the median refuge of that divided
+road, a walking area no sidewalk reaches; SUMO rebuilds the person's route to end on that walking area, its
+pedestrian router finds no way from the refuge to the route's end (itself), and
+MSPModel_Striping::getNextLane's fallback for that case reads the previous lane, which PState::moveToXY
+passes as a null pointer. With that route the turns are staged there.
 """
 
 from __future__ import annotations

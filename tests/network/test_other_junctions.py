@@ -1,6 +1,6 @@
 """Junctions other than Xueqing, built from OpenStreetMap clips (tests/network/data/osm, ODbL): each builds
 into a site folder that passes its checks, says which scenarios it can host and why not, and runs the
-ones it hosts with roadside detections under V2I (issue 14, items 4 and 7)."""
+ones it hosts with roadside detections under V2I."""
 
 from __future__ import annotations
 
@@ -212,7 +212,7 @@ def _hosting_by_approach(stdout: str, own: str) -> dict[tuple[str, str], str]:
 
 @pytest.mark.slow
 def test_every_hosted_scenario_runs_on_every_approach_with_roadside_detections(built, tmp_path):
-    """Issue 14 item 7 on the zhixin clip (two-lane Qinghua East Rd, one-lane tertiary side roads): what
+    """On the zhixin clip (two-lane Qinghua East Rd, one-lane tertiary side roads): what
     the build says it hosts on each approach is what `--scenario all --approach all` runs, under SV and
     V2I, each on the approach it names, with detections by the roadside camera under V2I."""
     folder, stdout = built["zhixin"]

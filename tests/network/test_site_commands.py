@@ -1,6 +1,5 @@
 """Every command takes --site NAME_OR_PATH: a copy of the Xueqing folder under another name, anywhere, is
-used by path; run.json records where it was, and replay finds it there and refuses it once it differs
-(issue 14, item 1)."""
+used by path; run.json records where it was, and replay finds it there and refuses it once it differs."""
 
 from __future__ import annotations
 

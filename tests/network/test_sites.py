@@ -1,5 +1,5 @@
 """A site is a folder: found by name or path, checked against the network its derived files were made
-from, re-derived after an edit (issue 14, items 1 and 2)."""
+from, re-derived after an edit."""
 
 from __future__ import annotations
 
@@ -215,7 +215,7 @@ def test_a_pole_turned_away_cannot_host_the_crossing():
     params = load_params(None)
     hosting = site_hosting(site, dict(SCENARIOS), params)
     # Every scenario but left_turn: Xueqing's split-phase program never lets the oncoming vehicle that
-    # hides its pedestrian move while the ego turns left (issue 13; networks/xueqing_two_phase can).
+    # hides its pedestrian move while the ego turns left (networks/xueqing_two_phase can).
     assert {name for name, problem in hosting.items() if problem is not None} == {"left_turn"}
     assert "never shows green to the oncoming through movement" in hosting["left_turn"]
     units = {u.id: u for u in load_roadside_units(site.file("rsu.add.xml"), 6.0, 20.0)}

@@ -16,7 +16,7 @@ from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.control.agent import KNOWN_SENSORS, AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.perception.raycast import KIND_PEDESTRIAN
+from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
 from pedsafe_sumo.scenarios.registry import SCENARIOS
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.observation import ObservationFeeds
