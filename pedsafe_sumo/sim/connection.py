@@ -21,7 +21,8 @@ SUMO's generators continue across a restore, and the staged vehicles (copies of 
 0.9602 that every load with that seed gives, and its V2I run failed ("SUMO did not insert vehicle
 'leader_0'"), while it runs when loaded (tests/sim/test_episode_history.py). On Xueqing 80 of 80 rows
 came out equal with and without the restore (benchmarks/bench_load_state.py, tools/compare_runs_exact.py):
-the effect is rare, not absent. What the restore does, and its other limits:
+the effect is rare, not absent (docs/decisions/2026-11-27-state-restore-off.md). What the restore does,
+and its other limits:
 - the state is saved without SUMO's random number generators (no --save-state.rng): with them in the
   file, restored episodes differ from loaded ones from the second on (measured, mechanism not found);
 - a restore keeps SUMO's generators where the last episode left them (generator states written into a
