@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pedsafe_sumo.batch import runner as batch_runner  # noqa: E402
 from pedsafe_sumo.batch.__main__ import parse_args, prepare  # noqa: E402
 from pedsafe_sumo.batch.chunks import plan_chunks  # noqa: E402
-from pedsafe_sumo.sim import episode as episode_module  # noqa: E402
+from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 
 
 class _MallInfo2(ctypes.Structure):
@@ -78,7 +78,7 @@ def main() -> None:
 
     # Warm-up, and the SUMO arguments and step counts of real episodes (for --mode sumo).
     captured: list[tuple[list[str], int]] = []
-    real_run = episode_module.SumoSession.run
+    real_run = SumoSession.run
     import libsumo
 
     real_step = libsumo.simulation.step
@@ -95,12 +95,12 @@ def main() -> None:
         captured.append((list(sumo_args), 0))
         return real_run(self, sumo_args)
 
-    episode_module.SumoSession.run = capture
+    SumoSession.run = capture
     libsumo.simulation.step = counting_step
     for group in by_scenario.values():
         batch_runner.run_chunk(plan.config, "warm", group[-1].tasks)
     captured[-1] = (captured[-1][0], steps[0])
-    episode_module.SumoSession.run = real_run
+    SumoSession.run = real_run
     libsumo.simulation.step = real_step
 
     if args.tracemalloc:

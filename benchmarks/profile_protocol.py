@@ -31,6 +31,9 @@ from pedsafe_sumo.batch.__main__ import parse_args, prepare  # noqa: E402
 from pedsafe_sumo.batch.chunks import plan_chunks  # noqa: E402
 from pedsafe_sumo.io.episodes import to_table  # noqa: E402
 from pedsafe_sumo.sim import episode as episode_module  # noqa: E402
+from pedsafe_sumo.sim import outcome as outcome_module  # noqa: E402
+from pedsafe_sumo.sim import staging as staging_module  # noqa: E402
+from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 
 TOTALS: dict[str, float] = defaultdict(float)
 CPU_TOTALS: dict[str, float] = defaultdict(float)
@@ -147,11 +150,11 @@ def main() -> None:
 
     runner_cls = episode_module.EpisodeRunner
     timed(runner_cls, "draw_setup", "draw world (draw_setup)")
-    timed(runner_cls, "_background", "  of it: background traffic")
-    timed(episode_module.SumoSession, "run", "SUMO load")
-    timed(runner_cls, "_populate", "staging: add vehicles, person")
-    timed(episode_module, "start_signals", "staging: signals")
-    timed(episode_module, "episode_indexes", "indexes at the end")
+    timed(episode_module, "draw_background", "  of it: background traffic")
+    timed(SumoSession, "run", "SUMO load")
+    timed(staging_module, "populate", "staging: add vehicles, person")
+    timed(staging_module, "start_signals", "staging: signals")
+    timed(outcome_module, "episode_indexes", "indexes at the end")
     timed(episode_module.pd, "DataFrame", "log DataFrame")
     timed(libsumo.simulation, "step", "simulation.step (all)")
     timed(runner_cls, "run", "episode (run)")
@@ -167,7 +170,7 @@ def main() -> None:
     runner_cls.run = run_keeping_timings
     timed(episode_module, "perceive", "perceive")
     timed(episode_module, "ego_in_sight", "pedestrian sight rays")
-    timed(episode_module, "_move_pedestrian", "person.moveToXY")
+    timed(episode_module, "move_pedestrian", "person.moveToXY")
 
     if args.sumo_calls:
         wrap_sumo_calls(libsumo)

@@ -20,7 +20,7 @@ from pathlib import Path
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
-from pedsafe_sumo.network.hosting import check_hosting
+from pedsafe_sumo.network.hosting import check_hosting, site_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
@@ -28,13 +28,8 @@ from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
 from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.connection import SimulatorError
-from pedsafe_sumo.sim.episode import (
-    CONDITIONS,
-    DEFAULT_ALGORITHM,
-    EpisodeResult,
-    EpisodeRunner,
-    conflict_step,
-)
+from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeRunner
+from pedsafe_sumo.sim.outcome import EpisodeResult, conflict_step
 
 SENSOR_NAMES = {
     "onboard_camera": "onboard camera",
@@ -172,8 +167,6 @@ def main(argv: list[str] | None = None) -> int:
         check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
         if args.approach:  # can it be staged there at all (also without V2I)?
-            from pedsafe_sumo.network.hosting import site_hosting
-
             problem = site_hosting(site, specs, params)[args.scenario] or ""
             if problem.startswith("cannot be staged"):
                 raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")

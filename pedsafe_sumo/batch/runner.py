@@ -145,7 +145,7 @@ def _note_started(chunk_key: str) -> None:
 def site_file_digests(site_name: str) -> dict[str, str]:
     """SHA-256 of every site file an episode reads, by file name (`site_name`: a site name or folder)."""
     from pedsafe_sumo.network.sites import resolve_site
-    from pedsafe_sumo.sim.episode import SITE_FILES_READ
+    from pedsafe_sumo.sim.staging import SITE_FILES_READ
 
     site = resolve_site(site_name, verify=False)
     digests = {}

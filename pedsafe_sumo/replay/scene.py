@@ -34,7 +34,7 @@ import pandas as pd
 
 from pedsafe_sumo.perception.sensors import CameraSpec
 from pedsafe_sumo.scenarios.registry import EpisodeSetup
-from pedsafe_sumo.sim.episode import EGO_ID, PED_ID
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
 VIEW_ID = "View #0"
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo import OSM_ATTRIBUTION
-from pedsafe_sumo.sim.episode import EGO_ID, PED_ID
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 from pedsafe_sumo.sumo_binaries import sumo_binary
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 

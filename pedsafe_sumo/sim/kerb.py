@@ -1,4 +1,4 @@
-"""Cars parked at the kerb of a one-lane approach, as SUMO parking spaces (issue 14 item 4).
+"""Cars parked at the kerb of a one-lane approach, as SUMO parking spaces.
 
 On a one-lane approach the vehicles that hide the pedestrian (crossing, jaywalking, background blending)
 stand parked at the kerb beside the lane (VehicleSetup.kerb_offset_m > 0, scenarios.registry). SUMO knows

@@ -185,7 +185,7 @@ def test_start_signals_sets_the_phase_and_what_is_left_of_it():
     from types import SimpleNamespace
 
     from pedsafe_sumo.scenarios.registry import SignalStaging
-    from pedsafe_sumo.sim.episode import start_signals
+    from pedsafe_sumo.sim.staging import start_signals
 
     light = _FakeTrafficLight(PROGRAM.durations_s, PROGRAM.states)
     staging = SignalStaging("tls", "0", cycle_start_s=11.5, ego_link_index=0, ped_link_index=1)

@@ -1,5 +1,5 @@
-"""The AD interface in real SUMO (issue 15): raw data and world feeds only on request, lane changes and
-paths actuated in SUMO (and refused off the road), the traffic light as SUMO has it (over V2I with the
+"""The AD interface in real SUMO: raw data and world feeds only on request, lane changes and paths
+actuated in SUMO (and refused off the road), the traffic light as SUMO has it (over V2I with the
 link's latency), the map from the network, unknown sensors refused in one line."""
 
 from __future__ import annotations
