@@ -293,6 +293,7 @@ def with_perception(agent_class: type[Agent], perception_class: type) -> type[Ag
                 super().close()
 
     PluggedStack.__name__ = PluggedStack.__qualname__ = f"{agent_class.__name__}+{perception_class.__name__}"
+    PluggedStack.__module__ = agent_class.__module__  # messages name the user's module (stack_label)
     return PluggedStack
 
 

@@ -45,6 +45,7 @@ from pedsafe_sumo.control.agent import (
     PerceivedPedestrian,
     check_sensor_names,
 )
+from pedsafe_sumo.control.stack_calls import checked_speed_mps, close_quietly, setup_within, stack_label
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import load_site as load_demand_site
@@ -89,6 +90,7 @@ from pedsafe_sumo.scenarios.registry import (
 from pedsafe_sumo.scenarios.signals import SignalStagingError, colour_of_link, load_junction_signals
 from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
+from pedsafe_sumo.sim.flush import step_if_moved_since
 from pedsafe_sumo.sim.kerb import check_parked, kerb_parked, park_at_kerb, parking_xml, with_additional
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
 from pedsafe_sumo.sim.road_map import load_net_map
@@ -684,7 +686,8 @@ class EpisodeRunner:
         granted = {"onboard_camera", "onboard_lidar"} | ({"v2i"} if condition == "v2i" else set())
         granted |= granted_names(condition)  # raw data and world feeds (issue 15), on request only
         check_sensor_names(agent.sensors(), type(agent).__name__)
-        agent.setup(
+        setup_within(  # under --agent-timeout, like run_step (control/stack_calls.py)
+            agent,
             {
                 # The parameter file's [algorithm] settings (older run.json files have none).
                 **self.params.get("algorithm", {}),
@@ -694,7 +697,8 @@ class EpisodeRunner:
                 "step_length_s": self.step_length_s,
                 "sensors": sorted(set(agent.sensors()) & granted),
                 "sensor_mounts": sensor_mounts(self.params["perception"]),
-            }
+            },
+            self.agent_timeout_s,
         )
         wanted = set(agent.sensors()) & granted
         sensors = self.sensors_for(spec)
@@ -732,6 +736,8 @@ class EpisodeRunner:
         pose = PedestrianPose(start_x, start_y, start_heading, 0.0, "waiting")
         eye_height_m = self.params["pedestrians"]["eye_height_fraction"] * ped.height_m
         _move_pedestrian(api, pose, ped.radius_m)
+        moved_at_s = api.simulation.getTime()  # the move above is pending until SUMO steps (sim/flush.py)
+        stack = stack_label(self.agent_class)  # names the stack in the messages of its invalid commands
         # run_step under the per-step time limit: AgentTimeoutError ends the episode (status "timeout").
         run_step = guard_step(agent.run_step, self.agent_timeout_s).start()
         try:
@@ -807,7 +813,7 @@ class EpisodeRunner:
                     **extra,
                 )
                 command: Command = run_step(observation, time_s)
-                target_mps = max(0.0, float(command.target_speed_mps))
+                target_mps = checked_speed_mps(command, stack, time_s)  # or StackError (stack_calls.py)
                 refused, steer = "", None
                 if wants_lateral(command):  # lane change or path (issue 15); refusals are logged
                     net = load_net_map(str(self.site.file("net.xml")))
@@ -897,8 +903,9 @@ class EpisodeRunner:
                 timings["sumo_s"] += clock() - t4
         finally:
             run_step.stop()
+            step_if_moved_since(api, moved_at_s, self.session.exception)  # no moveToXY left pending
             if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
-                agent.close()
+                close_quietly(agent)  # while the episode fails, its first failure is the one reported
 
         log = pd.DataFrame(rows, columns=list(LOG_COLUMNS)) if rows else pd.DataFrame()
         # SUMO's verdict counts where it looks: a pedestrian on a crossing or walking area at the
