@@ -58,7 +58,7 @@ def checked_speed_mps(command: Any, stack: str, time_s: float) -> float:
         speed = float(speed)
     if not 0.0 <= speed < math.inf:  # NaN fails the comparison too
         raise StackError(f"AD stack {stack} returned target_speed_mps={speed!r} at t={time_s:.2f} s")
-    return max(0.0, speed)
+    return speed + 0.0  # -0.0 becomes 0.0; every other speed keeps its bits
 
 
 def stack_failure(exc: BaseException, stack: str) -> BaseException | None:
