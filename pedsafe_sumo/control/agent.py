@@ -172,6 +172,7 @@ class Observation:
 class Command:
     """The AD stack's output for one step: the speed it wants to have at the end of the step."""
 
+    #: A finite real number >= 0; anything else ends the episode with an error (control/stack_calls.py).
     target_speed_mps: float
     #: Free-form diagnostics logged with the step (e.g. {"braking": True}).
     info: dict[str, Any] = field(default_factory=dict)

@@ -903,7 +903,7 @@ class EpisodeRunner:
                 timings["sumo_s"] += clock() - t4
         finally:
             run_step.stop()
-            step_if_moved_since(api, moved_at_s, self.session.exception)  # no moveToXY left pending
+            step_if_moved_since(api, moved_at_s)  # no moveToXY left pending (sim/flush.py)
             if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
                 close_quietly(agent)  # while the episode fails, its first failure is the one reported
 
