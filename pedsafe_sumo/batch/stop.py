@@ -4,7 +4,9 @@ Either signal, delivered to the driver, is handed on to its local worker process
 their episode at once, instead of finishing their chunk) and raises KeyboardInterrupt in the driver,
 whose handler keeps every chunk recorded so far and exits with code 130: `--resume` continues the run
 (run.json stays "running", which is what --resume continues). Ctrl-C in a terminal reaches the workers
-directly as well; the second SIGINT they get is harmless, they are stopping anyway.
+directly as well; the second SIGINT they get is harmless, they are stopping anyway. A second signal to
+the driver while it stops ends it at once (the signal's default action): the run stays resumable, the
+OS releases its lock.
 """
 
 from __future__ import annotations
@@ -35,8 +37,8 @@ def stop_on_signals() -> Callable[[], None]:
 
 
 def _stop(signum: int, frame: FrameType | None) -> None:
-    for signum_ in STOP_SIGNALS:  # a second signal while stopping does not interrupt the cleanup
-        signal.signal(signum_, signal.SIG_IGN)
+    for signum_ in STOP_SIGNALS:  # a second signal ends the driver at once, should the stop hang
+        signal.signal(signum_, signal.SIG_DFL)
     for child in multiprocessing.active_children():
         if child.pid is not None:
             try:
