@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
+from pedsafe_sumo.control.stack_calls import StackError
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.network.hosting import check_hosting, site_hosting
@@ -197,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  per-step log: {path}")
             if args.case_dir:
                 print(f"  case: {write_case(args.case_dir, result)}")
-    except (SimulatorError, AgentTimeoutError) as exc:
+    except (SimulatorError, AgentTimeoutError, StackError) as exc:  # the stack's fault, in one line
         print(f"error: {exc}", file=sys.stderr)
         return 1
     finally:

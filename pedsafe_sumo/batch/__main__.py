@@ -59,6 +59,7 @@ from pedsafe_sumo.batch.sampled import (
     run_sampled,
     sampler_identity,
 )
+from pedsafe_sumo.batch.stop import stop_on_signals
 from pedsafe_sumo.batch.trust import check_stack_from_file
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, check_timeout_s
@@ -805,6 +806,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{plan.out} is complete ({plan.recorded.get('episodes_total', '?')} episodes): nothing to resume"
         )
         return 0
+    restore_signals = stop_on_signals()  # SIGINT, SIGTERM: workers stopped, run kept for --resume
     try:
         backend.start()
         return run(plan, backend, argv)
@@ -819,6 +821,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     finally:
         backend.close()
+        restore_signals()
 
 
 def run(plan: Plan, backend: Backend, argv: list[str]) -> int:

@@ -92,6 +92,7 @@ def merge_outputs(outputs: list[ChunkOutput]) -> ChunkOutput:
         ",".join(sorted({o.worker for o in outputs if o.worker})),
         sum(o.compute_s for o in outputs),
         step_logs.merge_bytes([o.step_logs for o in outputs]),
+        [trace for o in outputs for trace in o.tracebacks],
     )
 
 

@@ -21,6 +21,7 @@ from pedsafe_sumo.batch.trust import check_run_entries
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
+from pedsafe_sumo.io.error_cases import write_error_case
 from pedsafe_sumo.io.run_store import (
     CASES_DIR,
     EPISODES_FILE,
@@ -149,6 +150,8 @@ class BatchRunDirectory:
             raise BatchError(f"chunk {chunk.key} came back with other episodes than it holds (a bug)")
         for result in output.cases:
             write_case(self.cases_dir, result)
+        for stem, text in output.tracebacks:  # episodes that ended in an error or a timeout
+            write_error_case(self.cases_dir, stem, text)
         steplog_file, steplog_sha256 = "", ""
         if self.keep_logs == step_logs.KEEP_ALL:
             # A chunk whose every pair killed its worker comes back without logs: an empty file says so.

@@ -13,13 +13,12 @@ The loop, at every step of `step_length_s` (default 0.05 s):
      which sees the vehicle bodies and casts its line of sight to the ego through the same geometry;
   7. log the step, and advance SUMO.
 The episode ends on a collision (contact while the ego moves at `STATIONARY_SPEED_MPS` or faster; a
-contact with a standing ego is logged and the episode goes on), once both road users have cleared the
-conflict area (the ego's rear past the pedestrian's path, the pedestrian past the ego's far flank), when
-the ego has left the network, or at the scenario's time limit.
+contact with a standing ego is logged), once both road users have cleared the conflict area (the ego's rear
+past the pedestrian's path, the pedestrian past the ego's far flank), when the ego has left the network, or
+at the scenario's time limit.
 
-The loop (`_drive`) is the hot path: what it uses is bound to local variables once per episode, so a
-step looks up no attribute it could have bound before; measure a change to it with
-benchmarks/bench_episode.py (BENCHMARKS.md).
+The loop (`_drive`) is the hot path: it binds what it uses to local variables once per episode; measure
+a change to it with benchmarks/bench_episode.py (BENCHMARKS.md).
 
 Randomness: the episode seed is split (numpy SeedSequence) into a world stream, drawn identically
 under SV and V2I, and a perception stream; SUMO gets the seed too.
@@ -52,6 +51,7 @@ from pedsafe_sumo.control.agent import (
     PerceivedPedestrian,
     check_sensor_names,
 )
+from pedsafe_sumo.control.stack_calls import checked_speed_mps, close_quietly, setup_within, stack_label
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_s, guard_step
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.vehicles import speed_limit_scale
@@ -81,8 +81,15 @@ from pedsafe_sumo.scenarios.registry import (
 )
 from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
+from pedsafe_sumo.sim.flush import step_if_moved_since
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
-from pedsafe_sumo.sim.outcome import EpisodeResult, EpisodeTrace, judge_episode, sumo_collision_record
+from pedsafe_sumo.sim.outcome import (
+    LOG_COLUMNS,
+    EpisodeResult,
+    EpisodeTrace,
+    judge_episode,
+    sumo_collision_record,
+)
 from pedsafe_sumo.sim.road_map import load_net_map
 from pedsafe_sumo.sim.staging import (
     EGO_ID,
@@ -105,34 +112,6 @@ DEFAULT_ALGORITHM = "pedsafe_sumo.control.reference:ReferenceStack"
 STEP_LENGTH_S = 0.05
 #: The parts of an episode's time the loop measures (EpisodeResult.timings_s).
 TIMED_PARTS = ("sumo_s", "snapshot_s", "perception_s", "agent_s", "logging_s")
-
-#: The per-step log's columns, in order (pedsafe_sumo.safety.log's contract plus the command and
-#: diagnostics): the loop appends one tuple of these per step.
-LOG_COLUMNS = (
-    "time_s",
-    "ego_x_m",
-    "ego_y_m",
-    "ego_yaw_rad",
-    "ego_speed_mps",
-    "ego_length_m",
-    "ego_width_m",
-    "ped_x_m",
-    "ped_y_m",
-    "ped_vx_mps",
-    "ped_vy_mps",
-    "ped_radius_m",
-    "detected_onboard_camera",
-    "detected_onboard_lidar",
-    "detected_roadside",
-    "perceived",
-    "roadside_raw",
-    "clearance_m",
-    "command_speed_mps",
-    "braking",
-    "ped_state",
-    "sumo_collision",
-    "command_refused",
-)
 
 
 #: A per-step observer for replay: `on_step(api, row)` gets SUMO's API handle, in the state of the step
@@ -295,6 +274,7 @@ class EpisodeRunner:
         start_x, start_y, start_heading = walker.position(0.0)
         pose = PedestrianPose(start_x, start_y, start_heading, 0.0, "waiting")
         move_pedestrian(api, pose, ped.radius_m)
+        moved_at_s = api.simulation.getTime()  # the move above is pending until SUMO steps (sim/flush.py)
         # run_step under the per-step time limit: AgentTimeoutError ends the episode (status "timeout").
         run_step = guard_step(agent.run_step, self.agent_timeout_s).start()
         try:
@@ -302,6 +282,7 @@ class EpisodeRunner:
                 pose,
                 run_step,
                 on_step,
+                stack=stack_label(self.agent_class),  # names the stack in its invalid commands' messages
                 api=api,
                 setup=setup,
                 v2i=condition == "v2i",
@@ -322,8 +303,9 @@ class EpisodeRunner:
             )
         finally:
             run_step.stop()
+            step_if_moved_since(api, moved_at_s)  # no moveToXY left pending (sim/flush.py)
             if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
-                agent.close()
+                close_quietly(agent)  # while the episode fails, its first failure is the one reported
         return judge_episode(setup, condition, seed, trace, self.arm, self.injury_model, self.proximity_model)
 
     def _start_agent(self, setup: EpisodeSetup, condition: str, seed: int) -> tuple[Agent, set[str]]:
@@ -333,7 +315,8 @@ class EpisodeRunner:
         granted = {"onboard_camera", "onboard_lidar"} | ({"v2i"} if condition == "v2i" else set())
         granted |= granted_names(condition)  # raw data and world feeds, on request only
         check_sensor_names(agent.sensors(), type(agent).__name__)
-        agent.setup(
+        setup_within(  # under --agent-timeout, like run_step (control/stack_calls.py)
+            agent,
             {
                 # The parameter file's [algorithm] settings (a run.json may have none).
                 **self.params.get("algorithm", {}),
@@ -343,7 +326,8 @@ class EpisodeRunner:
                 "step_length_s": self.step_length_s,
                 "sensors": sorted(set(agent.sensors()) & granted),
                 "sensor_mounts": sensor_mounts(self.params["perception"]),
-            }
+            },
+            self.agent_timeout_s,
         )
         return agent, set(agent.sensors()) & granted
 
@@ -407,6 +391,7 @@ def _drive(
     run_step: Callable[[Observation, float], Command],
     on_step: StepHook | None,
     *,
+    stack: str,
     api,
     setup: EpisodeSetup,
     v2i: bool,
@@ -511,7 +496,7 @@ def _drive(
         reported = perceived_pedestrians(detections, wanted)
         ego = EgoState(ego_x, ego_y, ego_yaw, ego_speed, ego_length, ego_width)
         command: Command = run_step(Observation(ego, tuple(reported), step_length_s, **extra), time_s)
-        target_mps = max(0.0, float(command.target_speed_mps))
+        target_mps = checked_speed_mps(command, stack, time_s)  # or StackError (control/stack_calls.py)
         refused, steer = "", None
         if wants_lateral(command):  # a lane change or a path; refusals are logged
             net = load_net_map(net_file)

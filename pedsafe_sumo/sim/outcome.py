@@ -21,6 +21,34 @@ from pedsafe_sumo.scenarios.registry import EpisodeSetup
 from pedsafe_sumo.scenarios.signals import colour_of_link
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
+#: The per-step log's columns, in order (pedsafe_sumo.safety.log's contract plus the command and
+#: diagnostics): the loop appends one tuple of these per step.
+LOG_COLUMNS = (
+    "time_s",
+    "ego_x_m",
+    "ego_y_m",
+    "ego_yaw_rad",
+    "ego_speed_mps",
+    "ego_length_m",
+    "ego_width_m",
+    "ped_x_m",
+    "ped_y_m",
+    "ped_vx_mps",
+    "ped_vy_mps",
+    "ped_radius_m",
+    "detected_onboard_camera",
+    "detected_onboard_lidar",
+    "detected_roadside",
+    "perceived",
+    "roadside_raw",
+    "clearance_m",
+    "command_speed_mps",
+    "braking",
+    "ped_state",
+    "sumo_collision",
+    "command_refused",
+)
+
 
 @dataclass
 class EpisodeResult:
@@ -42,7 +70,7 @@ class EpisodeResult:
 class EpisodeTrace:
     """What the loop recorded of one episode, for judging."""
 
-    #: One row per step (sim.episode.LOG_COLUMNS); empty when no step was logged.
+    #: One row per step (LOG_COLUMNS); empty when no step was logged.
     log: pd.DataFrame
     #: Why the episode ended: "collision", "both_cleared", "ego_left_network" or "time_limit".
     end_reason: str
