@@ -22,10 +22,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pedsafe_sumo.control.reference import ReferenceStack  # noqa: E402
-from pedsafe_sumo.network.hosting import site_hosting  # noqa: E402
 from pedsafe_sumo.network.sites import get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
-from pedsafe_sumo.scenarios.registry import SCENARIOS, get_scenario  # noqa: E402
+from pedsafe_sumo.scenarios.hosting import site_hosting  # noqa: E402
+from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario  # noqa: E402
 from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 from pedsafe_sumo.sim.episode import EpisodeRunner  # noqa: E402
 

@@ -21,12 +21,13 @@ from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, sta
 from pedsafe_sumo.control.stack_calls import StackError
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
-from pedsafe_sumo.network.hosting import check_hosting, site_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.hosting import check_hosting, site_hosting
 from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeRunner

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.params import load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import ScenarioSpec, get_scenario
+from pedsafe_sumo.scenarios.specs import ScenarioSpec, get_scenario
 
 
 class UsageError(ValueError):

@@ -32,7 +32,8 @@ import pandas as pd
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
 

@@ -73,7 +73,6 @@ from pedsafe_sumo.io.run_store import (
     read_json,
 )
 from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS, KEEP_LOGS_CHOICES
-from pedsafe_sumo.network.hosting import check_hosting, split_hosted
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.safety.stats import ERROR_STATUS
@@ -93,7 +92,9 @@ from pedsafe_sumo.sampling.stages import (
     SCORE_TTC,
     SCORES,
 )
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.hosting import check_hosting, split_hosted
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
@@ -666,8 +667,8 @@ def approach_units(
     """The run's units `<scenario>@<arm>` under --approach, with their specs (the field `approach` set).
     With --scenario all or --approach all, every combination the site hosts (the others printed with why);
     a combination named explicitly that the site cannot host is refused in one line (UsageError)."""
-    from pedsafe_sumo.network.hosting import hosting_matrix
     from pedsafe_sumo.scenarios.geometry import ARMS, default_arm, site_approaches
+    from pedsafe_sumo.scenarios.hosting import hosting_matrix
 
     if approach_arg not in (*ARMS, "all"):
         raise UsageError(f"unknown approach '{approach_arg}' (known: {', '.join(ARMS)}, all)")

@@ -268,7 +268,7 @@ def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
     `<scenario>:<field>` keys (a protocol's per-scenario values) for this one. `name` may be
     `<scenario>@<arm>` (batch --approach): that scenario on the approach from that arm."""
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
 
     name, _, arm = name.partition("@")
     common = {key: value for key, value in overrides.items() if ":" not in key}

@@ -220,7 +220,7 @@ def kinematics_of(config: Any, scenario: str) -> Kinematics:
 def low_contrast_of(config: Any) -> tuple[tuple[int, ...], ...]:
     """The V2I factor's table L (sampling/joint.py): the scenarios' clothing against their car colours at
     the roadside camera's delta E threshold of the run's parameters."""
-    from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
+    from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
 
     threshold = float(config.params["perception"]["roadside_camera"]["delta_e_threshold"])
     return low_contrast_table(CLOTHING_COLOURS_RGB, CAR_COLOURS_RGB, threshold)

@@ -35,15 +35,10 @@ from functools import lru_cache
 from pathlib import Path
 
 from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, NcapError, Protocol
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, VehicleSetup
 from pedsafe_sumo.scenarios.geometry import Approach, lane_path_in, offset_to_lane_pos_m, shape_length_m
-from pedsafe_sumo.scenarios.registry import (
-    EGO_BLUE_RGB,
-    VEHICLE_CLASSES,
-    EpisodeSetup,
-    PedestrianSetup,
-    ScenarioSpec,
-    VehicleSetup,
-)
+from pedsafe_sumo.scenarios.road_users import EGO_BLUE_RGB, VEHICLE_CLASSES
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sumo_net import read_net
 
 #: How far the ego's front is past first touching the dummy at the nominal impact step [m].

@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     for line in summarise(site).lines():
         print(line)
-    from pedsafe_sumo.network.hosting import hosting_lines
+    from pedsafe_sumo.scenarios.hosting import hosting_lines
 
     print("  scenarios:")
     for line in hosting_lines(resolve_site(args.site)):

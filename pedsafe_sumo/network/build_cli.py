@@ -15,10 +15,10 @@ from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
-from pedsafe_sumo.network.hosting import _site_world, hosted_count, hosting_lines
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import Site, SiteError, resolve_site
 from pedsafe_sumo.scenarios.geometry import load_approach
+from pedsafe_sumo.scenarios.hosting import _site_world, hosted_count, hosting_lines
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
 DEFAULT_RADIUS_M = 200.0
@@ -26,7 +26,7 @@ DEFAULT_RADIUS_M = 200.0
 
 def hosting_scorer(site: Site) -> Callable[[list[dict], str], int]:
     """How many of the scenarios staged on the staged `site`'s approach a pole pair lets it host
-    (:func:`pedsafe_sumo.network.hosting.hosted_count`): the scorer the build places the poles with."""
+    (:func:`pedsafe_sumo.scenarios.hosting.hosted_count`): the scorer the build places the poles with."""
     # Both cache by site: the staging folder describes another approach on each call, and its name may
     # come back in a later build of this process.
     _site_world.cache_clear()

@@ -40,7 +40,7 @@ from pedsafe_sumo.replay.scene import (
     ScreenshotTaken,
 )
 from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
-from pedsafe_sumo.scenarios.registry import EpisodeSetup
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.settings import UsageError
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeRunner

@@ -39,7 +39,8 @@ from pedsafe_sumo.control.stack_source import stack_to_replay
 from pedsafe_sumo.io.cases import case_stem, read_case
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params, validate
-from pedsafe_sumo.scenarios.registry import ScenarioError, ScenarioSpec
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sim.episode import CONDITIONS, STEP_LENGTH_S
 
 EPISODES_FILE = "episodes.parquet"

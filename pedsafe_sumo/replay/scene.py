@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.perception.sensors import CameraSpec
-from pedsafe_sumo.scenarios.registry import EpisodeSetup
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
 VIEW_ID = "View #0"

@@ -89,7 +89,7 @@ from pedsafe_sumo.sampling.draws import family_from_json  # noqa: E402
 from pedsafe_sumo.sampling.importance import SQRT_HALF, Product  # noqa: E402
 from pedsafe_sumo.sampling.joint import fit_logistic, quadratic_design  # noqa: E402
 from pedsafe_sumo.sampling.stages import INPUTS_SCREENED, SCORE_TTC, cross_entropy_update  # noqa: E402
-from pedsafe_sumo.scenarios.registry import get_scenario  # noqa: E402
+from pedsafe_sumo.scenarios.specs import get_scenario  # noqa: E402
 
 RIDGE = 1.0
 STAGE_ROWS = 200

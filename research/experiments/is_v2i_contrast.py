@@ -41,7 +41,7 @@ from pedsafe_sumo.sampling.joint import (  # noqa: E402
     low_contrast_table,
     with_v2i_factor,
 )
-from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB  # noqa: E402
+from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB  # noqa: E402
 
 
 def contrast_table(pairs: pd.DataFrame, threshold: float) -> pd.DataFrame:

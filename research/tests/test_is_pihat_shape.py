@@ -11,7 +11,7 @@ from scipy import special
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 _spec = importlib.util.spec_from_file_location(
     "is_pihat_shape", REPO_ROOT / "research" / "experiments" / "is_pihat_shape.py"

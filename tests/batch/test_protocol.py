@@ -15,7 +15,7 @@ from batch_cli import batch
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 #: The newest protocol: the one that runs on this code (older ones predate parameters added since, and
 #: are refused, as a protocol must name every value).

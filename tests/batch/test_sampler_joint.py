@@ -16,7 +16,7 @@ from scipy import special, stats
 from pedsafe_sumo.batch.chunks import episode_seed
 from pedsafe_sumo.demand.sampling import age_group_speed_distributions
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 JOINT_RUN = (
     "--scenario", "background_blending", "--episodes", "3", "--seed", "3", "--sampler", "is",

@@ -134,7 +134,7 @@ def test_the_episode_background_draws_from_the_same_law():
     each desired speed the calibrated law's value of the same normal score."""
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.network.sites import resolve_site
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     log_mu, log_sigma = 2.05, 0.33

@@ -28,7 +28,7 @@ from pedsafe_sumo.control.agent import (
 from pedsafe_sumo.control.reference import CLEAR_HOLD_S, ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SITE = get_site("xueqing")

@@ -95,7 +95,7 @@ def test_right_turns_from_the_one_lane_approaches_run_under_both_conditions(zhix
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.params import load_params
     from pedsafe_sumo.scenarios.geometry import load_approach
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     site = resolve_site(str(zhixin))

@@ -205,11 +205,11 @@ def test_a_pole_turned_away_cannot_host_the_crossing():
     import dataclasses
     import math
 
-    from pedsafe_sumo.network.hosting import hosting_problem, site_hosting, staging_points
     from pedsafe_sumo.params import load_params
     from pedsafe_sumo.perception.world import load_roadside_units
     from pedsafe_sumo.scenarios.geometry import load_approach
-    from pedsafe_sumo.scenarios.registry import SCENARIOS
+    from pedsafe_sumo.scenarios.hosting import hosting_problem, site_hosting, staging_points
+    from pedsafe_sumo.scenarios.specs import SCENARIOS
 
     site = resolve_site("xueqing")
     params = load_params(None)

@@ -10,7 +10,8 @@ import re
 import pytest
 
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import SCENARIOS, SPEC_UPPER_BOUNDS, ScenarioError
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import SCENARIOS, SPEC_UPPER_BOUNDS
 
 FAR_OUT = 1e12
 

@@ -16,7 +16,7 @@ from replay_runs import case_files, edit_run_json, episode_row, run_cli
 
 from pedsafe_sumo.io.cases import read_case
 from pedsafe_sumo.replay.rundir import load_logged_episode, scenario_from_record
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 

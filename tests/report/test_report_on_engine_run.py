@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 
 
 @pytest.mark.slow

@@ -26,7 +26,7 @@ from pedsafe_sumo.sampling.joint import (
     with_v2i_factor,
 )
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
-from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
+from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
 
 LOG_MU, LOG_SIGMA = 1.5853, 0.3827
 NOMINAL = {"ego_speed_log": Normal(LOG_MU, LOG_SIGMA), "conflict_offset_s": Beta(1.0, 1.0, -1.0, 1.5)}

@@ -18,7 +18,7 @@ from pedsafe_sumo.scenarios.geometry import (
     path_pos_m,
     shape_length_m,
 )
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 
 def test_conversion_scales_by_drawn_over_lane_length():

@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.oncoming import load_oncoming
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError, draw_episode, get_scenario
+from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario
+from pedsafe_sumo.scenarios.staging import draw_episode
 
 TRAITS = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
 

@@ -17,7 +17,7 @@ from pedsafe_sumo.control.agent import KNOWN_SENSORS, AlgorithmLoadError, load_a
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.observation import ObservationFeeds
 from pedsafe_sumo.sumo_net import read_net

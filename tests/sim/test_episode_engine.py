@@ -16,7 +16,7 @@ from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params, with_overrides
 from pedsafe_sumo.safety.log import REQUIRED_COLUMNS
-from pedsafe_sumo.scenarios.registry import SCENARIOS, get_scenario
+from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SITE = get_site("xueqing")

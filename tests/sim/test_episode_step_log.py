@@ -14,7 +14,7 @@ from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.safety.log import BOOLEAN_COLUMNS, NUMERIC_COLUMNS
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.outcome import LOG_COLUMNS
 from pedsafe_sumo.sim.staging import EGO_ID

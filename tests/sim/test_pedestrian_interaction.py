@@ -14,7 +14,8 @@ from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES, get_scenario
+from pedsafe_sumo.scenarios.road_users import VEHICLE_CLASSES
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SITE = get_site("xueqing")
