@@ -5,7 +5,7 @@
     python -m pedsafe_sumo.episode --scenario crossing --set conflict_offset_max_s=0 \
         --set perception.v2i.latency_s=0.3
 
-`--set key=value` sets a scenario field (see pedsafe_sumo/scenarios/registry.py) or, with a dotted
+`--set key=value` sets a scenario field (see pedsafe_sumo/scenarios/specs.py) or, with a dotted
 key, a value of the parameter file (pedsafe_sumo/params/defaults.toml). Bad input ends in one line
 on stderr and exit code 2.
 """

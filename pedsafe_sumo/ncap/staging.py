@@ -170,7 +170,8 @@ def spec_for(cell: Cell, roadside_units: tuple[str, ...], time_limit_s: float = 
     return ScenarioSpec(
         cell.cell_id,
         f"Euro NCAP {cell.test.name}: {cell.test.description}",
-        placement="crosswalk" if cell.test.placement == "crosswalk" else "midblock",
+        # The protocol's placements (ncap/protocol.py, PLACEMENTS) are scenario placements of those names.
+        placement=cell.test.placement,
         ego_speed_fit="intersection",
         background_traffic=0,
         time_limit_s=time_limit_s,

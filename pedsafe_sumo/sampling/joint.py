@@ -29,7 +29,7 @@ exp(mu_g + sigma_g z) of the age group's lognormal (before the sex factor), and 
 
 (the seconds left, from the pedestrian's coming into view VISIBLE_M before the ego lane's centre, beyond the
 stack's reaction time t_r and the time a full stop from v at a_max takes: negative, no stop before the
-conflict point; scenarios/registry.py stages the ego to reach the conflict point conflict_offset_s after
+conflict point; scenarios/placements/ stages the ego to reach the conflict point conflict_offset_s after
 the pedestrian). Each is standardised by its moments on MOMENT_DRAWS nominal draws. They are features of a
 fit, not a model of the episode: a wrong VISIBLE_M or t_r costs efficiency, never bias (the weights are
 exact whatever pi_hat is). Offline on v5_full's rows, 2-stage pilot: per final episode right_turn 11.5 ->

@@ -58,8 +58,8 @@ def _seen(spec, pose, points: list[StagingPoint], static) -> np.ndarray:
     # The perception package is imported where it is used: its kernels take about a second to import,
     # and the batch, the build and the CLIs import this module whether or not they check V2I.
     from pedsafe_sumo.perception.pipeline import _NO_HITS, _cast_all
-    from pedsafe_sumo.perception.sensors import finish_camera, plan_camera
-    from pedsafe_sumo.perception.world import Pedestrians, VehicleBoxes, WorldSnapshot
+    from pedsafe_sumo.perception.sensors import finish_camera, plan_camera  # as above
+    from pedsafe_sumo.perception.world import Pedestrians, VehicleBoxes, WorldSnapshot  # as above
 
     n = len(points)
     peds = Pedestrians.build(
@@ -83,7 +83,7 @@ def hosting_problem(
 ) -> str | None:
     """Why the site cannot host `spec` under V2I (one line), or None when it can."""
     from pedsafe_sumo.perception.pipeline import SensorSuite  # about a second to import (see _seen)
-    from pedsafe_sumo.perception.world import StaticOccluders
+    from pedsafe_sumo.perception.world import StaticOccluders  # as above
 
     units = [roadside_units[u] for u in spec.roadside_unit_ids if u in roadside_units]
     missing = [u for u in spec.roadside_unit_ids if u not in roadside_units]

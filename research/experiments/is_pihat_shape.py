@@ -21,7 +21,7 @@ Variants, fixed before any score was looked at:
 
       margin_s = conflict_offset_s + D / w - t_r - v / (2 a_max).
 
-  Source: scenarios/registry.py stages the ego so that, at its initial speed v, it reaches the conflict
+  Source: scenarios/placements/ stages the ego so that, at its initial speed v, it reaches the conflict
   point (the pedestrian's path on the ego lane's centre line) conflict_offset_s after the pedestrian does;
   the pedestrian walks at w. So from the moment the pedestrian is D metres before the ego lane's centre
   the ego has conflict_offset_s + D / w seconds before it reaches the conflict point, and it needs the

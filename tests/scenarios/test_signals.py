@@ -1,4 +1,4 @@
-"""Signals (issue 13 item 1): the program read from the network, start times in the cycle, and the
+"""Signals: the program read from the network, start times in the cycle, and the
 signal states SUMO shows at the conflict of real episodes.
 
 Expected values come from a hand-built program (worked by hand), from the .net.xml parsed here with

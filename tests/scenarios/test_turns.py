@@ -1,4 +1,4 @@
-"""The turning scenarios' occlusion (issue 13 items 2 and 7): right_turn's leader hides the pedestrian
+"""The turning scenarios' occlusion: right_turn's leader hides the pedestrian
 waiting at the far end of the crosswalk at the start under SV, with the real sensor models in real SUMO,
 and without it the same world shows them; both turning scenarios run under both conditions."""
 

@@ -1,5 +1,6 @@
-"""The scenario registry: three frozen specs, validated overrides, and placements on the real network
-that have the property each scenario is about (checked with independent geometry)."""
+"""The scenario table (scenarios/specs.py): frozen specs and validated overrides; and the episodes drawn
+from them (scenarios/staging.py, scenarios/placements/) on the real network, which have the property each
+scenario is about (checked with independent geometry)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.oncoming import load_oncoming
+from pedsafe_sumo.scenarios.placements import placement_of
 from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario
 from pedsafe_sumo.scenarios.staging import draw_episode
 
@@ -25,7 +27,7 @@ def approach():
 
 def draw(name, seed, approach, speed=8.0, traits=TRAITS):
     spec = get_scenario(name)
-    turn = load_turn(get_site("xueqing"), spec.turn) if spec.placement == "turn" else None
+    turn = placement_of(spec).load_turn(get_site("xueqing"), spec, None)
     # Xueqing's geometry (its program cannot stage left_turn's oncoming vehicle; drawing needs no signals).
     oncoming = load_oncoming(get_site("xueqing")) if spec.oncoming_vehicle else None
     return draw_episode(spec, approach, seed, traits, speed, np.random.default_rng(seed), turn, oncoming)
@@ -54,7 +56,7 @@ def _footprint(approach, lane_id, front_pos_m, length_m, width_m):
     ]
 
 
-def test_registry_holds_the_three_scenarios_of_the_paper():
+def test_the_table_holds_the_scenarios_of_the_paper():
     assert sorted(SCENARIOS) == ["background_blending", "crossing", "jaywalking", "left_turn", "right_turn"]
     with pytest.raises(ScenarioError, match="unknown scenario 'parking'"):
         get_scenario("parking")
@@ -89,7 +91,7 @@ def test_same_seed_same_world_other_seed_other_world(name, approach):
     assert draw(name, 7, approach) != draw(name, 8, approach)
 
 
-@pytest.mark.parametrize("name", sorted(n for n, s in SCENARIOS.items() if s.placement != "turn"))
+@pytest.mark.parametrize("name", sorted(n for n, s in SCENARIOS.items() if not placement_of(s).turning))
 def test_ego_reaches_the_conflict_point_at_the_drawn_offset(name, approach):
     setup = draw(name, 11, approach)
     ped = setup.pedestrian
