@@ -7,10 +7,10 @@ import sys
 
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.network.build import BuildError, build_site
-from pedsafe_sumo.network.build_cli import hosting_scorer
 from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
+from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -55,8 +55,6 @@ def main(argv: list[str] | None = None) -> int:
         )
     for line in summarise(site).lines():
         print(line)
-    from pedsafe_sumo.scenarios.hosting import hosting_lines
-
     print("  scenarios:")
     for line in hosting_lines(resolve_site(args.site)):
         print(f"  {line}")

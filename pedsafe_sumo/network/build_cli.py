@@ -9,29 +9,16 @@ network build meets the scenarios.
 from __future__ import annotations
 
 import argparse
-import functools
-from collections.abc import Callable
 from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
-from pedsafe_sumo.network.sites import Site, SiteError, resolve_site
-from pedsafe_sumo.scenarios.geometry import load_approach
-from pedsafe_sumo.scenarios.hosting import _site_world, hosted_count, hosting_lines
+from pedsafe_sumo.network.sites import SiteError, resolve_site
+from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
 DEFAULT_RADIUS_M = 200.0
-
-
-def hosting_scorer(site: Site) -> Callable[[list[dict], str], int]:
-    """How many of the scenarios staged on the staged `site`'s approach a pole pair lets it host
-    (:func:`pedsafe_sumo.scenarios.hosting.hosted_count`): the scorer the build places the poles with."""
-    # Both cache by site: the staging folder describes another approach on each call, and its name may
-    # come back in a later build of this process.
-    _site_world.cache_clear()
-    load_approach.cache_clear()
-    return functools.partial(hosted_count, site)
 
 
 def _parse_center(text: str) -> tuple[float, float]:

@@ -20,13 +20,15 @@ summary. A site that cannot host a scenario says why in one line.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+from collections.abc import Callable
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.network.sites import SiteError
+from pedsafe_sumo.network.sites import Site, SiteError
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.scenarios.geometry import (
     approach_unit_ids,
@@ -224,6 +226,16 @@ def hosted_count(site, poles: list[dict], poly_file: str) -> int:
         for spec in SCENARIOS.values()
         if not placement_of(spec).turning
     )
+
+
+def hosting_scorer(site: Site) -> Callable[[list[dict], str], int]:
+    """How many of the scenarios staged on the staged `site`'s approach a pole pair lets it host
+    (hosted_count): the scorer the site build places the poles with (network.poles.HostingScorer)."""
+    # Both cache by site: the staging folder describes another approach on each call, and its name may
+    # come back in a later build of this process.
+    _site_world.cache_clear()
+    load_approach.cache_clear()
+    return functools.partial(hosted_count, site)
 
 
 @lru_cache(maxsize=4)
