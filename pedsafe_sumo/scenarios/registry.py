@@ -5,6 +5,7 @@ colours), staging.py (drawing and signal staging)."""
 from pedsafe_sumo.scenarios.episode_setup import (
     BackgroundVehicle,
     EpisodeSetup,
+    PedestrianSetup,
     SignalStaging,
     VehicleSetup,
 )
@@ -17,6 +18,7 @@ __all__ = [
     "VEHICLE_CLASSES",
     "BackgroundVehicle",
     "EpisodeSetup",
+    "PedestrianSetup",
     "ScenarioSpec",
     "SignalStaging",
     "VehicleSetup",
