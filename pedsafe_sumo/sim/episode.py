@@ -70,15 +70,12 @@ from pedsafe_sumo.safety.geometry_kernels import rectangle_circle_clearance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Family
-from pedsafe_sumo.scenarios.geometry import approach_unit_ids, load_turn, refuge_walkingareas
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup
+from pedsafe_sumo.scenarios.geometry import approach_unit_ids, refuge_walkingareas
 from pedsafe_sumo.scenarios.oncoming import load_oncoming
-from pedsafe_sumo.scenarios.registry import (
-    EpisodeSetup,
-    PedestrianSetup,
-    ScenarioSpec,
-    draw_episode,
-    stage_signals,
-)
+from pedsafe_sumo.scenarios.placements import placement_of
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
+from pedsafe_sumo.scenarios.staging import draw_episode, stage_signals
 from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.flush import step_if_moved_since
@@ -217,7 +214,7 @@ class EpisodeRunner:
         ego_speed_mps = draw_lognormal(draws, "ego_speed_log", fit.log_mu, fit.log_sigma) * speed_limit_scale(
             self.approach.speed_limit_mps, self.params["traffic"]
         )
-        turn = load_turn(self.site, spec.turn, spec.approach or None) if spec.placement == "turn" else None
+        turn = placement_of(spec).load_turn(self.site, spec, spec.approach or None)
         oncoming = load_oncoming(self.site, spec.approach or None) if spec.oncoming_vehicle else None
         setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn, oncoming)
         if spec.approach:

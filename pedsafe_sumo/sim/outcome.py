@@ -17,7 +17,7 @@ import pandas as pd
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.proximity import ProximityModel
-from pedsafe_sumo.scenarios.registry import EpisodeSetup
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.scenarios.signals import colour_of_link
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 

@@ -30,18 +30,17 @@ from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.perception import load_roadside_units, load_static_occluders
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
-from pedsafe_sumo.scenarios.geometry import Approach, default_arm, load_approach
-from pedsafe_sumo.scenarios.registry import (
-    CAR_COLOURS_RGB,
-    VEHICLE_CLASSES,
+from pedsafe_sumo.scenarios.episode_setup import (
     BackgroundVehicle,
     EpisodeSetup,
     PedestrianSetup,
-    ScenarioSpec,
     SignalStaging,
     VehicleSetup,
 )
+from pedsafe_sumo.scenarios.geometry import Approach, default_arm, load_approach
+from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, VEHICLE_CLASSES
 from pedsafe_sumo.scenarios.signals import SignalStagingError, load_junction_signals
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.kerb import check_parked, kerb_parked, park_at_kerb, parking_xml, with_additional
 
