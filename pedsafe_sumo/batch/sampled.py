@@ -202,7 +202,7 @@ def kinematics_of(config: Any, scenario: str) -> Kinematics:
     speed bounds, the age groups' walking-speed lognormals in the order the draws number them, and the
     [algorithm] reaction time and braking of the parameters."""
     from pedsafe_sumo.batch.runner import scenario_spec
-    from pedsafe_sumo.demand.sampling import age_group_speed_distributions
+    from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 
     spec = scenario_spec(scenario, config.scenario_overrides)
     laws = list(age_group_speed_distributions(dict(config.params["pedestrians"])).values())

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Family, Normal, Product
 
 #: The inputs a proposal may move (when the scenario draws them): those that decide whether the ego and
@@ -187,10 +188,8 @@ def as_draws(rng: np.random.Generator | Draws) -> Draws:
 
 def draw_pedestrian_traits(draws: Draws, pedestrians: Mapping[str, Any]) -> dict[str, Any]:
     """One pedestrian of the age-group mixture, through `draws`: the same Generator calls in the same
-    order as demand.sampling.sample_pedestrians(rng, pedestrians, 1) (group, risk type, gender, age,
-    walking speed), so that under no proposal the pedestrian is the same."""
-    from pedsafe_sumo.demand.sampling import age_group_speed_distributions
-
+    order as pedsafe_sumo.demand.sampling.sample_pedestrians(rng, pedestrians, 1) (group, risk type,
+    gender, age, walking speed), so that under no proposal the pedestrian is the same."""
     groups = list(pedestrians["age_groups"].items())
     weights = np.array([g["weight_share"] for _, g in groups], dtype=float)
     group_p = weights / weights.sum()

@@ -14,8 +14,8 @@ from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 from scipy import special, stats
 
 from pedsafe_sumo.batch.chunks import episode_seed
-from pedsafe_sumo.demand.sampling import age_group_speed_distributions
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.scenarios.registry import get_scenario
 
 JOINT_RUN = (

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import special, stats
 
-from pedsafe_sumo.demand.sampling import age_group_speed_distributions
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal, is_estimate
 from pedsafe_sumo.sampling.joint import (
