@@ -250,7 +250,8 @@ def test_out_refuses_a_directory_with_only_a_hidden_file(capsys, tmp_path):
 
 
 def test_out_accepts_an_empty_directory(tmp_path):
-    from pedsafe_sumo.batch.__main__ import parse_args, prepare
+    from pedsafe_sumo.batch.__main__ import parse_args
+    from pedsafe_sumo.batch.plan import prepare
 
     (tmp_path / "empty").mkdir()
     plan = prepare(parse_args([*CROSSING, "--out", str(tmp_path / "empty")]))

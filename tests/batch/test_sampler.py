@@ -10,8 +10,10 @@ import pandas as pd
 import pytest
 from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 
-from pedsafe_sumo.batch.__main__ import main, parse_args, prepare, resumed_arguments
+from pedsafe_sumo.batch.__main__ import main, parse_args
+from pedsafe_sumo.batch.arguments import resumed_arguments
 from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.batch.plan import prepare
 from pedsafe_sumo.protocol import main as protocol_main
 from pedsafe_sumo.report.tables import table_one_of_run
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
