@@ -19,17 +19,9 @@ from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
 from pedsafe_sumo.io.run_store import read_parts
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
-from pedsafe_sumo.sampling.joint import (
-    GUARD_MIN_COLLISIONS,
-    NORM_DRAWS,
-    V2I_ONLY_MIN_COLLISIONS,
-    VISIBLE_M,
-    Kinematics,
-    joint_update,
-    low_contrast_table,
-    v2i_only_count,
-)
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, NORM_DRAWS, VISIBLE_M, Kinematics
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
+from pedsafe_sumo.sampling.joint_fit import joint_update
 from pedsafe_sumo.sampling.pooling import POOL_FROM_KEY, pooled_from_stage
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
@@ -44,6 +36,7 @@ from pedsafe_sumo.sampling.stages import (
     cross_entropy_update,
     stage_layout,
 )
+from pedsafe_sumo.sampling.v2i_factor import V2I_ONLY_MIN_COLLISIONS, low_contrast_table, v2i_only_count
 
 #: --is-family: the cross-entropy product of one family per input, or the joint sqrt(pi_hat) proposal.
 FAMILY_PRODUCT = "product"

@@ -20,9 +20,10 @@ from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
-from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, V2I_ONLY_MIN_COLLISIONS
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS
 from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage, stage_max_weight
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+from pedsafe_sumo.sampling.v2i_factor import V2I_ONLY_MIN_COLLISIONS
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's

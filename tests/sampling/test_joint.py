@@ -12,15 +12,8 @@ from pedsafe_sumo.params import load_params
 from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal, is_estimate
-from pedsafe_sumo.sampling.joint import (
-    JointProposal,
-    Kinematics,
-    fit_joint,
-    fit_logistic,
-    normalised,
-    proposal_of_json,
-    region_proposal,
-)
+from pedsafe_sumo.sampling.joint import JointProposal, Kinematics, fit_logistic, normalised, proposal_of_json
+from pedsafe_sumo.sampling.joint_fit import fit_joint, region_proposal
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 PEDESTRIANS = load_params()["pedestrians"]

@@ -15,17 +15,15 @@ from scipy import special, stats
 from pedsafe_sumo.sampling.control_variate import condition_control
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal
-from pedsafe_sumo.sampling.joint import (
-    GUARD_MIN_COLLISIONS,
-    ContrastFactor,
-    JointProposal,
-    joint_update,
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, ContrastFactor, JointProposal, normalised
+from pedsafe_sumo.sampling.joint_fit import joint_update
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+from pedsafe_sumo.sampling.v2i_factor import (
     low_contrast_table,
-    normalised,
+    v2i_only_count,
     v2i_only_engages,
     with_v2i_factor,
 )
-from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
 
 LOG_MU, LOG_SIGMA = 1.5853, 0.3827
@@ -340,7 +338,6 @@ def test_the_v2i_only_pilot_count_and_the_tables_note() -> None:
     """v2i_only_count against the pairs counted here; Table I's note where the last stage's pilots saw
     V2I-only collisions and the proposal has no term for them, and none otherwise or before the count."""
     from pedsafe_sumo.report.tables import v2i_only_note
-    from pedsafe_sumo.sampling.joint import v2i_only_count
 
     rng = np.random.default_rng(25)
     rows = _rows([_episode_with_v2i_only(rng, None) for _ in range(800)], 0)
