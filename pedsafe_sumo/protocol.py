@@ -1,4 +1,4 @@
-"""Protocols: every value of a study fixed in one dated file before it runs (issue 13 item 4).
+"""Protocols: every value of a study fixed in one dated file before it runs.
 
     python -m pedsafe_sumo.batch --protocol protocols/paper-v7.toml --out DIR [--episodes N] [--workers K]
     python -m pedsafe_sumo.protocol write paper-v8 --date 2026-12-01 --out protocols/paper-v8.toml
@@ -10,7 +10,7 @@ A protocol file (TOML) holds:
 Above each value a comment gives its source or, for what the paper does not report, the reason it was
 chosen (`write` copies them from the comments of defaults.toml and of the registry's fields). A
 protocol that leaves out a scenario field or a parameter is refused: nothing falls back silently to
-defaults that may since have changed. The rule (docs/protocols.md): a change after seeing results is a
+defaults that may change later. The rule (docs/protocols.md): a change after seeing results is a
 new dated file, never an edit; run.json records the file and its SHA-256.
 """
 
@@ -30,6 +30,7 @@ from typing import Any
 import tomllib
 
 from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, overlay, validate
+from pedsafe_sumo.scenarios import registry
 from pedsafe_sumo.scenarios.registry import (
     SCENARIOS,
     ScenarioError,
@@ -282,8 +283,6 @@ def _comment(text: str, width: int = 108) -> list[str]:
 def protocol_text(header: dict[str, Any]) -> str:
     """A complete protocol: the header given, every scenario field and parameter as they stand now,
     each with its source or reason."""
-    from pedsafe_sumo.scenarios import registry
-
     registry_source = Path(registry.__file__).read_text(encoding="utf-8")
     p_reasons = parameter_reasons(DEFAULTS_PATH.read_text(encoding="utf-8"))
     f_reasons = field_reasons(registry_source)

@@ -134,9 +134,9 @@ def table_one_weighted(
             }
         )
     table = pd.DataFrame(rows)
-    if not controlled:  # no control variate anywhere: the table of runs before it, column for column
+    if not controlled:  # no control variate anywhere: no estimator column, the table of plain IS
         table = table.drop(columns="estimator", errors="ignore")
-    if not pooled:  # the final stage alone everywhere, as before --is-pool-from
+    if not pooled:  # the final stage alone everywhere (no --is-pool-from): no stages column
         table = table.drop(columns="stages", errors="ignore")
     return table
 
@@ -437,7 +437,7 @@ def v2i_only_note(run_info: Mapping[str, Any] | None) -> str:
     """One line per scenario of an importance-sampling run whose final proposal does not aim at V2I's
     collisions where SV does not collide although its pilots drew some (run.json's sampler_levels: the
     last stage's `v2i_only_pilot_collisions` > 0 without `v2i_only_terms`): V2I's interval may then be
-    too narrow (docs/sampling.md, Limits, "Another junction"); "" otherwise, and for runs recorded before
+    too narrow (docs/sampling.md, Limits, "Another junction"); "" otherwise, and for a run.json without
     the count."""
     levels = (run_info or {}).get("sampler_levels") or {}
     notes = []

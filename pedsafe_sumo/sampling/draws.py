@@ -6,8 +6,8 @@ classes and colours, queue gaps, the mid-block distance, the parked and blend ga
 signal cycle) is drawn by name through it, and it keeps, per name, the value on the scale of its nominal
 family (`sampling.importance`: Normal, Categorical, Beta on an interval) and the family itself.
 
-Without a proposal (plain Monte Carlo, `--sampler mc`) each draw is the very Generator call the code made
-before this object existed, in the same order: the episodes are bit-identical to the earlier ones. With a
+Without a proposal (plain Monte Carlo, `--sampler mc`) each draw is the plain Generator call of the input's
+law, in the order the scenario makes them: the episodes are bit-identical to draws on a bare Generator. With a
 proposal (`--sampler is`), an input named in it is drawn from the proposal's family instead, and the
 episode's weight is the product of the likelihood ratios p(x) / q(x) of those inputs (every other input
 stays nominal and contributes 1). Background traffic has its own stream and is never proposed.
@@ -182,7 +182,7 @@ class _UniformSource:
 
 def as_draws(rng: np.random.Generator | Draws) -> Draws:
     """`rng` itself when it is a Draws, else a nominal Draws around the Generator (callers that pass a
-    bare Generator, as before, get the same values)."""
+    bare Generator get the values its own calls would give)."""
     return rng if isinstance(rng, Draws) else Draws(rng)
 
 

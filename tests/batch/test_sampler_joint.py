@@ -1,4 +1,4 @@
-"""`batch --sampler is --is-family joint` (issue 17, joint17): a real run whose joint proposal is fitted on
+"""`batch --sampler is --is-family joint`: a real run whose joint proposal is fitted on
 the pilot, whose weights are recomputed here from the stored coefficients, and whose rows are the same on
 1 and 2 workers."""
 
@@ -41,7 +41,7 @@ def _expected_weight(record: dict, data: dict) -> float:
         z = (x - law.mean()) / law.std()
         continuous.append(z)
         columns += [z, z * z]
-    if "kinematics" in data:  # session 8: v, 1/w and the braking margin, standardised by stored moments
+    if "kinematics" in data:  # v, 1/w and the braking margin, standardised by stored moments
         kin = data["kinematics"]
         x = record["inputs"]
         v = min(max(math.exp(x["ego_speed_log"]), kin["ego_speed_min_mps"]), kin["ego_speed_max_mps"])

@@ -133,7 +133,7 @@ def test_mean_pi_hat_is_the_nominal_mean_of_the_fitted_probability():
     assert again.mean_pi_hat == proposal.mean_pi_hat and again.mean_pi_hat_se == proposal.mean_pi_hat_se
 
 
-# ---------------------------------------------------------------- kinematic features (session 8)
+# ---------------------------------------------------------------- kinematic features
 GROUP_LAWS = list(age_group_speed_distributions(dict(PEDESTRIANS)).values())
 GROUP_SHARES = np.array([g["weight_share"] for g in PEDESTRIANS["age_groups"].values()], dtype=float)
 GROUP_SHARES = GROUP_SHARES / GROUP_SHARES.sum()
