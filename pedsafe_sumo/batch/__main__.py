@@ -242,6 +242,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command. Exit code 0: done, or nothing left to resume; 1: the batch failed (the finished chunks
+    are kept for --resume); 2: bad input (one line on stderr, nothing written); 130: interrupted."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     try:

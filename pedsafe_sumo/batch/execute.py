@@ -34,6 +34,7 @@ Backend = DaskBackend | ProcessPoolBackend
 
 
 def git_commit() -> str:
+    """The repository's commit, with "-dirty" when the work tree has changes; "" outside git."""
     try:
         out = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=5
@@ -47,6 +48,7 @@ def git_commit() -> str:
 
 
 def _versions() -> dict[str, str]:
+    """The versions run.json records: the workers' (pedsafe_sumo, SUMO), Python's, numpy's, pandas'."""
     return {
         **worker_versions(),
         "python": platform.python_version(),
@@ -57,6 +59,8 @@ def _versions() -> dict[str, str]:
 
 
 def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any]:
+    """run.json of a new run, state running: its identity, where the site's files are, how many chunks and
+    episodes, the arguments, the executor, versions and commit; the totals filled in at the end."""
     identity = plan.identity
     chunks_total = len(plan.scenarios) * math.ceil(
         identity["episodes_per_scenario"] / identity["chunk_size_pairs"]

@@ -78,24 +78,7 @@ class Plan:
 
 def prepare(args: argparse.Namespace) -> Plan:
     """Check everything about the command and its input files; writes nothing."""
-    if args.workers is not None and args.cluster:
-        raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {args.workers}")
-    if args.workers is not None and args.workers > MAX_WORKERS:
-        raise UsageError(f"--workers must be at most {MAX_WORKERS}, got {args.workers} (more: use --cluster)")
-    if args.recycle_chunks is not None and args.cluster:
-        raise UsageError(
-            "--recycle-chunks applies to the process pool; Dask's workers are bounded by their nanny's "
-            "memory limit (docs/batch.md)"
-        )
-    if args.recycle_chunks is not None and not 0 <= args.recycle_chunks <= MAX_RECYCLE_CHUNKS:
-        raise UsageError(
-            f"--recycle-chunks must be between 0 (never) and {MAX_RECYCLE_CHUNKS:,}, "
-            f"got {args.recycle_chunks}"
-        )
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise UsageError(f"--out {args.out} is a file, not a run directory")
+    _check_execution_flags(args)
     explicit = explicit_arguments(args)
     recorded = None
     if args.resume:
@@ -129,70 +112,8 @@ def prepare(args: argparse.Namespace) -> Plan:
     if arguments["condition"] not in (*CONDITIONS, "both"):
         raise UsageError(f"unknown condition '{arguments['condition']}' (known: sv, v2i, both)")
     conditions = list(CONDITIONS) if arguments["condition"] == "both" else [arguments["condition"]]
-    if arguments["episodes"] < 1:
-        raise UsageError(f"--episodes must be at least 1, got {arguments['episodes']}")
-    if arguments["episodes"] > MAX_EPISODES:
-        raise UsageError(
-            f"--episodes must be at most {MAX_EPISODES:,} per scenario, got {arguments['episodes']}"
-        )
-    if arguments["seed"] < 0:
-        raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
-    if arguments["seed"] > MAX_SEED:
-        raise UsageError(f"--seed must be at most 2**63 - 1, got {arguments['seed']}")
-    if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
-        raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
-    if arguments["chunk_size"] is not None and arguments["chunk_size"] > MAX_CHUNK_PAIRS:
-        raise UsageError(
-            f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
-        )
-    # The proposal's settings: --is-proposal takes them from the run it names.
-    pilot_flags = (
-        "is_pilot_stages",
-        "is_pilot_episodes",
-        "is_inputs",
-        "is_min_spread",
-        "is_score",
-        "is_family",
-        "is_pool_from",
-        "is_v2i_factor",
-    )
-    is_flags = (*pilot_flags, "is_proposal")
-    if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
-        given = ", ".join(f"--{name.replace('_', '-')}" for name in is_flags if name in explicit)
-        raise UsageError(f"{given}: need --sampler is")
-    if arguments.get("is_proposal") and any(name in explicit for name in pilot_flags):
-        raise UsageError(
-            "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"
-        )
-    unused_by_joint = [name for name in ("is_inputs", "is_min_spread", "is_score") if name in explicit]
-    if arguments["is_family"] == FAMILY_JOINT and unused_by_joint:
-        # The joint proposal moves every proposable input at once, fitted on the pilots' collisions: no
-        # input screen, spread floor or score for the pilots' elite (docs/sampling.md).
-        given = ", ".join(f"--{name.replace('_', '-')}" for name in unused_by_joint)
-        raise UsageError(f"{given}: not used by --is-family joint (give --is-family product)")
-    if arguments["is_family"] != FAMILY_JOINT and "is_v2i_factor" in explicit:
-        raise UsageError("--is-v2i-factor: used only by --is-family joint")
-    if not MIN_SPREAD_FLAG <= arguments["is_min_spread"] <= 1.0:
-        raise UsageError(
-            f"--is-min-spread must lie in {MIN_SPREAD_FLAG}..1, got {arguments['is_min_spread']}"
-        )
-    if not 1 <= arguments["is_pilot_stages"] <= MAX_PILOT_STAGES:
-        raise UsageError(
-            f"--is-pilot-stages must lie in 1..{MAX_PILOT_STAGES}, got {arguments['is_pilot_stages']}"
-        )
-    pool_from, final_stage = arguments.get("is_pool_from"), arguments["is_pilot_stages"]
-    if "is_pool_from" in explicit and pool_from is not None and not 0 <= pool_from <= final_stage:
-        raise UsageError(
-            f"--is-pool-from must lie in 0..{arguments['is_pilot_stages']} (the final stage, after "
-            f"--is-pilot-stages {arguments['is_pilot_stages']}), got {pool_from}"
-        )
-    if not MIN_PILOT_EPISODES <= arguments["is_pilot_episodes"] <= MAX_PILOT_EPISODES:
-        raise UsageError(
-            f"--is-pilot-episodes must lie in {MIN_PILOT_EPISODES}..{MAX_PILOT_EPISODES:,}, "
-            f"got {arguments['is_pilot_episodes']}"
-        )
-    if arguments["sampler"] == SAMPLER_IS and arguments["condition"] == "v2i":
-        raise UsageError("--sampler is adapts its proposal on the SV condition: --condition sv or both")
+    _check_run_numbers(arguments)
+    _check_sampler_arguments(arguments, explicit)
     try:
         agent_timeout_s = check_timeout_s(arguments["agent_timeout"])
     except (TypeError, ValueError) as exc:
@@ -254,6 +175,100 @@ def prepare(args: argparse.Namespace) -> Plan:
     if recorded is not None:
         check_same_run(out, identity, versions, recorded)
     return plan
+
+
+def _check_execution_flags(args: argparse.Namespace) -> None:
+    """The flags of how the run is carried out (--workers, --cluster, --recycle-chunks, --out)."""
+    if args.workers is not None and args.cluster:
+        raise UsageError("--workers and --cluster exclude each other (local:N starts N Dask workers)")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers is not None and args.workers > MAX_WORKERS:
+        raise UsageError(f"--workers must be at most {MAX_WORKERS}, got {args.workers} (more: use --cluster)")
+    if args.recycle_chunks is not None and args.cluster:
+        raise UsageError(
+            "--recycle-chunks applies to the process pool; Dask's workers are bounded by their nanny's "
+            "memory limit (docs/batch.md)"
+        )
+    if args.recycle_chunks is not None and not 0 <= args.recycle_chunks <= MAX_RECYCLE_CHUNKS:
+        raise UsageError(
+            f"--recycle-chunks must be between 0 (never) and {MAX_RECYCLE_CHUNKS:,}, "
+            f"got {args.recycle_chunks}"
+        )
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} is a file, not a run directory")
+
+
+def _check_run_numbers(arguments: dict[str, Any]) -> None:
+    """--episodes, --seed and --chunk-size within their bounds."""
+    if arguments["episodes"] < 1:
+        raise UsageError(f"--episodes must be at least 1, got {arguments['episodes']}")
+    if arguments["episodes"] > MAX_EPISODES:
+        raise UsageError(
+            f"--episodes must be at most {MAX_EPISODES:,} per scenario, got {arguments['episodes']}"
+        )
+    if arguments["seed"] < 0:
+        raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
+    if arguments["seed"] > MAX_SEED:
+        raise UsageError(f"--seed must be at most 2**63 - 1, got {arguments['seed']}")
+    if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
+        raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
+    if arguments["chunk_size"] is not None and arguments["chunk_size"] > MAX_CHUNK_PAIRS:
+        raise UsageError(
+            f"--chunk-size must be at most {MAX_CHUNK_PAIRS:,} pairs, got {arguments['chunk_size']}"
+        )
+
+
+def _check_sampler_arguments(arguments: dict[str, Any], explicit: dict[str, Any]) -> None:
+    """The --sampler and --is-* flags: given together only where they apply, each within its bounds."""
+    # The proposal's settings: --is-proposal takes them from the run it names.
+    pilot_flags = (
+        "is_pilot_stages",
+        "is_pilot_episodes",
+        "is_inputs",
+        "is_min_spread",
+        "is_score",
+        "is_family",
+        "is_pool_from",
+        "is_v2i_factor",
+    )
+    is_flags = (*pilot_flags, "is_proposal")
+    if arguments["sampler"] == SAMPLER_MC and any(name in explicit for name in is_flags):
+        given = ", ".join(f"--{name.replace('_', '-')}" for name in is_flags if name in explicit)
+        raise UsageError(f"{given}: need --sampler is")
+    if arguments.get("is_proposal") and any(name in explicit for name in pilot_flags):
+        raise UsageError(
+            "--is-proposal takes the pilot settings of that run: leave out the other --is-* flags"
+        )
+    unused_by_joint = [name for name in ("is_inputs", "is_min_spread", "is_score") if name in explicit]
+    if arguments["is_family"] == FAMILY_JOINT and unused_by_joint:
+        # The joint proposal moves every proposable input at once, fitted on the pilots' collisions: no
+        # input screen, spread floor or score for the pilots' elite (docs/sampling.md).
+        given = ", ".join(f"--{name.replace('_', '-')}" for name in unused_by_joint)
+        raise UsageError(f"{given}: not used by --is-family joint (give --is-family product)")
+    if arguments["is_family"] != FAMILY_JOINT and "is_v2i_factor" in explicit:
+        raise UsageError("--is-v2i-factor: used only by --is-family joint")
+    if not MIN_SPREAD_FLAG <= arguments["is_min_spread"] <= 1.0:
+        raise UsageError(
+            f"--is-min-spread must lie in {MIN_SPREAD_FLAG}..1, got {arguments['is_min_spread']}"
+        )
+    if not 1 <= arguments["is_pilot_stages"] <= MAX_PILOT_STAGES:
+        raise UsageError(
+            f"--is-pilot-stages must lie in 1..{MAX_PILOT_STAGES}, got {arguments['is_pilot_stages']}"
+        )
+    pool_from, final_stage = arguments.get("is_pool_from"), arguments["is_pilot_stages"]
+    if "is_pool_from" in explicit and pool_from is not None and not 0 <= pool_from <= final_stage:
+        raise UsageError(
+            f"--is-pool-from must lie in 0..{arguments['is_pilot_stages']} (the final stage, after "
+            f"--is-pilot-stages {arguments['is_pilot_stages']}), got {pool_from}"
+        )
+    if not MIN_PILOT_EPISODES <= arguments["is_pilot_episodes"] <= MAX_PILOT_EPISODES:
+        raise UsageError(
+            f"--is-pilot-episodes must lie in {MIN_PILOT_EPISODES}..{MAX_PILOT_EPISODES:,}, "
+            f"got {arguments['is_pilot_episodes']}"
+        )
+    if arguments["sampler"] == SAMPLER_IS and arguments["condition"] == "v2i":
+        raise UsageError("--sampler is adapts its proposal on the SV condition: --condition sv or both")
 
 
 def approach_units(
