@@ -1,4 +1,4 @@
-"""Per-frame cost of the AD interface's raw data and world feeds (issue 15), in the episode loop.
+"""Per-frame cost of the AD interface's raw data and world feeds, in the episode loop.
 
     python benchmarks/bench_raw_sensors.py [--episodes 3] [--scenario crossing] [--condition v2i]
 

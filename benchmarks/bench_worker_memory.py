@@ -1,4 +1,4 @@
-"""Where a batch worker's memory creep comes from (issue 19, item 3): one process, many episodes.
+"""Where a batch worker's memory creep comes from: one process, many episodes.
 
     nice .venv/bin/python benchmarks/bench_worker_memory.py --mode full --pairs 100 --every 10
     nice .venv/bin/python benchmarks/bench_worker_memory.py --mode full --pairs 100 --tracemalloc
@@ -66,8 +66,9 @@ def main() -> None:
     parser.add_argument("--tracemalloc", action="store_true", help="trace the Python heap as well")
     args = parser.parse_args()
     per_scenario = max(1, -(-args.pairs // 4))
+    # prepare() writes nothing: --out is only a name the parser requires.
     plan = prepare(
-        parse_args(["--protocol", args.protocol, "--episodes", str(per_scenario), "--out", "/tmp/x"])
+        parse_args(["--protocol", args.protocol, "--episodes", str(per_scenario), "--out", "never-written"])
     )
     chunks = plan_chunks(plan.scenarios, plan.conditions, per_scenario, plan.arguments["seed"], 1)
     # Round-robin over the scenarios, one pair per chunk, as a protocol's workers meet them.

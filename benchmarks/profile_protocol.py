@@ -1,8 +1,8 @@
 """Where a protocol's time goes: its actual mix of scenarios and conditions, in one process, per episode
-and per step (issue 19, item 1 of session 4).
+and per step.
 
-    .venv/bin/python benchmarks/profile_protocol.py --protocol protocols/paper-v4.toml --episodes 10
-    .venv/bin/python benchmarks/profile_protocol.py ... --cprofile /tmp/prof.out   # and a cProfile dump
+    .venv/bin/python benchmarks/profile_protocol.py --protocol protocols/paper-v7.toml --episodes 10
+    .venv/bin/python benchmarks/profile_protocol.py ... --cprofile prof.out   # and a cProfile dump
 
 Runs the worker side of a batch (`batch.runner.run_chunk`, the protocol's scenarios, conditions and
 parameters) in this process, after one untimed pair per scenario (numba's kernels loaded). The phases
@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -121,7 +122,7 @@ def report_sumo_calls(episodes: int, steps: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--protocol", default="protocols/paper-v4.toml")
+    parser.add_argument("--protocol", default="protocols/paper-v7.toml")
     parser.add_argument("--episodes", type=int, default=10, help="pairs per scenario")
     parser.add_argument("--cprofile", help="also profile with cProfile and write the stats here")
     parser.add_argument(
@@ -131,8 +132,9 @@ def main() -> None:
         "vehicletype), the wrapper's own cost subtracted: what SUMO costs outside its step and load",
     )
     args = parser.parse_args()
+    # prepare() writes nothing: --out is only a name the parser requires.
     plan = prepare(
-        parse_args(["--protocol", args.protocol, "--episodes", str(args.episodes), "--out", "/tmp/x"])
+        parse_args(["--protocol", args.protocol, "--episodes", str(args.episodes), "--out", "never-written"])
     )
     chunks = plan_chunks(
         plan.scenarios, plan.conditions, args.episodes, plan.arguments["seed"], args.episodes
@@ -189,7 +191,8 @@ def main() -> None:
     steps = CALLS["simulation.step (all)"]
     t = time.perf_counter()
     table = to_table(rows)
-    table.to_parquet("/tmp/profile_protocol_rows.parquet")
+    with tempfile.TemporaryDirectory() as folder:
+        table.to_parquet(Path(folder) / "rows.parquet")
     write_s = time.perf_counter() - t
     print(
         f"{episodes} episodes, {steps} SUMO steps ({steps / episodes:.0f} per episode), "

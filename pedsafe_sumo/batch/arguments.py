@@ -55,15 +55,17 @@ RUN_ARGUMENT_DEFAULTS: dict[str, Any] = {
     "is_min_spread": SQRT_HALF,
     "is_proposal": None,
     # TTC: the clearance score drives the proposal away from collisions on Xueqing's crossing; the TTC
-    # score agrees with plain MC on all four scenarios (docs/sampling.md).
+    # score agrees with plain MC on all four scenarios (docs/decisions/2026-11-23-is-score-ttc.md).
     "is_score": SCORE_TTC,
     # joint: against a 10,000-pair MC run it needs fewer episodes than the product on all four scenarios
-    # (docs/sampling.md, "A joint proposal"); the product stays one flag away.
+    # (docs/decisions/2026-11-23-is-family-joint.md); the product stays one flag away.
     "is_family": FAMILY_JOINT,
-    # Table I pools the pilot stages from stage 2 with the final one (docs/sampling.md, "Pooling the stages").
+    # Table I pools the pilot stages from stage 2 with the final one
+    # (docs/decisions/2026-11-23-is-pooling-and-pilot-stages.md).
     "is_pool_from": DEFAULT_POOL_FROM_STAGE,
     # The joint proposal also aims at V2I's collisions where the pilots hold enough of them, including
-    # those where SV does not collide (sampling/v2i_factor.py; docs/sampling.md, "The V2I factor").
+    # those where SV does not collide (sampling/v2i_factor.py; docs/decisions/2026-11-23-is-v2i-factor.md,
+    # docs/decisions/2026-11-24-is-v2i-only-term.md).
     "is_v2i_factor": V2I_FACTOR_CONTRAST_V2I_ONLY,
 }
 #: The value a run.json without one of these keys stands for: its run was made with that value, before

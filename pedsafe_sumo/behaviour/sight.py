@@ -1,6 +1,6 @@
 """A pedestrian's line of sight to a vehicle, through the geometry the sensors see.
 
-The pedestrian reacts to the ego only when they can see it (issue 12): rays from their eyes to a few
+The pedestrian reacts to the ego only when they can see it: rays from their eyes to a few
 points of the ego are cast with the perception layer's ray casting (`perception.raycast.cast_rays`)
 through the same world snapshot as the sensors: buildings, tree trunks and crowns, hedges and every
 vehicle box. Pure geometry, no SUMO.

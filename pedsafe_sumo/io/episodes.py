@@ -16,15 +16,15 @@ EPISODE_COLUMNS = (
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
     "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
-    # the proximity measure (issue 12; pedsafe_sumo.safety.proximity)
+    # the proximity measure (pedsafe_sumo.safety.proximity)
     "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
-    # collision semantics and end conditions (issue 12; safety.collision, sim.episode)
+    # collision semantics and end conditions (safety.collision, sim.episode)
     "contact_stationary", "end_reason",
-    # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
+    # Signal each road user had at the conflict (green, yellow, red or none).
     "ego_signal", "ped_signal",
-    # The arm the ego came in on (N, E, S, W; batch --approach, issue 14).
+    # The arm the ego came in on (N, E, S, W; batch --approach).
     "approach",
-    # Importance sampling (issue 17; sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
+    # Importance sampling (sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
     # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
     # 0 under mc) and its random inputs as JSON.
     "weight", "sampler_stage", "sampler_inputs",

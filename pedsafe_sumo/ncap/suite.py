@@ -24,7 +24,7 @@ from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeResult, EpisodeRunner
 from pedsafe_sumo.sumo_net import read_net
 
-#: The columns of ncap.csv: the issue's eight, then what explains them.
+#: The columns of ncap.csv: the eight result columns (docs/ncap.md), then what explains them.
 CELL_COLUMNS = (
     "test", "ego_speed_kmh", "impact_point_pct", "condition", "avoided", "impact_speed_kmh", "colour",
     "cell_score", "test_range", "turn", "variation", "cell_id", "measured_impact_point_pct", "end_reason",

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from pedsafe_sumo.ncap.suite import NcapRunner
 from pedsafe_sumo.replay.check import CHECKED_OUTCOME, TrajectoryCheck, outcome_mismatches
 from pedsafe_sumo.replay.fcd import FcdRecorder, write_fcd
 from pedsafe_sumo.replay.rundir import LoggedEpisode, ReplayError, load_logged_episode
@@ -37,6 +38,7 @@ from pedsafe_sumo.replay.scene import (
     ScreenshotRequest,
     ScreenshotTaken,
 )
+from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
 from pedsafe_sumo.scenarios.registry import EpisodeSetup
 from pedsafe_sumo.settings import UsageError
 from pedsafe_sumo.sim.connection import SimulatorError
@@ -177,8 +179,6 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
 def runner_class(logged: LoggedEpisode) -> type[EpisodeRunner]:
     """The engine the run used: a Euro NCAP run (pedsafe_sumo.ncap) holds the ego's movement green."""
     if logged.run_info.get("kind") == "ncap":
-        from pedsafe_sumo.ncap.suite import NcapRunner
-
         return NcapRunner
     return EpisodeRunner
 
@@ -305,8 +305,6 @@ def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
 
 def export_xosc(logged: LoggedEpisode, path: Path, say) -> int:
     """The episode as OpenSCENARIO + OpenDRIVE (pedsafe_sumo/replay/xosc.py), checked like --export-fcd."""
-    from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
-
     runner = runner_class(logged)(
         logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
     )

@@ -3,7 +3,7 @@
 A run directory (DESIGN section 3) holds episodes.parquet, run.json and cases/. Replaying episode N of
 a scenario under a condition takes, from the run and never from today's defaults:
 - the episode seed: episodes.parquet's `seed` of (scenario, episode, condition);
-- the scenario: run.json["scenarios"][name], every field of the ScenarioSpec the batch used (with its
+- the scenario: `run.json["scenarios"][name]`, every field of the ScenarioSpec the batch used (with its
   --set overrides applied), rebuilt field by field so a changed default in the registry cannot leak in;
 - the parameters: run.json["parameters"], the full merged parameter file of the run;
 - the AD stack: run.json["algorithm"], loaded like --algorithm;
@@ -29,7 +29,10 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import sumolib
 
+from pedsafe_sumo import __version__
+from pedsafe_sumo.batch.runner import site_file_digests
 from pedsafe_sumo.control.agent import Agent, AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import case_stem, read_case
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site
@@ -315,8 +318,6 @@ def _read_episodes(path: Path) -> pd.DataFrame:
 def run_site(run_info: dict[str, Any], given: str | None = None) -> Site:
     """The site of a run (see the module docstring); ReplayError, in one line, when it cannot be found
     or its files differ from the ones the run read."""
-    from pedsafe_sumo.batch.runner import site_file_digests
-
     recorded_path = run_info.get("site_path")
     if given is not None:
         reference = given
@@ -340,10 +341,6 @@ def run_site(run_info: dict[str, Any], given: str | None = None) -> Site:
 
 
 def _version_notes(run_info: dict[str, Any]) -> list[str]:
-    import sumolib
-
-    from pedsafe_sumo import __version__
-
     notes = []
     versions: dict[str, Any] = run_info["versions"] if isinstance(run_info.get("versions"), dict) else {}
     sumo_then, sumo_now = versions.get("sumo"), sumolib.version.gitDescribe()

@@ -198,6 +198,8 @@ def _vehicle(xosc, name: str, track: Track):
 
 def build_scenario(recorder: TrackRecorder, xodr_name: str, description: str, step_length_s: float):
     """The scenariogeneration Scenario of a recorded episode."""
+    # Imported here, not at module top: scenariogeneration takes about half a second to import, and only
+    # --export-xosc needs it.
     from scenariogeneration import xosc
 
     entities = xosc.Entities()

@@ -27,12 +27,12 @@ INDEX_COLUMNS = (
     "first_detection_distance_m",
     "first_detection_time_s",
     "detected_by",
-    # the proximity measure (issue 12): close passes whatever the pedestrian's speed
+    # the proximity measure: close passes whatever the pedestrian's speed
     "min_clearance_m",
     "ego_speed_at_min_clearance_mps",
     "drac_mps2",
     "close_pass",
-    # contact with a standing ego: neither a collision nor an injury (issue 12)
+    # contact with a standing ego: neither a collision nor an injury
     "contact_stationary",
 )
 

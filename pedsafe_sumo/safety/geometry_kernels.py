@@ -1,7 +1,7 @@
 """Compiled (numba) scalar forms of :mod:`pedsafe_sumo.safety.geometry`'s rectangle-circle clearance, for
-the per-step callers of the episode loop (issue 19): the ego-pedestrian clearance of every step and the
-walker's body test (:meth:`PedestrianWalker._walks_into`), which ran a dozen numpy calls on scalars or
-on arrays of a few elements every step.
+the per-step callers of the episode loop: the ego-pedestrian clearance of every step and the walker's
+body test (:meth:`PedestrianWalker._walks_into`), where the numpy forms would make a dozen numpy calls on
+scalars or on arrays of a few elements every step.
 
 Bit-identical to the numpy functions: the same operations in the same order (``to_rectangle_frame``,
 ``box_signed_distance_m``, then minus the radius), and NaN propagates as in ``np.maximum``/``np.minimum``.

@@ -60,7 +60,7 @@ from pedsafe_sumo.sampling.draws import family_from_json, family_to_json, produc
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Family, Normal
 
 KIND = "joint"
-#: Ridge penalty on the standardised features: tools/is_limits.py's value, fixed before the measurement at
+#: Ridge penalty on the standardised features: research/is_limits.py's value, fixed before the measurement at
 #: pilot size and not tuned on it.
 RIDGE = 1.0
 #: Nominal draws that estimate c = E_p[sqrt(pi_hat)]: relative standard error about 1e-3 for the four
@@ -101,8 +101,9 @@ Block = np.ndarray | list[np.ndarray]
 
 def quadratic_design(n_rows: int, blocks: list[Block]) -> np.ndarray:
     """The logistic model's features: an intercept; per input in order, its indicators or its z and z^2;
-    then the products of every pair of continuous inputs. Shared with tools/is_limits.py and
-    tools/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler does."""
+    then the products of every pair of continuous inputs. Shared with research/is_limits.py and
+    research/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler
+    does."""
     columns, continuous = [np.ones(n_rows)], []
     for block in blocks:
         if isinstance(block, list):

@@ -72,7 +72,7 @@ INPUT_MODES = (INPUTS_SCREENED, INPUTS_ALL)
 #: 1972's surrogate). On the paper-v5 MC run's 10,000 SV crossing episodes the top 10% by clearance are 93%
 #: yielding pedestrians with a slower ego (4.3 m/s; all: 5.2), who stop about 1 m from the car, while the
 #: collisions are 63% unaware pedestrians and a fast ego (10.3 m/s): the clearance drives the proposal away
-#: from collisions. The top 10% by TTC: ego 7.0 m/s, 53% unaware.
+#: from collisions. The top 10% by TTC: ego 7.0 m/s, 53% unaware (docs/decisions/2026-11-23-is-score-ttc.md).
 SCORE_CLEARANCE = "clearance"
 SCORE_TTC = "ttc"
 SCORES = (SCORE_CLEARANCE, SCORE_TTC)
@@ -93,8 +93,8 @@ MAX_PILOT_EPISODES = 100_000
 #: the final stage's (the pooled variance sum n_t s_t^2 / N^2 is then below the final stage's alone).
 #: Stage 0 is plain Monte Carlo and stage 1's proposal is fitted on one stage of 200 pairs; on ten-stage
 #: runs of jaywalking and blending stage 1 is worth 1.7-6.1 per episode against the final's 4.8-12.3
-#: with the control variate, and stage 2 5.7-10.3 (docs/sampling.md, "Pooling the stages"). So from stage
-#: 2, fixed before any run that pools; a run of fewer pilot stages pools from its final stage.
+#: with the control variate, and stage 2 5.7-10.3 (docs/decisions/2026-11-23-is-pooling-and-pilot-stages.md).
+#: So from stage 2, fixed before any run that pools; a run of fewer pilot stages pools from its final stage.
 DEFAULT_POOL_FROM_STAGE = 2
 
 

@@ -81,7 +81,7 @@ V2I_ONLY_MIN_COLLISIONS = 2
 def low_contrast_table(
     clothing_rgb: Any, car_rgb: Any, delta_e_threshold: float
 ) -> tuple[tuple[int, ...], ...]:
-    """L[i][j] = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
+    """`L[i][j]` = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
     the cameras' rule: perception/sensors.py)."""
     clothing, cars = np.asarray(clothing_rgb, dtype=float), np.asarray(car_rgb, dtype=float)
     return tuple(
