@@ -27,8 +27,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pedsafe_sumo.batch import runner as batch_runner  # noqa: E402
-from pedsafe_sumo.batch.__main__ import parse_args, prepare  # noqa: E402
+from pedsafe_sumo.batch.__main__ import parse_args  # noqa: E402
 from pedsafe_sumo.batch.chunks import plan_chunks  # noqa: E402
+from pedsafe_sumo.batch.plan import prepare  # noqa: E402
 from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 
 

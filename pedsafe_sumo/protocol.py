@@ -1,4 +1,4 @@
-"""Protocols: every value of a study fixed in one dated file before it runs (issue 13 item 4).
+"""Protocols: every value of a study fixed in one dated file before it runs.
 
     python -m pedsafe_sumo.batch --protocol protocols/paper-v7.toml --out DIR [--episodes N] [--workers K]
     python -m pedsafe_sumo.protocol write paper-v8 --date 2026-12-01 --out protocols/paper-v8.toml
@@ -10,7 +10,7 @@ A protocol file (TOML) holds:
 Above each value a comment gives its source or, for what the paper does not report, the reason it was
 chosen (`write` copies them from the comments of defaults.toml and of the spec's fields). A
 protocol that leaves out a scenario field or a parameter is refused: nothing falls back silently to
-defaults that may since have changed. The rule (docs/protocols.md): a change after seeing results is a
+defaults that may change later. The rule (docs/protocols.md): a change after seeing results is a
 new dated file, never an edit; run.json records the file and its SHA-256.
 """
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.params import load_params, with_overrides
+from pedsafe_sumo.perception.world import load_roadside_units
 from pedsafe_sumo.scenarios.specs import ScenarioSpec, get_scenario
 
 
@@ -58,8 +59,6 @@ def configure(
 
 def check_roadside_units(specs: dict[str, ScenarioSpec], site) -> None:
     """Every roadside pole a scenario names must exist at the site (else one clear line, before any work)."""
-    from pedsafe_sumo.perception.world import load_roadside_units
-
     # The poles the engine loads: the roadside_camera POIs of the site's rsu.add.xml (heights and
     # pitches do not matter here).
     try:

@@ -13,6 +13,7 @@ import xml.etree.ElementTree as ET
 from typing import Any
 
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.sim.staging import SITE_FILES_READ, load_site_data
 
 
 class InputFileError(ValueError):
@@ -26,8 +27,6 @@ def _one_line(exc: BaseException) -> str:
 
 def check_site(site: Site, params: dict[str, Any]) -> None:
     """Raise InputFileError unless every site file exists, parses, and yields the episode's world."""
-    from pedsafe_sumo.sim.staging import SITE_FILES_READ, load_site_data
-
     for suffix in SITE_FILES_READ:
         path = site.file(suffix)
         if not path.is_file():

@@ -31,15 +31,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import sumolib
 
+from pedsafe_sumo import __version__
 from pedsafe_sumo.batch.chunks import Task
+from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.control.stack_calls import episode_error_message, stack_failure, stack_label
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, AgentTimeoutError
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.cases import case_stem
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS
+from pedsafe_sumo.network.sites import get_site, resolve_site
+from pedsafe_sumo.sampling.joint import proposal_of_json
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+from pedsafe_sumo.scenarios.specs import get_scenario
+from pedsafe_sumo.sim.episode import EpisodeRunner
+from pedsafe_sumo.sim.staging import SITE_FILES_READ
 
 ERROR_STATUS = "error"
 #: How often a pool worker checks that its driver is still alive [s].
@@ -150,9 +158,6 @@ def _note_started(chunk_key: str) -> None:
 
 def site_file_digests(site_name: str) -> dict[str, str]:
     """SHA-256 of every site file an episode reads, by file name (`site_name`: a site name or folder)."""
-    from pedsafe_sumo.network.sites import resolve_site
-    from pedsafe_sumo.sim.staging import SITE_FILES_READ
-
     site = resolve_site(site_name, verify=False)
     digests = {}
     for suffix in SITE_FILES_READ:
@@ -162,10 +167,6 @@ def site_file_digests(site_name: str) -> dict[str, str]:
 
 
 def worker_versions() -> dict[str, str]:
-    import sumolib
-
-    from pedsafe_sumo import __version__
-
     return {"pedsafe_sumo": __version__, "sumo": sumolib.version.gitDescribe()}
 
 
@@ -196,10 +197,6 @@ def _runner_for(config: WorkerConfig) -> Any:
     fingerprint = config.fingerprint
     if _RUNNER is not None and _RUNNER_FINGERPRINT == fingerprint:
         return _RUNNER
-    from pedsafe_sumo.control.agent import load_agent_class
-    from pedsafe_sumo.network.sites import get_site
-    from pedsafe_sumo.sim.episode import EpisodeRunner
-
     if _RUNNER is not None:
         _close_runner()
     check_environment(config)
@@ -255,8 +252,6 @@ def sampler_proposal(text: str) -> Any:
     if not text:
         return None
     if text not in _PROPOSALS:
-        from pedsafe_sumo.sampling.joint import proposal_of_json
-
         _PROPOSALS[text] = proposal_of_json(text)
     return _PROPOSALS[text]
 
@@ -268,8 +263,6 @@ def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
     `<scenario>:<field>` keys (a protocol's per-scenario values) for this one. `name` may be
     `<scenario>@<arm>` (batch --approach): that scenario on the approach from that arm."""
-    from pedsafe_sumo.scenarios.specs import get_scenario
-
     name, _, arm = name.partition("@")
     common = {key: value for key, value in overrides.items() if ":" not in key}
     own = {key.split(":", 1)[1]: value for key, value in overrides.items() if key.startswith(f"{name}:")}

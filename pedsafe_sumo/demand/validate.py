@@ -47,13 +47,14 @@ from scipy import optimize, stats
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.demand.generate import generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
-from pedsafe_sumo.demand.sampling import Lognormal, traffic_distributions
+from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
 from pedsafe_sumo.demand.validation_page import measured_markdown, plot_ecdfs, write_report
 from pedsafe_sumo.demand.vehicles import background_speed_scale
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.network.sumo_inputs import config_inputs
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
+from pedsafe_sumo.sampling.distributions import Lognormal
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
 #: Acceptance bound of the validation: mid-block approach speeds vs the non-intersection fit.

@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 
 from pedsafe_sumo.demand.routes_xml import attrs
-from pedsafe_sumo.demand.sampling import Lognormal, poisson_departures_s
+from pedsafe_sumo.demand.sampling import poisson_departures_s
 from pedsafe_sumo.demand.site import EnteringLane, Route
+from pedsafe_sumo.sampling.distributions import Lognormal
 
 MOVEMENTS = ("left", "straight", "right")
 VTYPE_ID = "bg_passenger"

@@ -163,8 +163,8 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
         title = AGREEMENT_TITLE
         if not idx.sumo_collision_is_nullable(episodes):
             title += (
-                "\nnote: this run's sumo_collision is a plain boolean (from before issue 12): False also "
-                "where SUMO could not see, so those episodes are compared too"
+                "\nnote: this run's sumo_collision is a plain boolean (it cannot say 'SUMO cannot see'): "
+                "False also where SUMO could not see, so those episodes are compared too"
             )
         sections.append((title, "agreement.csv", agreement, idx.agreement_rows))
     if "pet_s" in episodes.columns:

@@ -83,8 +83,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from is_joint_pilot import DEFENSIVE_SHARE, design, design_spec, evaluate  # noqa: E402
 from is_limits import proposal_efficiency  # noqa: E402
 
-from pedsafe_sumo.demand.sampling import age_group_speed_distributions  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions  # noqa: E402
 from pedsafe_sumo.sampling.draws import family_from_json  # noqa: E402
 from pedsafe_sumo.sampling.importance import SQRT_HALF, Product  # noqa: E402
 from pedsafe_sumo.sampling.joint import fit_logistic, quadratic_design  # noqa: E402

@@ -8,7 +8,7 @@ final stage drew from the proposal of SV alone):
    and each vehicle colour the scenario draws (CIE76 delta E, perception/sensors.py) separates the pairs
    where V2I collided too: the AUC of -delta E (0.5: no information), and the share of each kind of pair
    below the roadside camera's threshold.
-2. The proposal the sampler now fits (sampling/joint.py's with_v2i_factor on the run's pilot rows, added
+2. The proposal the sampler now fits (sampling/v2i_factor.py's with_v2i_factor on the run's pilot rows, added
    to the run's stored final proposal), scored on the final stage's rows by reweighting
    (research/experiments/is_v2i_proposal.py: E_q'[w'^2 f] = E_q[w w' f]) against the stored proposal:
    efficiency per final episode for SV and V2I, plain IS and with the control variate (pi_hat for SV;
@@ -34,13 +34,8 @@ from is_v2i_within_sv import auc  # noqa: E402
 
 from pedsafe_sumo.params import load_params  # noqa: E402
 from pedsafe_sumo.perception.sensors import delta_e_cie76  # noqa: E402
-from pedsafe_sumo.sampling.joint import (  # noqa: E402
-    CLOTHING_INPUT,
-    COLOUR_SUFFIX,
-    JointProposal,
-    low_contrast_table,
-    with_v2i_factor,
-)
+from pedsafe_sumo.sampling.joint import CLOTHING_INPUT, COLOUR_SUFFIX, JointProposal  # noqa: E402
+from pedsafe_sumo.sampling.v2i_factor import low_contrast_table, with_v2i_factor  # noqa: E402
 from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB  # noqa: E402
 
 

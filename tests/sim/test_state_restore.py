@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from pedsafe_sumo.batch import runner as batch_runner
-from pedsafe_sumo.batch.__main__ import parse_args, prepare
+from pedsafe_sumo.batch.__main__ import parse_args
 from pedsafe_sumo.batch.chunks import plan_chunks
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
@@ -171,6 +171,8 @@ def test_options_that_differ_in_more_than_the_seed_load():
 
 def _batch_rows(restore: bool, calls: list[str]) -> pd.DataFrame:
     """The worker side of a batch (one pair per scenario, as a pool worker runs them) in this process."""
+    from pedsafe_sumo.batch.plan import prepare
+
     plan = prepare(parse_args(["--scenario", "crossing,jaywalking,background_blending,right_turn",
                                "--episodes", "1", "--out", "/nonexistent"]))  # fmt: skip
     chunks = plan_chunks(plan.scenarios, plan.conditions, 1, plan.arguments["seed"], 1)
