@@ -24,7 +24,7 @@ def plot_ecdfs(comparisons: list[Comparison], figures_dir: Path, prefix: str, ti
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after the backend is chosen
 
     figures_dir.mkdir(parents=True, exist_ok=True)
     paths = []

@@ -32,8 +32,8 @@ def grid_figure(table: pd.DataFrame, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch, Rectangle
+    import matplotlib.pyplot as plt  # after the backend is chosen
+    from matplotlib.patches import Patch, Rectangle  # with pyplot, after the backend
 
     nominal = table[table["variation"] == "nominal"]
     tests = list(dict.fromkeys(nominal["test"]))
