@@ -49,7 +49,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check .
 
 network: $(STAMP)
-	$(PY) -m pedsafe_sumo.network --site xueqing
+	$(PY) -m pedsafe_sumo.site --site xueqing
 
 clean-venv:
 	rm -rf $(VENV)

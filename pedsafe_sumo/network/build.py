@@ -18,7 +18,7 @@ network edited afterwards is refused until --refresh re-derives them from it (do
 The steps live in their own modules: :mod:`.clip` (the OSM clip), :mod:`.convert` (netconvert,
 polyconvert), :mod:`.approaches` (the intersection and its approaches), :mod:`.poles` (the roadside
 poles), :mod:`.site_files` (sumocfg, view, site file, copying into the folder); the command line is
-:mod:`.build_cli`.
+:mod:`pedsafe_sumo.site.build_command`.
 """
 
 from __future__ import annotations

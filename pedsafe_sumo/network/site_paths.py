@@ -1,7 +1,7 @@
 """The paths a site file names, as a build reads and writes them (docs/trust.md).
 
 A site folder may come from someone else, and its site file names OSM data by path (`source_osm`,
-`clip_osm`). A build (`tools/build_network.py --site`, `python -m pedsafe_sumo.network --site`) reads
+`clip_osm`). A build (`tools/build_network.py --site`, `python -m pedsafe_sumo.site --site`) reads
 such a path only inside the site folder or the repository's osm/ (the shipped OSM data), and writes
 only inside the site folder; the shipped sites under networks/ keep their clip in the
 repository's osm/, which their rebuild writes. A path the user gives on the command line (--osm,

@@ -18,10 +18,10 @@ from pedsafe_sumo.control.reference import ReferenceStack  # noqa: E402
 from pedsafe_sumo.ncap.protocol import load_protocol, select_cells  # noqa: E402
 from pedsafe_sumo.ncap.staging import stage_cell  # noqa: E402
 from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests  # noqa: E402
-from pedsafe_sumo.network.build_cli import main as build_network  # noqa: E402
 from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, Site, get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
 from pedsafe_sumo.scenarios.geometry import load_approach  # noqa: E402
+from pedsafe_sumo.site.build_command import main as build_network  # noqa: E402
 
 PROTOCOL = load_protocol()
 SITE = get_site("xueqing")

@@ -132,7 +132,7 @@ def test_polygons_below_ground_are_not_occluders(built):
 @pytest.mark.slow
 def test_a_t_junction_of_one_way_roads_builds_and_says_why_it_hosts_nothing(built, tmp_path):
     folder, stdout = built["g6_link"]
-    summary = _run("-m", "pedsafe_sumo.network", "--site", str(folder), "--no-build")
+    summary = _run("-m", "pedsafe_sumo.site", "--site", str(folder), "--no-build")
     assert summary.returncode == 0, summary.stderr
     arms = [line for line in summary.stdout.splitlines() if line.startswith("    ") and " lane(s) in" in line]
     assert len(arms) == 3  # a T

@@ -177,7 +177,7 @@ def _source(value: str):
     return lambda info, folder: info.update(source_osm=value)
 
 
-BUILD = ("-m", "pedsafe_sumo.network", "--site")
+BUILD = ("-m", "pedsafe_sumo.site", "--site")
 BUILD_TOOL = (str(TOOLS / "build_network.py"), "--site")
 
 

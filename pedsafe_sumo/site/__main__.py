@@ -1,4 +1,4 @@
-"""python -m pedsafe_sumo.network [--site NAME_OR_PATH] [--no-build]: build a study site and summarise it."""
+"""python -m pedsafe_sumo.site [--site NAME_OR_PATH] [--no-build]: build a study site and summarise it."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.network", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.site", description=__doc__)
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument("--no-build", action="store_true", help="summarise the site folder as it is")
     args = parser.parse_args(argv)
