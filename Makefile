@@ -65,7 +65,7 @@ docs: $(DOCS_STAMP)
 	$(VENV)/bin/mkdocs build --strict --site-dir $(DOCS_SITE_DIR)
 
 network: $(STAMP)
-	$(PY) -m pedsafe_sumo.network --site xueqing
+	$(PY) -m pedsafe_sumo.site --site xueqing
 
 clean-venv:
 	rm -rf $(VENV)

@@ -1,5 +1,5 @@
 """Time per episode, split into SUMO (load, insertion, stepping), snapshot, perception, AD stack and
-logging; plus the cost of starting SUMO against reloading it (issue 5, items 1 and 10).
+logging; plus the cost of starting SUMO against reloading it.
 
     .venv/bin/python benchmarks/bench_episode.py --episodes 10
 
@@ -7,7 +7,7 @@ The column `step` is the time inside SUMO's own `simulation.step` alone (timed b
 function; no setSpeed, moveToXY or load in it). The last line, `overhead ratio: X`, is everything else
 an episode costs per step (loading SUMO, staging, the snapshot, perception, the AD stack, logging, the
 indexes, the loop's Python) divided by the time inside `simulation.step`, over all scenarios and
-conditions (issue 19, item 1).
+conditions.
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pedsafe_sumo.control.reference import ReferenceStack  # noqa: E402
-from pedsafe_sumo.network.hosting import site_hosting  # noqa: E402
 from pedsafe_sumo.network.sites import get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
-from pedsafe_sumo.scenarios.registry import SCENARIOS, get_scenario  # noqa: E402
+from pedsafe_sumo.scenarios.hosting import site_hosting  # noqa: E402
+from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario  # noqa: E402
 from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 from pedsafe_sumo.sim.episode import EpisodeRunner  # noqa: E402
 
@@ -89,7 +89,7 @@ def main() -> None:
     print(f"libsumo start {start_s * 1e3:.1f} ms, load (reuse) {load_s * 1e3:.1f} ms (median)")
 
     runner = EpisodeRunner(site, load_params(), ReferenceStack)
-    # Scenarios the site cannot stage (left_turn on Xueqing's split phasing since session 5) are skipped.
+    # Scenarios the site cannot stage (left_turn on Xueqing's split phasing) are skipped.
     problems = site_hosting(site, dict(SCENARIOS), load_params())
     names = [name for name in SCENARIOS if not (problems[name] or "").startswith("cannot be staged")]
     for name in sorted(set(SCENARIOS) - set(names)):
@@ -137,7 +137,7 @@ def main() -> None:
         f"{grand_inside / grand_steps * 1e6:.0f} us of it inside simulation.step"
     )
     print(f"overhead ratio in CPU time: {(grand_cpu - grand_inside_cpu) / grand_inside_cpu:.2f}")
-    # Everything an episode costs besides SUMO's own step, per unit of that step (issue 19, item 1).
+    # Everything an episode costs besides SUMO's own step, per unit of that step.
     print(f"overhead ratio: {(grand_wall - grand_inside) / grand_inside:.2f}")
 
 

@@ -1,4 +1,4 @@
-"""Per-frame cost of the AD interface's raw data and world feeds (issue 15), in the episode loop.
+"""Per-frame cost of the AD interface's raw data and world feeds, in the episode loop.
 
     python benchmarks/bench_raw_sensors.py [--episodes 3] [--scenario crossing] [--condition v2i]
 
@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 from pedsafe_sumo.control.agent import Agent, Command  # noqa: E402
 from pedsafe_sumo.network.sites import get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
-from pedsafe_sumo.scenarios.registry import SCENARIOS  # noqa: E402
+from pedsafe_sumo.scenarios.specs import SCENARIOS  # noqa: E402
 from pedsafe_sumo.sim.episode import EpisodeRunner  # noqa: E402
 
 VARIANTS = {

@@ -1,7 +1,7 @@
-"""Memory of a batch's worker processes over a run (issue 19, item 3): does a worker's RSS stay flat?
+"""Memory of a batch's worker processes over a run: does a worker's RSS stay flat?
 
-    nice .venv/bin/python benchmarks/bench_rss.py --out /tmp/rss -- \
-        --protocol protocols/paper-v4.toml --episodes 300 --workers 2
+    nice .venv/bin/python benchmarks/bench_rss.py --out OUT -- \
+        --protocol protocols/paper-v7.toml --episodes 300 --workers 2
 
 Starts `python -m pedsafe_sumo.batch <arguments after -->` with `--out OUT/run`, and every `--every`
 seconds reads the resident set size (VmRSS of /proc/<pid>/status) of the driver and of every process

@@ -1,4 +1,4 @@
-"""Where a batch worker's memory creep comes from (issue 19, item 3): one process, many episodes.
+"""Where a batch worker's memory creep comes from: one process, many episodes.
 
     nice .venv/bin/python benchmarks/bench_worker_memory.py --mode full --pairs 100 --every 10
     nice .venv/bin/python benchmarks/bench_worker_memory.py --mode full --pairs 100 --tracemalloc
@@ -27,9 +27,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pedsafe_sumo.batch import runner as batch_runner  # noqa: E402
-from pedsafe_sumo.batch.__main__ import parse_args, prepare  # noqa: E402
+from pedsafe_sumo.batch.__main__ import parse_args  # noqa: E402
 from pedsafe_sumo.batch.chunks import plan_chunks  # noqa: E402
-from pedsafe_sumo.sim import episode as episode_module  # noqa: E402
+from pedsafe_sumo.batch.plan import prepare  # noqa: E402
+from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 
 
 class _MallInfo2(ctypes.Structure):
@@ -65,8 +66,9 @@ def main() -> None:
     parser.add_argument("--tracemalloc", action="store_true", help="trace the Python heap as well")
     args = parser.parse_args()
     per_scenario = max(1, -(-args.pairs // 4))
+    # prepare() writes nothing: --out is only a name the parser requires.
     plan = prepare(
-        parse_args(["--protocol", args.protocol, "--episodes", str(per_scenario), "--out", "/tmp/x"])
+        parse_args(["--protocol", args.protocol, "--episodes", str(per_scenario), "--out", "never-written"])
     )
     chunks = plan_chunks(plan.scenarios, plan.conditions, per_scenario, plan.arguments["seed"], 1)
     # Round-robin over the scenarios, one pair per chunk, as a protocol's workers meet them.
@@ -77,7 +79,7 @@ def main() -> None:
 
     # Warm-up, and the SUMO arguments and step counts of real episodes (for --mode sumo).
     captured: list[tuple[list[str], int]] = []
-    real_run = episode_module.SumoSession.run
+    real_run = SumoSession.run
     import libsumo
 
     real_step = libsumo.simulation.step
@@ -94,12 +96,12 @@ def main() -> None:
         captured.append((list(sumo_args), 0))
         return real_run(self, sumo_args)
 
-    episode_module.SumoSession.run = capture
+    SumoSession.run = capture
     libsumo.simulation.step = counting_step
     for group in by_scenario.values():
         batch_runner.run_chunk(plan.config, "warm", group[-1].tasks)
     captured[-1] = (captured[-1][0], steps[0])
-    episode_module.SumoSession.run = real_run
+    SumoSession.run = real_run
     libsumo.simulation.step = real_step
 
     if args.tracemalloc:

@@ -1,8 +1,8 @@
 """Where a protocol's time goes: its actual mix of scenarios and conditions, in one process, per episode
-and per step (issue 19, item 1 of session 4).
+and per step.
 
-    .venv/bin/python benchmarks/profile_protocol.py --protocol protocols/paper-v4.toml --episodes 10
-    .venv/bin/python benchmarks/profile_protocol.py ... --cprofile /tmp/prof.out   # and a cProfile dump
+    .venv/bin/python benchmarks/profile_protocol.py --protocol protocols/paper-v7.toml --episodes 10
+    .venv/bin/python benchmarks/profile_protocol.py ... --cprofile prof.out   # and a cProfile dump
 
 Runs the worker side of a batch (`batch.runner.run_chunk`, the protocol's scenarios, conditions and
 parameters) in this process, after one untimed pair per scenario (numba's kernels loaded). The phases
@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -26,10 +27,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pedsafe_sumo.batch import runner as batch_runner  # noqa: E402
-from pedsafe_sumo.batch.__main__ import parse_args, prepare  # noqa: E402
+from pedsafe_sumo.batch.__main__ import parse_args  # noqa: E402
 from pedsafe_sumo.batch.chunks import plan_chunks  # noqa: E402
+from pedsafe_sumo.batch.plan import prepare  # noqa: E402
 from pedsafe_sumo.io.episodes import to_table  # noqa: E402
 from pedsafe_sumo.sim import episode as episode_module  # noqa: E402
+from pedsafe_sumo.sim import outcome as outcome_module  # noqa: E402
+from pedsafe_sumo.sim import staging as staging_module  # noqa: E402
+from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
 
 TOTALS: dict[str, float] = defaultdict(float)
 CPU_TOTALS: dict[str, float] = defaultdict(float)
@@ -120,7 +125,7 @@ def report_sumo_calls(episodes: int, steps: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--protocol", default="protocols/paper-v4.toml")
+    parser.add_argument("--protocol", default="protocols/paper-v7.toml")
     parser.add_argument("--episodes", type=int, default=10, help="pairs per scenario")
     parser.add_argument("--cprofile", help="also profile with cProfile and write the stats here")
     parser.add_argument(
@@ -130,8 +135,9 @@ def main() -> None:
         "vehicletype), the wrapper's own cost subtracted: what SUMO costs outside its step and load",
     )
     args = parser.parse_args()
+    # prepare() writes nothing: --out is only a name the parser requires.
     plan = prepare(
-        parse_args(["--protocol", args.protocol, "--episodes", str(args.episodes), "--out", "/tmp/x"])
+        parse_args(["--protocol", args.protocol, "--episodes", str(args.episodes), "--out", "never-written"])
     )
     chunks = plan_chunks(
         plan.scenarios, plan.conditions, args.episodes, plan.arguments["seed"], args.episodes
@@ -145,11 +151,11 @@ def main() -> None:
 
     runner_cls = episode_module.EpisodeRunner
     timed(runner_cls, "draw_setup", "draw world (draw_setup)")
-    timed(runner_cls, "_background", "  of it: background traffic")
-    timed(episode_module.SumoSession, "run", "SUMO load")
-    timed(runner_cls, "_populate", "staging: add vehicles, person")
-    timed(episode_module, "start_signals", "staging: signals")
-    timed(episode_module, "episode_indexes", "indexes at the end")
+    timed(episode_module, "draw_background", "  of it: background traffic")
+    timed(SumoSession, "run", "SUMO load")
+    timed(staging_module, "populate", "staging: add vehicles, person")
+    timed(staging_module, "start_signals", "staging: signals")
+    timed(outcome_module, "episode_indexes", "indexes at the end")
     timed(episode_module.pd, "DataFrame", "log DataFrame")
     timed(libsumo.simulation, "step", "simulation.step (all)")
     timed(runner_cls, "run", "episode (run)")
@@ -165,7 +171,7 @@ def main() -> None:
     runner_cls.run = run_keeping_timings
     timed(episode_module, "perceive", "perceive")
     timed(episode_module, "ego_in_sight", "pedestrian sight rays")
-    timed(episode_module, "_move_pedestrian", "person.moveToXY")
+    timed(episode_module, "move_pedestrian", "person.moveToXY")
 
     if args.sumo_calls:
         wrap_sumo_calls(libsumo)
@@ -188,7 +194,8 @@ def main() -> None:
     steps = CALLS["simulation.step (all)"]
     t = time.perf_counter()
     table = to_table(rows)
-    table.to_parquet("/tmp/profile_protocol_rows.parquet")
+    with tempfile.TemporaryDirectory() as folder:
+        table.to_parquet(Path(folder) / "rows.parquet")
     write_s = time.perf_counter() - t
     print(
         f"{episodes} episodes, {steps} SUMO steps ({steps / episodes:.0f} per episode), "

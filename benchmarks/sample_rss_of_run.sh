@@ -2,7 +2,7 @@
 # Samples the RSS of a batch that is already running (bench_rss.py starts its own batch; this one
 # attaches to a long run, e.g. a whole protocol): every 20 s (SAMPLE_EVERY_S), each worker of the batch
 # whose command line contains PATTERN, with the episodes done read from the batch's progress bar in LOG.
-#   benchmarks/sample_rss_of_run.sh PATTERN LOG OUT.csv     (e.g. paper-v5.toml run.log rss.csv)
+#   benchmarks/sample_rss_of_run.sh PATTERN LOG OUT.csv     (e.g. paper-v7.toml run.log rss.csv)
 set -euo pipefail
 pattern=${1:?PATTERN (a string of the batch command line)} log=${2:?LOG (the batch stderr)} out=${3:?OUT.csv}
 echo "utc,pid,rss_kib,episodes_done" > "$out"

@@ -1,13 +1,14 @@
 """A user AD stack: the reference pedestrian braking, with object permanence. A pedestrian it stops
 perceiving stays in its world for `coast_s` (2 s), moved on at the velocity last tracked.
 
-Why (EXPERIMENTS.md, "Importance sampling, session 14", part 2): the reference stack forgets a pedestrian
-as soon as no detection comes. After `clear_hold_s` (0.5 s) without one it drives back to its cruise speed,
-and when the pedestrian is seen again its reaction time starts over. Under V2I the roadside camera sees the
-pedestrian from far off but loses them behind the queued vehicles. The reference stack then first brakes
-gently, forgets, speeds up again, and meets the pedestrian late. On the zhixin junction, holding a lost threat
-for 2 s removes all 46 of V2I's jaywalking collisions in 10,000 pairs; this stack removes 24 of 26 in 5,000
-there and 8 of 11 on Xueqing, and adds at most one.
+Why (research/EXPERIMENTS.md, "zhixin's V2I collisions are the reference stack forgetting the
+pedestrian"): the reference stack forgets a pedestrian as soon as no detection comes. After `clear_hold_s`
+(0.5 s) without one it drives back to its cruise speed, and when the pedestrian is seen again its reaction
+time starts over. Under V2I the roadside camera sees the pedestrian from far off but loses them behind the
+queued vehicles. The reference stack then first brakes gently, forgets, speeds up again, and meets the
+pedestrian late. On the zhixin junction, holding a lost threat for 2 s removes all 46 of V2I's jaywalking
+collisions in 10,000 pairs; this stack removes 24 of 26 in 5,000 there and 8 of 11 on Xueqing, and adds at
+most one.
 
     python -m pedsafe_sumo.batch --scenario jaywalking --condition v2i \
         --algorithm examples.tracking_stack:TrackingStack
@@ -22,8 +23,8 @@ from pedsafe_sumo.control.agent import Command, Observation, PerceivedPedestrian
 from pedsafe_sumo.control.reference import ReferenceStack, TrackedPedestrian, Tracker
 
 #: How long a pedestrian no longer perceived is kept, moved on at constant velocity [s]. 2 s: about the
-#: longest the roadside camera loses a jaywalker behind the queue on zhixin (median 0.9 s, 90% 1.7 s). It
-#: was chosen before any run of this stack.
+#: longest the roadside camera loses a jaywalker behind the queue on zhixin (median 0.9 s, 90% 1.7 s),
+#: chosen before any run of this stack.
 COAST_S = 2.0
 #: The source given to a pedestrian kept from memory (the reference stack does not read it).
 COASTED_SOURCE = "track"

@@ -274,7 +274,7 @@ def runs_by_approach(
         return [(approach, load_run(path_a, approach=approach), load_run(path_b, approach=approach))]
     arms_a, arms_b = load_run_per_approach(path_a), load_run_per_approach(path_b)
     if len(arms_a) == 1 and len(arms_b) == 1:
-        # One arm each (or runs from before --approach): compared as they are, as before.
+        # One arm each (or runs without an approach column): compared as they are, arm against arm.
         (arm, run_a), (_, run_b) = next(iter(arms_a.items())), next(iter(arms_b.items()))
         return [(arm, run_a, run_b)]
     if set(arms_a) != set(arms_b):

@@ -5,7 +5,7 @@
     python -m pedsafe_sumo.episode --scenario crossing --set conflict_offset_max_s=0 \
         --set perception.v2i.latency_s=0.3
 
-`--set key=value` sets a scenario field (see pedsafe_sumo/scenarios/registry.py) or, with a dotted
+`--set key=value` sets a scenario field (see pedsafe_sumo/scenarios/specs.py) or, with a dotted
 key, a value of the parameter file (pedsafe_sumo/params/defaults.toml). Bad input ends in one line
 on stderr and exit code 2.
 """
@@ -18,22 +18,20 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
+from pedsafe_sumo.control.stack_calls import StackError
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
-from pedsafe_sumo.network.hosting import check_hosting
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
+from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.hosting import check_hosting, site_hosting
 from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.connection import SimulatorError
-from pedsafe_sumo.sim.episode import (
-    CONDITIONS,
-    DEFAULT_ALGORITHM,
-    EpisodeResult,
-    EpisodeRunner,
-    conflict_step,
-)
+from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeRunner
+from pedsafe_sumo.sim.outcome import EpisodeResult, conflict_step
 
 SENSOR_NAMES = {
     "onboard_camera": "onboard camera",
@@ -162,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         if any(c not in CONDITIONS for c in conditions):
             raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
         site = resolve_site(args.site)
+        if args.gui:  # sumo-gui loads the site's additionals and view settings (docs/trust.md)
+            check_gui_site(site, site.file("view.xml"))
         # --approach is the scenario field `approach` (as in batch).
         set_pairs = [*(args.set or []), *([f"approach={args.approach}"] if args.approach else [])]
         specs, params = configure([args.scenario], args.params, set_pairs)
@@ -169,8 +169,6 @@ def main(argv: list[str] | None = None) -> int:
         check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
         spec = specs[args.scenario]
         if args.approach:  # can it be staged there at all (also without V2I)?
-            from pedsafe_sumo.network.hosting import site_hosting
-
             problem = site_hosting(site, specs, params)[args.scenario] or ""
             if problem.startswith("cannot be staged"):
                 raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")
@@ -201,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  per-step log: {path}")
             if args.case_dir:
                 print(f"  case: {write_case(args.case_dir, result)}")
-    except (SimulatorError, AgentTimeoutError) as exc:
+    except (SimulatorError, AgentTimeoutError, StackError) as exc:  # the stack's fault, in one line
         print(f"error: {exc}", file=sys.stderr)
         return 1
     finally:

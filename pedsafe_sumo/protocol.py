@@ -1,16 +1,16 @@
-"""Protocols: every value of a study fixed in one dated file before it runs (issue 13 item 4).
+"""Protocols: every value of a study fixed in one dated file before it runs.
 
     python -m pedsafe_sumo.batch --protocol protocols/paper-v7.toml --out DIR [--episodes N] [--workers K]
     python -m pedsafe_sumo.protocol write paper-v8 --date 2026-12-01 --out protocols/paper-v8.toml
 
 A protocol file (TOML) holds:
 - [protocol]: name, date, description, scenarios (list), conditions, episodes, seed, site, algorithm;
-- [scenarios.<name>]: every field of each scenario's spec (scenarios/registry.py);
+- [scenarios.<name>]: every field of each scenario's spec (scenarios/specs.py);
 - [parameters.<section>]: every value of the parameter file (params/defaults.toml).
 Above each value a comment gives its source or, for what the paper does not report, the reason it was
-chosen (`write` copies them from the comments of defaults.toml and of the registry's fields). A
+chosen (`write` copies them from the comments of defaults.toml and of the spec's fields). A
 protocol that leaves out a scenario field or a parameter is refused: nothing falls back silently to
-defaults that may since have changed. The rule (docs/protocols.md): a change after seeing results is a
+defaults that may change later. The rule (docs/protocols.md): a change after seeing results is a
 new dated file, never an edit; run.json records the file and its SHA-256.
 """
 
@@ -30,12 +30,9 @@ from typing import Any
 import tomllib
 
 from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, overlay, validate
-from pedsafe_sumo.scenarios.registry import (
-    SCENARIOS,
-    ScenarioError,
-    ScenarioSpec,
-    get_scenario,
-)
+from pedsafe_sumo.scenarios import specs
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import SCENARIOS, ScenarioSpec, get_scenario
 from pedsafe_sumo.settings import UsageError
 
 #: The keys of a protocol's [protocol] table.
@@ -216,7 +213,7 @@ def parameter_reasons(defaults_text: str) -> dict[str, str]:
 
 
 def field_reasons(source: str) -> dict[str, str]:
-    """ScenarioSpec field -> its `#:` comment in scenarios/registry.py."""
+    """ScenarioSpec field -> its `#:` comment in scenarios/specs.py."""
     reasons: dict[str, str] = {}
     body = source.split("class ScenarioSpec", 1)[1].split("\n    @property", 1)[0]
     block: list[str] = []
@@ -282,12 +279,10 @@ def _comment(text: str, width: int = 108) -> list[str]:
 def protocol_text(header: dict[str, Any]) -> str:
     """A complete protocol: the header given, every scenario field and parameter as they stand now,
     each with its source or reason."""
-    from pedsafe_sumo.scenarios import registry
-
-    registry_source = Path(registry.__file__).read_text(encoding="utf-8")
+    specs_source = Path(specs.__file__).read_text(encoding="utf-8")
     p_reasons = parameter_reasons(DEFAULTS_PATH.read_text(encoding="utf-8"))
-    f_reasons = field_reasons(registry_source)
-    v_reasons = scenario_value_reasons(registry_source)
+    f_reasons = field_reasons(specs_source)
+    v_reasons = scenario_value_reasons(specs_source)
     out = [
         f"# Protocol {header['name']}, fixed {header['date']} before any of its runs. Never edit it after",
         "# a run: a change is a new dated file (docs/protocols.md). Above each value: its source, or for",
@@ -305,9 +300,9 @@ def protocol_text(header: dict[str, Any]) -> str:
             reason = f_reasons.get(key, "")
             own = v_reasons.get((name, key), "")
             if default is dataclasses.MISSING:
-                reason = f"{reason} This scenario's value (scenarios/registry.py). {own}"
+                reason = f"{reason} This scenario's value (scenarios/specs.py). {own}"
             elif value != default:
-                reason = f"{reason} This scenario's value (scenarios/registry.py; default {default!r}). {own}"
+                reason = f"{reason} This scenario's value (scenarios/specs.py; default {default!r}). {own}"
             out += [*_comment(reason or "(no reason recorded)"), f"{key} = {_toml_value(value)}"]
 
     def tables(tree: dict[str, Any], prefix: str) -> None:

@@ -1,6 +1,6 @@
 """Settings layered defaults -> scenario -> parameter file -> command line, shared by the CLIs.
 
-`--set key=value` sets a scenario field (pedsafe_sumo/scenarios/registry.py) or, with a dotted key, a
+`--set key=value` sets a scenario field (pedsafe_sumo/scenarios/specs.py) or, with a dotted key, a
 value of the parameter file (pedsafe_sumo/params/defaults.toml). Unknown keys and out-of-range values
 raise, naming the key.
 """
@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.params import load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import ScenarioSpec, get_scenario
+from pedsafe_sumo.perception.world import load_roadside_units
+from pedsafe_sumo.scenarios.specs import ScenarioSpec, get_scenario
 
 
 class UsageError(ValueError):
@@ -58,8 +59,6 @@ def configure(
 
 def check_roadside_units(specs: dict[str, ScenarioSpec], site) -> None:
     """Every roadside pole a scenario names must exist at the site (else one clear line, before any work)."""
-    from pedsafe_sumo.perception.world import load_roadside_units
-
     # The poles the engine loads: the roadside_camera POIs of the site's rsu.add.xml (heights and
     # pitches do not matter here).
     try:
@@ -68,7 +67,7 @@ def check_roadside_units(specs: dict[str, ScenarioSpec], site) -> None:
         raise UsageError(str(exc)) from None
     for spec in specs.values():
         # rsu_camera_K@exit is a turn's pole on the arm it leaves by: which one depends on the approach,
-        # and the hosting check (network/hosting.py) says when a site has none there.
+        # and the hosting check (scenarios/hosting.py) says when a site has none there.
         unknown = [u for u in spec.roadside_unit_ids if u not in known and not u.endswith("@exit")]
         if unknown:
             raise UsageError(

@@ -14,7 +14,7 @@ OUT/findings.csv and findings.png say which of the paper's qualitative findings 
 combination (pedsafe_sumo/report/findings.py).
 Every --set / --vary key is validated for every combination before anything runs.
 
-`--preset NAME` is one of the sensitivity sweeps of issue 13 item 5 (PRESETS: the parameters the paper
+`--preset NAME` is one of the sensitivity sweeps (PRESETS: the parameters the paper
 does not report that move the indexes most, each over a range around its default), in place of --vary.
 `--combine DIR ... --out OUT` puts the findings of several one-key sweeps side by side:
 OUT/findings_across_sweeps.csv and .png (one panel per sweep).
@@ -29,14 +29,23 @@ from pathlib import Path
 
 import pandas as pd
 
+from pedsafe_sumo.batch.__main__ import main as batch_main
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
-from pedsafe_sumo.scenarios.registry import SCENARIOS, ScenarioError
+from pedsafe_sumo.report.findings import (
+    findings_across_sweeps,
+    findings_across_sweeps_figure,
+    findings_figure,
+    findings_table,
+)
+from pedsafe_sumo.safety.stats import table_one
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
 
-#: The sensitivity sweeps of issue 13 item 5, one key each, over a range that holds its default (the
+#: The sensitivity sweeps, one key each, over a range that holds its default (the
 #: values of defaults.toml and the scenario registry: reaction 0.4 s, deceleration 6 m/s2, blend gap 0,
 #: occluder SUV, queue of 3, V2I latency 0.1 s, gap acceptance t_s 3 s). Ranges are assumptions: a
 #: slower or gentler AD stack, the classes of the fleet, queues from one vehicle to twice the default,
@@ -86,7 +95,9 @@ def parse_args(argv):
     parser.add_argument(
         "--vary", action="append", default=[], metavar="KEY=V1,V2", help="a setting and its values"
     )
-    parser.add_argument("--preset", help=f"one of the sweeps of issue 13 item 5: {', '.join(PRESETS)}")
+    parser.add_argument(
+        "--preset", help=f"one of the sensitivity sweeps, each varying one key: {', '.join(PRESETS)}"
+    )
     parser.add_argument(
         "--combine",
         nargs="+",
@@ -136,8 +147,6 @@ def batch_argv(args, combo: dict[str, str], run_dir: Path) -> list[str]:
 
 
 def collect(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
-    from pedsafe_sumo.safety.stats import table_one
-
     frames = []
     for combo in combos:
         table = table_one(pd.read_parquet(out / label(combo) / "episodes.parquet", partitioning=None))
@@ -150,10 +159,10 @@ def collect(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
 def plot(table: pd.DataFrame, keys: list[str], path: Path) -> None:
     """Collision and conflict rate (rows) per scenario (columns) against the first --vary key; colour
     = condition, line style = the values of the other --vary keys."""
-    import matplotlib
+    import matplotlib  # here, not at the top: Agg is a process-wide choice, made only when a figure is drawn
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after matplotlib.use
 
     first, others = keys[0], keys[1:]
     scenarios = list(dict.fromkeys(table["scenario"]))
@@ -191,8 +200,6 @@ def plot(table: pd.DataFrame, keys: list[str], path: Path) -> None:
 
 def combine(dirs: list[Path], out: Path) -> int:
     """--combine: the findings of one-key sweeps side by side (OUT/findings_across_sweeps.csv, .png)."""
-    from pedsafe_sumo.report.findings import findings_across_sweeps, findings_across_sweeps_figure
-
     missing = [str(d) for d in dirs if not (d / "findings.csv").is_file()]
     if missing:
         print(f"error: no findings.csv in {missing[0]} (run the sweep first)", file=sys.stderr)
@@ -220,8 +227,6 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from pedsafe_sumo.batch.__main__ import main as batch_main
-
     args.out.mkdir(parents=True, exist_ok=True)
     for number, combo in enumerate(combos, 1):
         run_dir = args.out / label(combo)
@@ -251,8 +256,6 @@ def main(argv: list[str] | None = None) -> int:
 def write_findings(out: Path, combos: list[dict[str, str]]) -> pd.DataFrame:
     """OUT/findings.csv and findings.png: the paper's qualitative findings in every combination
     (pedsafe_sumo/report/findings.py)."""
-    from pedsafe_sumo.report.findings import findings_figure, findings_table
-
     table = findings_table({label(combo): out / label(combo) for combo in combos})
     table.to_csv(out / "findings.csv", index=False)
     findings_figure(table, out / "findings.png", title="the paper's qualitative findings, per combination")

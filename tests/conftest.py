@@ -1,6 +1,13 @@
-"""How the suite runs on several cores (`make test`: pytest-xdist, ``-n auto --dist loadgroup``).
+"""Fixtures of every test, and how the suite runs on several cores.
 
-Each test goes to the worker of its group (the ``xdist_group`` mark set here):
+The repository root named on PYTHONPATH: the test stacks (tests/*/plugin_agents.py) are imported by their
+dotted name. A replay or a resumed batch imports a stack that run.json names only from the import path
+without the current directory (docs/trust.md); naming the repository root on PYTHONPATH makes the test
+stacks importable as a user's own stacks are, for the commands the tests start and for those they call
+in-process.
+
+Several cores (`make test`: pytest-xdist, ``-n auto --dist loadgroup``): each test goes to the worker of
+its group (the ``xdist_group`` mark set here):
 
 - ``display``: the tests that start sumo-gui under ``xvfb-run -a``, with the rest of their files and every
   test of the logged run they replay (fixture ``replay_run``). ``xvfb-run -a`` takes the first display
@@ -19,8 +26,16 @@ only read the cache.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
+
+from pedsafe_sumo import REPO_ROOT
+
+_entries = [e for e in os.environ.get("PYTHONPATH", "").split(os.pathsep) if e]
+if str(REPO_ROOT) not in _entries:
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(REPO_ROOT), *_entries])
 
 #: Session fixtures whose tests share one worker (see the module docstring).
 SHARED_FIXTURE_GROUPS = ("small_run", "zhixin")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pedsafe_sumo.network.build import main  # noqa: E402
+from pedsafe_sumo.site.build_command import main  # noqa: E402
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -3,9 +3,9 @@ every step of steplogs/, must be bit-identical (NaN equal to NaN, same dtypes).
 
     .venv/bin/python tools/compare_runs_exact.py RUN_A RUN_B
 
-For optimisations that must not change results (issue 19): run the same batch on the code before and
-after and compare. episodes.parquet has no wall-clock column; run.json (timings, paths) is not compared.
-Prints one line per difference and exits 1 if there is any, 0 when identical, 2 on bad input.
+For changes that must not change results (optimisations, restructuring): run the same batch on the code
+before and after and compare. episodes.parquet has no wall-clock column; run.json (timings, paths) is not
+compared. Prints one line per difference and exits 1 if there is any, 0 when identical, 2 on bad input.
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site  # noqa: E402
+from pedsafe_sumo.network.sumo_inputs import config_inputs  # noqa: E402
 from pedsafe_sumo.sumo_binaries import sumo_binary  # noqa: E402
 
 #: Attempts at a snapshot of the asked size. Under load, sumo-gui can take its snapshot before the
@@ -61,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         site = resolve_site(args.site)
+        config_inputs(site.file("sumocfg"))  # sumo-gui -c reads it: no output it names (docs/trust.md)
     except UnknownSiteError as exc:
         parser.exit(2, f"screenshot_site: error: {exc}\n")
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))

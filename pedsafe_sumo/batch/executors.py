@@ -17,7 +17,7 @@ process) must neither stop the batch nor lose or repeat an episode:
   so becoming error rows.
 
 Worker memory. libsumo's `load` (one per episode) keeps about 0.9 KiB each time it is called (SUMO's, not
-ours: a loop of `load` alone shows it; BENCHMARKS.md, issue 19 session 6), so a worker's RSS creeps by about
+ours: a loop of `load` alone shows it; BENCHMARKS.md), so a worker's RSS creeps by about
 1 MiB per 1,000 episodes. The process pool therefore replaces its worker processes after every
 `recycle_chunks` chunks per worker (--recycle-chunks): the chunks go to the pool in generations of
 workers x recycle_chunks, each generation on a fresh pool. Rows do not change (an episode's rows depend on
@@ -92,6 +92,7 @@ def merge_outputs(outputs: list[ChunkOutput]) -> ChunkOutput:
         ",".join(sorted({o.worker for o in outputs if o.worker})),
         sum(o.compute_s for o in outputs),
         step_logs.merge_bytes([o.step_logs for o in outputs]),
+        [trace for o in outputs for trace in o.tracebacks],
     )
 
 
@@ -285,7 +286,7 @@ class DaskBackend:
 
     def start(self) -> None:
         """Connect (or start local:N); UsageError with one line when Dask is missing or unreachable."""
-        try:
+        try:  # Dask is an optional dependency (pip install 'pedsafe_sumo[cluster]'): imported only here
             import dask
             import distributed
         except ImportError:
@@ -335,7 +336,7 @@ class DaskBackend:
             self._cluster = None
 
     def run(self, config: WorkerConfig, chunks: list[Chunk], on_done: OnChunkDone) -> None:
-        from distributed import KilledWorker, as_completed
+        from distributed import KilledWorker, as_completed  # optional dependency, present once start() ran
 
         client = self._client
         # Keys unique to this session: a resumed batch on a long-lived cluster never meets its past tasks.

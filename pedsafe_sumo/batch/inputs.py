@@ -1,7 +1,7 @@
 """Checks of the files a batch reads, made before anything is written.
 
 A batch reads, besides its parameter file (pedsafe_sumo.params checks that one), the site's files
-listed in pedsafe_sumo.sim.episode.SITE_FILES_READ: the network, the buildings, the roadside unit and
+listed in pedsafe_sumo.sim.staging.SITE_FILES_READ: the network, the buildings, the roadside unit and
 the site facts. Each must exist and parse, and the episode loop must be able to derive its world from
 them; otherwise the batch ends in one line naming the file, before its run directory exists.
 """
@@ -13,6 +13,7 @@ import xml.etree.ElementTree as ET
 from typing import Any
 
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.sim.staging import SITE_FILES_READ, load_site_data
 
 
 class InputFileError(ValueError):
@@ -26,8 +27,6 @@ def _one_line(exc: BaseException) -> str:
 
 def check_site(site: Site, params: dict[str, Any]) -> None:
     """Raise InputFileError unless every site file exists, parses, and yields the episode's world."""
-    from pedsafe_sumo.sim.episode import SITE_FILES_READ, load_site_data
-
     for suffix in SITE_FILES_READ:
         path = site.file(suffix)
         if not path.is_file():

@@ -17,9 +17,11 @@ import pandas as pd
 from pedsafe_sumo.batch.chunks import Chunk
 from pedsafe_sumo.batch.executors import BatchError
 from pedsafe_sumo.batch.runner import ChunkOutput
+from pedsafe_sumo.batch.trust import check_run_entries
 from pedsafe_sumo.io import step_logs
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
+from pedsafe_sumo.io.error_cases import write_error_case
 from pedsafe_sumo.io.run_store import (
     CASES_DIR,
     EPISODES_FILE,
@@ -99,6 +101,7 @@ class BatchRunDirectory:
     def reopen(self) -> list[str]:
         """A stopped run: lock it, keep the recorded chunks whose part files are intact, and delete what
         a killed driver left behind (unrecorded parts, temporary files). Returns one note per change."""
+        check_run_entries(self.path)  # no link in the directory leads a write or a deletion out of it
         self._lock()
         try:
             self.manifest = Manifest.load(self.path / MANIFEST_FILE)
@@ -147,6 +150,8 @@ class BatchRunDirectory:
             raise BatchError(f"chunk {chunk.key} came back with other episodes than it holds (a bug)")
         for result in output.cases:
             write_case(self.cases_dir, result)
+        for stem, text in output.tracebacks:  # episodes that ended in an error or a timeout
+            write_error_case(self.cases_dir, stem, text)
         steplog_file, steplog_sha256 = "", ""
         if self.keep_logs == step_logs.KEEP_ALL:
             # A chunk whose every pair killed its worker comes back without logs: an empty file says so.

@@ -7,9 +7,11 @@ every episode (`load`), and every random draw comes from the episode's seed, so 
 depend on the worker, on the episodes it ran before, or on the order: tests/batch checks 1 against 2
 workers, a resumed run against an uninterrupted one, and Dask against the process pool.
 
-A failing episode (SUMO refusing it, an exception in the AD stack under test) becomes a row with status
-"error" and its message, an AD stack that exceeds the per-step time limit (--agent-timeout) a row with
-status "timeout"; the runner is rebuilt (SUMO may be in any state) and the chunk goes on. Rows
+A failing episode (SUMO refusing it, an exception, sys.exit or an invalid command in the AD stack under
+test: pedsafe_sumo.control.stack_calls) becomes a row with status "error" and its message, its traceback
+sent along for the case logs; an AD stack that exceeds the time limit of setup or run_step
+(--agent-timeout) a row with status "timeout". The runner is rebuilt (SUMO may be in any state) and the
+chunk goes on; the episode is not run again. Rows
 are returned to the driver, which alone writes the run directory: workers on other machines need no
 shared file system.
 """
@@ -29,13 +31,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import sumolib
 
+from pedsafe_sumo import __version__
 from pedsafe_sumo.batch.chunks import Task
+from pedsafe_sumo.control.agent import load_agent_class
+from pedsafe_sumo.control.stack_calls import episode_error_message, stack_failure, stack_label
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, TIMEOUT_STATUS, AgentTimeoutError
 from pedsafe_sumo.io import step_logs
+from pedsafe_sumo.io.cases import case_stem
 from pedsafe_sumo.io.episodes import EPISODE_COLUMNS
 from pedsafe_sumo.io.step_logs import KEEP_ALL, KEEP_EVENTS
+from pedsafe_sumo.network.sites import get_site, resolve_site
+from pedsafe_sumo.sampling.joint import proposal_of_json
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+from pedsafe_sumo.scenarios.specs import get_scenario
+from pedsafe_sumo.sim.episode import EpisodeRunner
+from pedsafe_sumo.sim.staging import SITE_FILES_READ
 
 ERROR_STATUS = "error"
 #: How often a pool worker checks that its driver is still alive [s].
@@ -97,6 +109,8 @@ class ChunkOutput:
     #: With --keep-logs all: every step log of the chunk's episodes that ran, as the bytes of one
     #: Parquet file (pedsafe_sumo.io.step_logs); b"" otherwise.
     step_logs: bytes = b""
+    #: (case stem, traceback) of every episode of the chunk that ended in an error or a timeout.
+    tracebacks: list[tuple[str, str]] = field(default_factory=list)
 
 
 # One runner per worker process. The lock serialises chunks in a process: a Dask worker started with
@@ -144,9 +158,6 @@ def _note_started(chunk_key: str) -> None:
 
 def site_file_digests(site_name: str) -> dict[str, str]:
     """SHA-256 of every site file an episode reads, by file name (`site_name`: a site name or folder)."""
-    from pedsafe_sumo.network.sites import resolve_site
-    from pedsafe_sumo.sim.episode import SITE_FILES_READ
-
     site = resolve_site(site_name, verify=False)
     digests = {}
     for suffix in SITE_FILES_READ:
@@ -156,10 +167,6 @@ def site_file_digests(site_name: str) -> dict[str, str]:
 
 
 def worker_versions() -> dict[str, str]:
-    import sumolib
-
-    from pedsafe_sumo import __version__
-
     return {"pedsafe_sumo": __version__, "sumo": sumolib.version.gitDescribe()}
 
 
@@ -190,10 +197,6 @@ def _runner_for(config: WorkerConfig) -> Any:
     fingerprint = config.fingerprint
     if _RUNNER is not None and _RUNNER_FINGERPRINT == fingerprint:
         return _RUNNER
-    from pedsafe_sumo.control.agent import load_agent_class
-    from pedsafe_sumo.network.sites import get_site
-    from pedsafe_sumo.sim.episode import EpisodeRunner
-
     if _RUNNER is not None:
         _close_runner()
     check_environment(config)
@@ -249,8 +252,6 @@ def sampler_proposal(text: str) -> Any:
     if not text:
         return None
     if text not in _PROPOSALS:
-        from pedsafe_sumo.sampling.joint import proposal_of_json
-
         _PROPOSALS[text] = proposal_of_json(text)
     return _PROPOSALS[text]
 
@@ -262,8 +263,6 @@ def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     """The scenario's spec with the run's overrides: `field` keys (--set) for every scenario, then
     `<scenario>:<field>` keys (a protocol's per-scenario values) for this one. `name` may be
     `<scenario>@<arm>` (batch --approach): that scenario on the approach from that arm."""
-    from pedsafe_sumo.scenarios.registry import get_scenario
-
     name, _, arm = name.partition("@")
     common = {key: value for key, value in overrides.items() if ":" not in key}
     own = {key.split(":", 1)[1]: value for key, value in overrides.items() if key.startswith(f"{name}:")}
@@ -271,9 +270,12 @@ def scenario_spec(name: str, overrides: dict[str, Any]) -> Any:
     return spec.with_overrides({"approach": arm}) if arm else spec
 
 
-def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], list[Any], list[Any]]:
+def _run_pair(
+    config: WorkerConfig, task: Task, tracebacks: list[tuple[str, str]] | None = None
+) -> tuple[list[dict[str, Any]], list[Any], list[Any]]:
     """Both conditions of one paired episode: its rows, both results when either had an event (the case
-    logs), and every result that ran (for --keep-logs all)."""
+    logs), and every result that ran (for --keep-logs all). The traceback of an episode that failed is
+    appended to `tracebacks` as (case stem, text)."""
     runner = _runner_for(config)
     rows, results = [], []
     try:
@@ -293,9 +295,16 @@ def _run_pair(config: WorkerConfig, task: Task) -> tuple[list[dict[str, Any]], l
     for condition in task.conditions:
         try:
             result = runner.run(spec, condition, task.seed, setup=setup)
-        except Exception as exc:
-            status = TIMEOUT_STATUS if isinstance(exc, AgentTimeoutError) else ERROR_STATUS
-            rows.append({**error_row(task, condition, f"{type(exc).__name__}: {exc}", status), **sampled})
+        except BaseException as exc:  # sys.exit in the AD stack is this episode's error, not the worker's end
+            failure = stack_failure(exc, stack_label(runner.agent_class))
+            if failure is None:  # KeyboardInterrupt: the batch is being stopped
+                raise
+            status = TIMEOUT_STATUS if isinstance(failure, AgentTimeoutError) else ERROR_STATUS
+            message = episode_error_message(failure)
+            rows.append({**error_row(task, condition, message, status), **sampled})
+            if tracebacks is not None:
+                stem = case_stem(setup.scenario, condition, setup.seed, setup.approach)
+                tracebacks.append((stem, f"{message}\n\n{traceback.format_exc()}"))
             # After a failed episode SUMO may be in any state: a fresh instance for the next one.
             _close_runner()
             runner = _runner_for(config)
@@ -314,10 +323,11 @@ def run_chunk(config: WorkerConfig, chunk_key: str, tasks: tuple[Task, ...]) -> 
         rows: list[dict[str, Any]] = []
         cases: list[Any] = []
         kept: list[tuple[int, Any]] = []
+        tracebacks: list[tuple[str, str]] = []
         for task in tasks:
-            pair_rows, pair_cases, ran = _run_pair(config, task)
+            pair_rows, pair_cases, ran = _run_pair(config, task, tracebacks)
             rows += pair_rows
             cases += pair_cases
             kept += [(task.episode, result) for result in ran]
         logs = step_logs.to_bytes(step_logs.chunk_step_log(kept)) if config.keep_logs == KEEP_ALL else b""
-        return ChunkOutput(rows, cases, worker_label(), time.perf_counter() - started, logs)
+        return ChunkOutput(rows, cases, worker_label(), time.perf_counter() - started, logs, tracebacks)

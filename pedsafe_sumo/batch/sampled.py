@@ -16,20 +16,14 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.batch.chunks import Chunk, Task, episode_seed
+from pedsafe_sumo.batch.runner import scenario_spec
 from pedsafe_sumo.io.run_store import read_parts
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.sampling.draws import product_from_json, product_to_json
 from pedsafe_sumo.sampling.importance import MIN_SPREAD_OF_NOMINAL
-from pedsafe_sumo.sampling.joint import (
-    GUARD_MIN_COLLISIONS,
-    NORM_DRAWS,
-    V2I_ONLY_MIN_COLLISIONS,
-    VISIBLE_M,
-    Kinematics,
-    joint_update,
-    low_contrast_table,
-    v2i_only_count,
-)
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, NORM_DRAWS, VISIBLE_M, Kinematics
 from pedsafe_sumo.sampling.joint import RIDGE as JOINT_RIDGE
+from pedsafe_sumo.sampling.joint_fit import joint_update
 from pedsafe_sumo.sampling.pooling import POOL_FROM_KEY, pooled_from_stage
 from pedsafe_sumo.sampling.stages import (
     ADAPT_CONDITION,
@@ -44,6 +38,8 @@ from pedsafe_sumo.sampling.stages import (
     cross_entropy_update,
     stage_layout,
 )
+from pedsafe_sumo.sampling.v2i_factor import V2I_ONLY_MIN_COLLISIONS, low_contrast_table, v2i_only_count
+from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
 
 #: --is-family: the cross-entropy product of one family per input, or the joint sqrt(pi_hat) proposal.
 FAMILY_PRODUCT = "product"
@@ -55,10 +51,10 @@ JOINT_FEATURES = (
     f"{GUARD_MIN_COLLISIONS} collisions"
 )
 FAMILIES = (FAMILY_PRODUCT, FAMILY_JOINT)
-#: --is-v2i-factor: whether the joint proposal also aims at V2I's collisions (sampling/joint.py, "The V2I
-#: factor"), and run.json's record of it (the key only when on, so that runs before it keep their identity).
+#: --is-v2i-factor: whether the joint proposal also aims at V2I's collisions (sampling/v2i_factor.py), and
+#: run.json's record of it (the key only when on, so that the identity of a run without it has no such key).
 V2I_FACTOR_CONTRAST = "contrast"
-#: since session 13: the factor with its V2I-only term (sampling/joint.py, "The V2I-only term").
+#: The factor with its V2I-only term (sampling/v2i_factor.py, "The V2I-only term").
 V2I_FACTOR_CONTRAST_V2I_ONLY = "contrast+v2i-only"
 V2I_FACTOR_NONE = "none"
 V2I_FACTORS = (V2I_FACTOR_CONTRAST_V2I_ONLY, V2I_FACTOR_CONTRAST, V2I_FACTOR_NONE)
@@ -90,7 +86,7 @@ class SamplerError(ValueError):
 
 
 def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = None) -> dict[str, Any] | None:
-    """What run.json records of the sampler (None under plain Monte Carlo, as in runs before it).
+    """What run.json records of the sampler (None under plain Monte Carlo).
 
     With `is_proposal` (batch --is-proposal RUN): the settings and every stage's proposal of that run
     (shared_proposal_of), so that this run draws the very episodes and weights it drew.
@@ -115,7 +111,7 @@ def sampler_identity(arguments: dict[str, Any], scenarios: list[str] | None = No
     if arguments.get("is_family", FAMILY_PRODUCT) != FAMILY_PRODUCT:
         # Only when not the product, so that product runs keep their identity.
         identity.update(family=arguments["is_family"], ridge=JOINT_RIDGE, norm_draws=NORM_DRAWS)
-        # Runs recorded before the kinematic features lack this key: their resume is refused (another fit).
+        # A run.json without this key fitted without the kinematic features: its resume is refused.
         identity[JOINT_FEATURES_KEY] = JOINT_FEATURES
         factor = arguments.get("is_v2i_factor", V2I_FACTOR_NONE)
         if factor in (V2I_FACTOR_CONTRAST, V2I_FACTOR_CONTRAST_V2I_ONLY):
@@ -201,9 +197,6 @@ def kinematics_of(config: Any, scenario: str) -> Kinematics:
     """The kinematic features' maps of `scenario` under the run's parameters (sampling/joint.py): its ego
     speed bounds, the age groups' walking-speed lognormals in the order the draws number them, and the
     [algorithm] reaction time and braking of the parameters."""
-    from pedsafe_sumo.batch.runner import scenario_spec
-    from pedsafe_sumo.demand.sampling import age_group_speed_distributions
-
     spec = scenario_spec(scenario, config.scenario_overrides)
     laws = list(age_group_speed_distributions(dict(config.params["pedestrians"])).values())
     algorithm = config.params["algorithm"]
@@ -220,8 +213,6 @@ def kinematics_of(config: Any, scenario: str) -> Kinematics:
 def low_contrast_of(config: Any) -> tuple[tuple[int, ...], ...]:
     """The V2I factor's table L (sampling/joint.py): the scenarios' clothing against their car colours at
     the roadside camera's delta E threshold of the run's parameters."""
-    from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
-
     threshold = float(config.params["perception"]["roadside_camera"]["delta_e_threshold"])
     return low_contrast_table(CLOTHING_COLOURS_RGB, CAR_COLOURS_RGB, threshold)
 
@@ -314,7 +305,8 @@ def run_sampled(
             ]
             rows = read_parts(run_dir.path, [run_dir.manifest.chunks[c.key] for c in previous])
             current = product_from_json(known[stage - 1]).families
-            # Runs recorded before the input screen proposed every input, with the spread floor of 0.2.
+            # A run.json without these keys proposed every input (no screen), with the spread floor of 0.2,
+            # and ranked by clearance.
             update = cross_entropy_update(
                 rows,
                 current,

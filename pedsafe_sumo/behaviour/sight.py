@@ -1,6 +1,6 @@
 """A pedestrian's line of sight to a vehicle, through the geometry the sensors see.
 
-The pedestrian reacts to the ego only when they can see it (issue 12): rays from their eyes to a few
+The pedestrian reacts to the ego only when they can see it: rays from their eyes to a few
 points of the ego are cast with the perception layer's ray casting (`perception.raycast.cast_rays`)
 through the same world snapshot as the sensors: buildings, tree trunks and crowns, hedges and every
 vehicle box. Pure geometry, no SUMO.
@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from pedsafe_sumo.perception.raycast import KIND_VEHICLE, cast_rays
+from pedsafe_sumo.perception.raycast import cast_rays
+from pedsafe_sumo.perception.surfaces import KIND_VEHICLE
 from pedsafe_sumo.perception.world import WorldSnapshot
 
 #: Points of the vehicle a pedestrian looks for: along its centreline at these fractions of its half

@@ -21,7 +21,9 @@ from pathlib import Path
 from pedsafe_sumo.conflicts.fcd import FcdError, read_fcd
 from pedsafe_sumo.conflicts.interactions import InteractionTracker
 from pedsafe_sumo.conflicts.output import TABLE_SUFFIXES, SsmWriter, TableWriter
+from pedsafe_sumo.conflicts.places import NetError, PlaceFinder
 from pedsafe_sumo.conflicts.sizes import SizeBook, TypesError
+from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params
 from pedsafe_sumo.settings import UsageError
 
@@ -65,8 +67,6 @@ def site_net(net: Path | None, site: str | None) -> Path | None:
         return net
     if net is not None:
         raise UsageError("give --net or --site, not both")
-    from pedsafe_sumo.network.sites import SiteError, resolve_site
-
     try:
         return resolve_site(site, verify=False).file("net.xml")
     except SiteError as exc:
@@ -96,8 +96,6 @@ def run(args: argparse.Namespace) -> dict[str, float]:
     sizes = SizeBook.from_params(section, args.types)
     place = None
     if args.net is not None:
-        from pedsafe_sumo.conflicts.places import NetError, PlaceFinder  # sumolib only when asked
-
         try:
             place = PlaceFinder(args.net)
         except NetError as exc:

@@ -22,6 +22,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
+from pedsafe_sumo.conflicts.__main__ import site_net  # noqa: E402
+from pedsafe_sumo.conflicts.places import NetError, PlaceFinder  # noqa: E402
+from pedsafe_sumo.settings import UsageError  # noqa: E402
+
 #: Size of a hexagonal cell across, m.
 CELL_M = 5.0
 
@@ -114,17 +118,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.out.suffix.lower() not in (".png", ".pdf", ".svg"):
             raise ValueError(f"--out must end in .png, .pdf or .svg, got {args.out}")
         table = read_table(args.table)
-        from pedsafe_sumo.conflicts.__main__ import site_net
-        from pedsafe_sumo.settings import UsageError
-
         try:
             args.net = site_net(args.net, args.site)
         except UsageError as exc:
             raise ValueError(str(exc)) from None
         if args.net is None:
             raise ValueError("give the network: --net NET.xml or --site NAME_OR_PATH")
-        from pedsafe_sumo.conflicts.places import NetError, PlaceFinder
-
         try:
             net = PlaceFinder(args.net).net
         except NetError as exc:

@@ -1,7 +1,7 @@
 """Upper bounds of the [conflicts] section of the parameter file (registered on import).
 
 The conflicts tool checks these values are positive numbers itself (pedsafe_sumo/conflicts/__main__.py);
-this validator adds the upper bound every parameter has (issue 19), so that no value set in a parameter
+this validator adds the upper bound every parameter has, so that no value set in a parameter
 file or with --set is accepted however far out of range."""
 
 from __future__ import annotations

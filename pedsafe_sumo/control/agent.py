@@ -172,6 +172,7 @@ class Observation:
 class Command:
     """The AD stack's output for one step: the speed it wants to have at the end of the step."""
 
+    #: A finite real number >= 0; anything else ends the episode with an error (control/stack_calls.py).
     target_speed_mps: float
     #: Free-form diagnostics logged with the step (e.g. {"braking": True}).
     info: dict[str, Any] = field(default_factory=dict)
@@ -293,6 +294,7 @@ def with_perception(agent_class: type[Agent], perception_class: type) -> type[Ag
                 super().close()
 
     PluggedStack.__name__ = PluggedStack.__qualname__ = f"{agent_class.__name__}+{perception_class.__name__}"
+    PluggedStack.__module__ = agent_class.__module__  # messages name the user's module (stack_label)
     return PluggedStack
 
 

@@ -1,6 +1,6 @@
 """The reference AD stack: cruise, and brake for a perceived pedestrian whose path meets the ego's.
 
-Behaviour (issue 5): cruise at the episode's initial speed. When a perceived pedestrian, moved ahead
+Behaviour: cruise at the episode's initial speed. When a perceived pedestrian, moved ahead
 at constant velocity, enters the ego's corridor (its width plus a margin, along the path it will
 drive) within the prediction horizon, the stack brakes after its system reaction time, with the
 deceleration that stops it short of the pedestrian, at most `max_decel_mps2`. Once no pedestrian has
@@ -33,7 +33,7 @@ from typing import Any
 
 from pedsafe_sumo.control.agent import KNOWN_SENSORS, Agent, Command, Observation, RouteAhead
 
-#: Defaults of the reference stack (issue 5); each can be overridden through the episode config (the
+#: Defaults of the reference stack; each can be overridden through the episode config (the
 #: parameter file's [algorithm] section carries reaction_time_s and max_decel_mps2).
 REACTION_TIME_S = 0.4  # system reaction time between first perceiving a threat and braking [s]
 MAX_DECEL_MPS2 = 6.0  # hardest braking the stack commands [m/s2]

@@ -1,8 +1,8 @@
-"""A time limit on each call of the AD stack's run_step (`--agent-timeout SECONDS`).
+"""A time limit on each call of the AD stack's run_step, and on its setup (`--agent-timeout SECONDS`).
 
-A stack whose run_step never returns (a deadlock, a sleep, an endless loop in Python) must end its own
-episode, not hold its batch forever. Python cannot interrupt a thread from outside, so the limit works
-in one of two ways, chosen once per episode by `guard_step`:
+A stack whose run_step (or setup) never returns (a deadlock, a sleep, an endless loop in Python) must
+end its own episode, not hold its batch forever. Python cannot interrupt a thread from outside, so the
+limit works in one of two ways, chosen once per episode by `guard_step`:
 
 * In a process's main thread (the process-pool workers, the episode and replay CLIs): a real-time
   timer (signal.setitimer, SIGALRM). When a call has run past the limit, the timer's handler raises
@@ -12,6 +12,8 @@ in one of two ways, chosen once per episode by `guard_step`:
   call runs in a helper thread of the episode and the step waits for its answer at most the limit. On a
   timeout the helper thread is abandoned (daemon; it holds only the stack, never SUMO) and the episode
   ends. Cost: one hand-over between threads per step.
+
+`call_within` puts one call (the stack's setup) under the same limit, the same two ways.
 
 Either way the episode ends with status "timeout" and the message of AgentTimeoutError; the batch goes on.
 A stack stuck in native code that never returns to the interpreter (and holds the GIL), or one that
@@ -63,10 +65,9 @@ def check_timeout_s(timeout_s: float) -> float:
     return value
 
 
-def _message(timeout_s: float, time_s: float) -> str:
-    return (
-        f"the AD stack's run_step did not return within {timeout_s:g} s (--agent-timeout) at t={time_s:.2f} s"
-    )
+def _message(timeout_s: float, time_s: float, call: str = "run_step") -> str:
+    when = f" at t={time_s:.2f} s" if call == "run_step" else ""
+    return f"the AD stack's {call} did not return within {timeout_s:g} s (--agent-timeout){when}"
 
 
 class _AlarmGuard:
@@ -84,6 +85,8 @@ class _AlarmGuard:
         self._step = step
         self.timeout_s = timeout_s
         self.timed_out = False
+        #: The stack's method under the limit, for the message ("run_step", "setup").
+        self.call = "run_step"
         self._active = False
         self._armed = False
         self._fired = False
@@ -106,7 +109,7 @@ class _AlarmGuard:
         signal.setitimer(signal.ITIMER_REAL, RETRY_S)
         if again:
             raise _StillRunning
-        raise AgentTimeoutError(_message(self.timeout_s, self._time_s))
+        raise AgentTimeoutError(_message(self.timeout_s, self._time_s, self.call))
 
     def start(self) -> _AlarmGuard:
         self._previous = signal.signal(signal.SIGALRM, self._on_alarm)
@@ -139,7 +142,7 @@ class _AlarmGuard:
             if self._fired:
                 self.timed_out = True
         if self.timed_out:  # the stack caught the AgentTimeoutError and returned late, or was stopped again
-            raise AgentTimeoutError(_message(self.timeout_s, time_s))
+            raise AgentTimeoutError(_message(self.timeout_s, time_s, self.call))
         return command
 
 
@@ -150,6 +153,7 @@ class _ThreadGuard:
         self._step = step
         self.timeout_s = timeout_s
         self.timed_out = False
+        self.call = "run_step"
         self._requests: queue.SimpleQueue[tuple[Any, float] | None] = queue.SimpleQueue()
         self._answers: queue.SimpleQueue[tuple[bool, Any]] = queue.SimpleQueue()
         self._thread: threading.Thread | None = None
@@ -186,7 +190,7 @@ class _ThreadGuard:
             ok, value = self._answers.get(timeout=self.timeout_s)
         except queue.Empty:
             self.timed_out = True
-            raise AgentTimeoutError(_message(self.timeout_s, time_s)) from None
+            raise AgentTimeoutError(_message(self.timeout_s, time_s, self.call)) from None
         if not ok:
             raise value
         return value
@@ -203,3 +207,13 @@ def guard_step(step: StepFunction, timeout_s: float) -> _AlarmGuard | _ThreadGua
     if in_main and hasattr(signal, "setitimer"):
         return _AlarmGuard(step, timeout_s)
     return _ThreadGuard(step, timeout_s)
+
+
+def call_within(function: Callable[[], Any], timeout_s: float, call: str) -> Any:
+    """`function()` (the stack's `call`, e.g. "setup") under the limit: its value, or AgentTimeoutError
+    when it has not returned within `timeout_s` (the same two ways as `guard_step`). After a timeout
+    the stack may still be running in an abandoned thread: do not call it again."""
+    guard = guard_step(lambda _observation, _time_s: function(), timeout_s)
+    guard.call = call
+    with guard:
+        return guard(None, 0.0)

@@ -1,4 +1,4 @@
-"""Calibration of the background's desired-speed law against the speeds SUMO measures (issue 14 item 6).
+"""Calibration of the background's desired-speed law against the speeds SUMO measures.
 
     python -m pedsafe_sumo.demand.calibrate [--net tests/demand/data/straight.net.xml] [--seeds 1 2 3]
         [--duration 1800] [--params FILE] [--write-params FILE]

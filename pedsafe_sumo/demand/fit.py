@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from pedsafe_sumo.params import ParameterError, load_params
+
 LOCATIONS = {
     "intersection": "intersection",
     "non_intersection": "nonintersection",
@@ -252,8 +254,6 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table(results))
     if args.out:
         # Load it back: a file the generator would reject must not pass silently.
-        from pedsafe_sumo.params import ParameterError, load_params
-
         text = params_toml(results, Path(args.csv).name)
         out = Path(args.out)
         try:

@@ -19,7 +19,7 @@
    lane's; for a junction loop, the limit of the lane the connection comes from) / fit_speed_limit_mps.
    The pooled speeds of a kind of loop are compared with the mixture of those scaled fits, each weighted by
    its loop's share of the records (`scaled_mixture`); where every limit is the fits' it is the fit itself.
-   Without the scaling each loop is compared with the fit itself, as before the rule.
+   Without the scaling each loop is compared with the fit itself.
 
 When the site cannot carry the demand (more than BACKLOG_MAX_SHARE of the vehicles still waiting to be
 inserted at the end: queues back up to where vehicles enter), speeds measured on the approaches are queue
@@ -37,6 +37,7 @@ import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,14 +47,17 @@ from scipy import optimize, stats
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.demand.generate import generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
-from pedsafe_sumo.demand.sampling import Lognormal, traffic_distributions
+from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
+from pedsafe_sumo.demand.validation_page import measured_markdown, plot_ecdfs, write_report
 from pedsafe_sumo.demand.vehicles import background_speed_scale
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
+from pedsafe_sumo.network.sumo_inputs import config_inputs
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
+from pedsafe_sumo.sampling.distributions import Lognormal
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
-#: Acceptance bound of the issue: mid-block approach speeds vs the non-intersection fit.
+#: Acceptance bound of the validation: mid-block approach speeds vs the non-intersection fit.
 MIDBLOCK_SPEED_KS_MAX = 0.10
 #: Distance (m) from the start of an entering lane to its mid-block loop. The clipped approaches are 70-180 m
 #: long and the signal's queues reach back over most of them, so the loop sits near where vehicles enter, yet
@@ -135,12 +139,8 @@ def _site_config(site: Site) -> tuple[Path | None, list[str]]:
     cfg = site.files.directory / f"{site.files.name}.sumocfg"
     if not cfg.is_file():
         return None, []
-    additionals: list[str] = []
-    for el in ET.parse(cfg).getroot().iter("additional-files"):
-        additionals = [
-            str(site.files.directory / f.strip()) for f in el.get("value", "").split(",") if f.strip()
-        ]
-    return cfg, additionals
+    # Checked first: a site's files name no SUMO output and no file outside the site (docs/trust.md).
+    return cfg, [str(path) for path in config_inputs(cfg)["additional"]]
 
 
 #: Settings for a network without a .sumocfg (the test networks).
@@ -204,7 +204,7 @@ class Comparison:
     measured_median: float
     fitted_median: float
     samples: np.ndarray
-    cdf: object  # callable x -> F(x) of the fit
+    cdf: Callable[[np.ndarray], np.ndarray]  # x -> F(x) of the fit
     slug: str  # file-name part of its figure
 
 
@@ -291,35 +291,6 @@ def measure(
         compare(cat(mid_headways), headway.cdf, "same-lane headway, mid-block (s)", "exponential",
                 math.log(2) / headway.rate_per_s, "headway_midblock"),
     ]  # fmt: skip
-
-
-def plot_ecdfs(comparisons: list[Comparison], figures_dir: Path, prefix: str, title: str) -> list[Path]:
-    """One ECDF-vs-fit PNG per comparison (matplotlib Agg: no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures_dir.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for comp in comparisons:
-        fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
-        if comp.n:
-            x = np.sort(comp.samples)
-            ax.step(x, np.arange(1, x.size + 1) / x.size, where="post", label=f"SUMO detectors (n={comp.n})")
-            grid = np.linspace(0, np.quantile(x, 0.995) * 1.1, 400)
-            ax.plot(grid, comp.cdf(grid), "--", label=f"fit: {comp.reference}")
-        ax.set_xlabel(comp.name)
-        ax.set_ylabel("cumulative share")
-        ax.set_title(f"{title}\n{comp.name}: KS D = {comp.ks_distance:.3f}", fontsize=10)
-        ax.grid(alpha=0.3)
-        ax.legend(loc="lower right")
-        fig.tight_layout()
-        path = figures_dir / f"{prefix}_{comp.slug}.png"
-        fig.savefig(path)
-        plt.close(fig)
-        paths.append(path)
-    return paths
 
 
 def sumo_statistics(log_text: str) -> dict[str, str]:
@@ -481,80 +452,6 @@ def validate(args) -> list[Run]:
     return runs
 
 
-MEASURED_BEGIN = "<!-- measured:begin (written by python -m pedsafe_sumo.demand.validate) -->"
-MEASURED_END = "<!-- measured:end -->"
-
-
-def measured_markers(site: str) -> tuple[str, str]:
-    """The comments around a site's measured part of the validation page. Each site has its own, so that
-    validating one site never overwrites another's numbers (before, any site replaced the page's one
-    block, Xueqing's, when run without --docs)."""
-    return (
-        MEASURED_BEGIN.replace("measured:begin", f"measured:begin site={site}"),
-        MEASURED_END.replace("measured:end", f"measured:end site={site}"),
-    )
-
-
-def measured_markdown(args, runs: list[Run], n_loops: dict[str, int]) -> str:
-    begin, end = measured_markers(args.site)
-    lines = [
-        begin,
-        f"Command: `python -m pedsafe_sumo.demand.validate --site {args.site} --duration {args.duration:g} "
-        f"--seed {args.seed}" + (f" --params {args.params}" if args.params else "") + "`",
-        "",
-        f"Loops: {n_loops['midblock']} mid-block ({MIDBLOCK_OFFSET_M:g} m into each entering lane), "
-        f"{n_loops['midlane']} mid-lane, {n_loops['junction']} inside the junction. Records of the first "
-        f"{args.warmup:g} s are ignored. KS distance = sup |ECDF - fitted CDF|.",
-        "",
-    ]
-    for run in runs:
-        verdict = (
-            "oversaturated: vehicles still waiting to enter at the end, approach speeds are queue speeds"
-            if run.oversaturated
-            else "the site carries this demand"
-        )
-        lines += [
-            f"### {run.label} demand: {run.headway_rate_per_s:.4g} veh/s per entering lane "
-            f"(mean headway {1 / run.headway_rate_per_s:.1f} s)",
-            "",
-            f"{run.n_vehicles} vehicles and {run.n_persons} pedestrians generated; {verdict} "
-            f"(backlog {100 * run.backlog:.1f}% of the vehicles).",
-            "SUMO: " + "; ".join(f"{k} {v}" for k, v in run.sim_stats.items()),
-            *(f"\n**Not capacity:** {lane.line()}." for lane in run.stalled),
-            "",
-            "| measured | fit | n | KS distance | measured median | fit median |",
-            "|---|---|---:|---:|---:|---:|",
-        ]
-        for c in run.comparisons:
-            lines.append(
-                f"| {c.name} | {c.reference} | {c.n} | {c.ks_distance:.3f} | {c.measured_median:.2f} | "
-                f"{c.fitted_median:.2f} |"
-            )
-        lines.append("")
-        lines += [f"![{fig.stem}](figures/{fig.name})" for fig in run.figures]
-        lines.append("")
-    lines.append(end)
-    return "\n".join(lines)
-
-
-def write_report(path: Path, measured: str, site: str) -> None:
-    """Replace `site`'s measured part of the validation page, keeping its hand-written explanation and
-    every other site's part; a site measured for the first time gets a section at the end."""
-    begin, end = measured_markers(site)
-    if path.is_file():
-        text = path.read_text(encoding="utf-8")
-        if begin in text and end in text:
-            head, rest = text.split(begin, 1)
-            tail = rest.split(end, 1)[1]
-            path.write_text(head + measured + tail, encoding="utf-8")
-            return
-        section = f"\n\n## Measured: {site}\n\n{measured}\n"
-        path.write_text(text.rstrip("\n") + section, encoding="utf-8")
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(f"# Demand validation\n\n## Measured: {site}\n\n" + measured + "\n", encoding="utf-8")
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0]
@@ -580,7 +477,11 @@ def main(argv: list[str] | None = None) -> int:
         n_loops = {
             k: sum(d.kind == k for d in place_detectors(site)) for k in ("midblock", "midlane", "junction")
         }
-        write_report(args.docs / "demand_validation.md", measured_markdown(args, runs, n_loops), args.site)
+        write_report(
+            args.docs / "demand_validation.md",
+            measured_markdown(args, runs, n_loops, MIDBLOCK_OFFSET_M),
+            args.site,
+        )
     except (SiteError, ParameterError, OSError, RuntimeError, ValueError) as exc:
         print(f"pedsafe_sumo.demand.validate: error: {exc}", file=sys.stderr)
         return 2

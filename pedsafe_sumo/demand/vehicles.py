@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.demand.sampling import Lognormal, poisson_departures_s
+from pedsafe_sumo.demand.routes_xml import attrs
+from pedsafe_sumo.demand.sampling import poisson_departures_s
 from pedsafe_sumo.demand.site import EnteringLane, Route
+from pedsafe_sumo.sampling.distributions import Lognormal
 
 MOVEMENTS = ("left", "straight", "right")
 VTYPE_ID = "bg_passenger"
@@ -133,8 +135,6 @@ def generate_vehicles(
 
 def vehicle_lines(vehicles: list[Vehicle], lanes: list[EnteringLane], traffic: dict[str, Any]) -> list[str]:
     """The vType, routes and vehicles of the vehicle route file, as XML lines."""
-    from pedsafe_sumo.demand.routes_xml import attrs
-
     lines = [
         "    <!-- speedDev 0: each vehicle's own speedFactor carries its lognormal desired speed (see "
         "pedsafe_sumo/demand/vehicles.py). -->",

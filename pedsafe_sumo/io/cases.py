@@ -17,14 +17,14 @@ from typing import Any
 
 import pandas as pd
 
-from pedsafe_sumo.scenarios.registry import (
+from pedsafe_sumo.scenarios.episode_setup import (
     BackgroundVehicle,
     EpisodeSetup,
     PedestrianSetup,
     SignalStaging,
     VehicleSetup,
-    VehicleSize,
 )
+from pedsafe_sumo.scenarios.road_users import VehicleSize
 
 
 def case_stem(scenario: str, condition: str, seed: int, approach: str = "") -> str:

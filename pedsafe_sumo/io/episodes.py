@@ -1,4 +1,4 @@
-"""The episodes.parquet contract (DESIGN section 3): one row per episode and condition.
+"""The episodes.parquet contract (docs/design.md, 'Contracts'): one row per episode and condition.
 
 Written by the batch runner, read by the report; both take the column names and types from here.
 """
@@ -10,21 +10,21 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-#: Columns, in DESIGN section 3 order.
+#: Columns, in the order of docs/design.md, 'Contracts'.
 EPISODE_COLUMNS = (
     "scenario", "condition", "episode", "seed", "ped_age", "ped_gender", "ped_risk", "ped_speed_mps",
     "ego_initial_speed_mps", "collision", "impact_speed_mps", "injury_probability", "conflict", "md_m",
     "tmd_s", "cs_mps", "conflict_probability", "min_ttc_s", "pet_s", "first_detection_distance_m",
     "first_detection_time_s", "detected_by", "sumo_collision", "status", "error",
-    # the proximity measure (issue 12; pedsafe_sumo.safety.proximity)
+    # the proximity measure (pedsafe_sumo.safety.proximity)
     "min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass",
-    # collision semantics and end conditions (issue 12; safety.collision, sim.episode)
+    # collision semantics and end conditions (safety.collision, sim.episode)
     "contact_stationary", "end_reason",
-    # Signal each road user had at the conflict (green, yellow, red or none; issue 13).
+    # Signal each road user had at the conflict (green, yellow, red or none).
     "ego_signal", "ped_signal",
-    # The arm the ego came in on (N, E, S, W; batch --approach, issue 14).
+    # The arm the ego came in on (N, E, S, W; batch --approach).
     "approach",
-    # Importance sampling (issue 17; sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
+    # Importance sampling (sampling/draws.py, docs/sampling.md): the episode's likelihood ratio
     # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
     # 0 under mc) and its random inputs as JSON.
     "weight", "sampler_stage", "sampler_inputs",

@@ -29,6 +29,7 @@ from typing import Any
 
 import pandas as pd
 
+from pedsafe_sumo.confine import ConfinementError, confined
 from pedsafe_sumo.io.episodes import sort_rows, to_table
 
 RUN_FILE = "run.json"
@@ -54,6 +55,7 @@ class RunStoreError(ValueError):
 def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write `data` to `path` through a temporary file, flushed and fsynced before the rename."""
     tmp = path.with_name(path.name + TMP_SUFFIX)
+    tmp.unlink(missing_ok=True)  # a link left at the temporary name would carry the write elsewhere
     with open(tmp, "wb") as handle:
         handle.write(data)
         handle.flush()
@@ -147,6 +149,12 @@ class Manifest:
             chunks = {key: ChunkRecord(**entry) for key, entry in data["chunks"].items()}
         except TypeError as exc:
             raise RunStoreError(f"{path} has a malformed chunk entry: {exc}") from None
+        try:  # the files it names are the run's own (docs/trust.md)
+            for record in chunks.values():
+                for name in filter(None, (record.file, record.steplog_file)):
+                    confined(path.parent, name, f"{path} entry {record.key}")
+        except ConfinementError as exc:
+            raise RunStoreError(str(exc)) from None
         return cls(path, chunks)
 
     def _line(self, key: str) -> str:

@@ -16,6 +16,7 @@ Bad input ends in one line on stderr and exit status 2; a DIR that already holds
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -23,10 +24,21 @@ import time
 from pathlib import Path
 from typing import Any, NoReturn
 
+import pandas as pd
+import sumolib
+from tqdm import tqdm
+
+from pedsafe_sumo import __version__
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.io.cases import write_case
+from pedsafe_sumo.io.episodes import to_table
+from pedsafe_sumo.ncap.figure import grid_figure
 from pedsafe_sumo.ncap.protocol import NcapError, load_protocol, parse_speeds, select_cells
+from pedsafe_sumo.ncap.staging import spec_for, stage_cell
+from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, get_site
 from pedsafe_sumo.params import ParameterError, load_params
+from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
 
 DEFAULT_SITE = "xueqing"
@@ -94,18 +106,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class) -> int:
-    import dataclasses
-
-    import pandas as pd
-    from tqdm import tqdm
-
-    from pedsafe_sumo.io.cases import write_case
-    from pedsafe_sumo.io.episodes import to_table
-    from pedsafe_sumo.ncap.figure import grid_figure
-    from pedsafe_sumo.ncap.staging import spec_for, stage_cell
-    from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests
-    from pedsafe_sumo.sim.connection import SimulatorError
-
     out: Path = args.out
     try:
         runner = NcapRunner(site, params, agent_class)
@@ -199,10 +199,6 @@ def _write(path: Path, writer) -> None:
 
 
 def _versions() -> dict[str, str]:
-    import sumolib
-
-    from pedsafe_sumo import __version__
-
     return {"pedsafe_sumo": __version__, "sumo": sumolib.version.gitDescribe()}
 
 

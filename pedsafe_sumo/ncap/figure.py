@@ -27,11 +27,13 @@ ERROR_FILL = "#b0b0b0"
 
 def grid_figure(table: pd.DataFrame, path: Path) -> Path:
     """One row of panels per test, one column per condition; writes `path` (PNG) and returns it."""
+    # matplotlib here, not at module top: the Agg backend is chosen when a figure is drawn, so importing
+    # this module leaves the backend of a program that uses its own alone.
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch, Rectangle
+    import matplotlib.pyplot as plt  # after the backend is chosen
+    from matplotlib.patches import Patch, Rectangle  # with pyplot, after the backend
 
     nominal = table[table["variation"] == "nominal"]
     tests = list(dict.fromkeys(nominal["test"]))

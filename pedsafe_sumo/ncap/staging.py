@@ -34,16 +34,13 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+import sumolib
+
 from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, NcapError, Protocol
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, VehicleSetup
 from pedsafe_sumo.scenarios.geometry import Approach, lane_path_in, offset_to_lane_pos_m, shape_length_m
-from pedsafe_sumo.scenarios.registry import (
-    EGO_BLUE_RGB,
-    VEHICLE_CLASSES,
-    EpisodeSetup,
-    PedestrianSetup,
-    ScenarioSpec,
-    VehicleSetup,
-)
+from pedsafe_sumo.scenarios.road_users import EGO_BLUE_RGB, VEHICLE_CLASSES
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sumo_net import read_net
 
 #: How far the ego's front is past first touching the dummy at the nominal impact step [m].
@@ -134,7 +131,6 @@ def _unit(a, b) -> tuple[float, float]:
 
 def _frame(shape, offset_m: float):
     """(x, y), u, n of a polyline at a geometric offset: the point, the direction and its left normal."""
-    import sumolib
 
     x, y = sumolib.geomhelper.positionAtShapeOffset(shape, offset_m)
     heading = sumolib.geomhelper.rotationAtShapeOffset(shape, offset_m)
@@ -175,7 +171,8 @@ def spec_for(cell: Cell, roadside_units: tuple[str, ...], time_limit_s: float = 
     return ScenarioSpec(
         cell.cell_id,
         f"Euro NCAP {cell.test.name}: {cell.test.description}",
-        placement="crosswalk" if cell.test.placement == "crosswalk" else "midblock",
+        # The protocol's placements (ncap/protocol.py, PLACEMENTS) are scenario placements of those names.
+        placement=cell.test.placement,
         ego_speed_fit="intersection",
         background_traffic=0,
         time_limit_s=time_limit_s,
@@ -338,7 +335,6 @@ def _obstruction(protocol: Protocol, approach: Approach, crossing_xy) -> list[Ve
     """CPNCO's two parked vehicles in the kerb lane, `gap_m` apart around the dummy's path."""
     spec = protocol.obstruction
     kerb_lane_id = approach.lane_ids[0]
-    import sumolib
 
     kerb_shape = approach.lane_shapes[0]
     geo_m = sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(crossing_xy, kerb_shape)

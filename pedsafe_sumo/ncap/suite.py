@@ -21,10 +21,12 @@ from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, Protocol
 from pedsafe_sumo.ncap.scoring import band_colour, cell_score, points_of_test
 from pedsafe_sumo.ncap.staging import StagedCell, spec_for, stage_cell
 from pedsafe_sumo.sim.connection import SimulatorError
-from pedsafe_sumo.sim.episode import EpisodeResult, EpisodeRunner
+from pedsafe_sumo.sim.episode import EpisodeRunner
+from pedsafe_sumo.sim.outcome import EpisodeResult
+from pedsafe_sumo.sim.staging import SumoStaging
 from pedsafe_sumo.sumo_net import read_net
 
-#: The columns of ncap.csv: the issue's eight, then what explains them.
+#: The columns of ncap.csv: the eight result columns (docs/ncap.md), then what explains them.
 CELL_COLUMNS = (
     "test", "ego_speed_kmh", "impact_point_pct", "condition", "avoided", "impact_speed_kmh", "colour",
     "cell_score", "test_range", "turn", "variation", "cell_id", "measured_impact_point_pct", "end_reason",
@@ -35,8 +37,8 @@ SCORE_COLUMNS = (
 )  # fmt: skip
 
 
-class NcapRunner(EpisodeRunner):
-    """The engine, with the ego's movement through the junction held green for the whole test.
+class NcapStaging(SumoStaging):
+    """The staging, with the ego's movement through the junction held green for the whole test.
 
     A Euro NCAP test has no signal: the ego drives its movement at the test speed. SUMO refuses to insert
     a vehicle at speed whose next link is never a prioritised green ('G'), which is the case of the
@@ -45,14 +47,20 @@ class NcapRunner(EpisodeRunner):
     by the test, not by SUMO.
     """
 
-    def _populate(self, api, setup, start_s: float = 0.0) -> None:
-        super()._populate(api, setup, start_s)
+    def populate(self, api, setup, approach, start_s: float = 0.0) -> None:
+        super().populate(api, setup, approach, start_s)
         link = ego_signal_link(str(self.site.file("net.xml")), setup.ego.lane_id, setup.ego_route[1])
         if link is not None:
             tls_id, index = link
             state = list(api.trafficlight.getRedYellowGreenState(tls_id))
             state[index] = "G"
             api.trafficlight.setRedYellowGreenState(tls_id, "".join(state))
+
+
+class NcapRunner(EpisodeRunner):
+    """The engine, staged for Euro NCAP tests (NcapStaging: the ego's movement held green)."""
+
+    staging_class = NcapStaging
 
 
 @lru_cache(maxsize=64)

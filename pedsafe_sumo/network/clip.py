@@ -14,6 +14,7 @@ fixed order, so the same input always gives the same file.
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -306,8 +307,6 @@ def _id_order(obj_id: int) -> tuple[int, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import argparse
-
     parser = argparse.ArgumentParser(
         prog="clip_osm", description="Clip an OSM XML file to a circle, cutting ways at the boundary."
     )

@@ -29,8 +29,6 @@ from pathlib import Path
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 
 OSM_DIR = REPO_ROOT / "osm"
-#: The unmodified OpenStreetMap export the team shares beside the repository (not shipped).
-SHARED_OSM_SOURCE = REPO_ROOT.parent / "shared" / "data" / "osm" / "haidian_xueqing.osm"
 #: Environment variable naming another folder of site folders (<folder>/<site>/<site>.net.xml, ...) in
 #: place of networks/: a batch on a modified copy of a site, or a package installed away from its
 #: checkout. Read at every lookup, so worker processes started by a batch see what the batch saw.
@@ -54,7 +52,7 @@ class SiteError(ValueError):
     """A site that cannot be found or used; the message is one line naming the problem."""
 
 
-#: The name the commands catch (kept from when sites were entries of a dict).
+#: The name the commands catch for a site they cannot find or use (the same class as SiteError).
 UnknownSiteError = SiteError
 
 

@@ -1,4 +1,4 @@
-"""One parameter file for every default of the model (DESIGN section 2 and the sensor settings).
+"""One parameter file for every default of the model (docs/design.md, 'Sources of numbers'; sensor settings).
 
 `defaults.toml` beside this module holds every number with its unit and source. A user points a run at
 their own TOML file, which is laid over the defaults: it may set any subset of keys, but an unknown key
@@ -9,6 +9,7 @@ rejects values out of range with a message naming the key.
 from __future__ import annotations
 
 import copy
+import importlib
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -114,8 +115,8 @@ def validate(params: dict[str, Any]) -> None:
 
 
 def _import_validator_modules() -> None:
-    import importlib
-
+    # Imported by name when validating, not at module top: each of these modules imports this one to
+    # register its validator, so importing them here at load time would make a cycle.
     for module in (
         "pedsafe_sumo.demand.params",
         "pedsafe_sumo.perception.params",
@@ -126,7 +127,7 @@ def _import_validator_modules() -> None:
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as exc:
-            # Tolerate a domain module (or its package) not written yet, never an error inside it.
+            # Tolerate an absent domain module (or package), never an error inside it.
             if exc.name is None or not (module == exc.name or module.startswith(exc.name + ".")):
                 raise
 

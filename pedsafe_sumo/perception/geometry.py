@@ -24,7 +24,8 @@ __all__ = ["sumo_angle_to_yaw_rad", "sumo_front_to_centre", "yaw_rad_to_sumo_ang
 
 
 def focal_length_px(width_px: float, hfov_deg: float) -> float:
-    """Pinhole focal length f = width / (2 tan(fov/2)) in pixels (DESIGN erratum of the paper's eq. 6)."""
+    """Pinhole focal length f = width / (2 tan(fov/2)) in pixels (the erratum of the paper's eq. 6 in
+    docs/design.md, 'Sources of numbers')."""
     if not 0.0 < hfov_deg < 180.0:
         raise ValueError(f"horizontal field of view must be in (0, 180) degrees, got {hfov_deg}")
     return width_px / (2.0 * math.tan(math.radians(hfov_deg) / 2.0))

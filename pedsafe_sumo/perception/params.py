@@ -214,7 +214,7 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     check_upper_bounds(v2i, V2I_UPPER_BOUNDS, w)
 
     raw = section.get("raw")
-    if raw is not None:  # absent from the parameters of runs older than issue 15
+    if raw is not None:  # absent from the parameters recorded by runs without raw sensors
         w = f"{where}.raw"
         for key in ("camera_image_width_px", "camera_image_height_px", "roadside_image_width_px",
                     "roadside_image_height_px"):  # fmt: skip

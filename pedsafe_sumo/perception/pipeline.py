@@ -24,8 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .geometry import invert_transform
-from .kernels import frame_kernel, static_tables, v2i_to_vehicle
-from .raycast import RayHits, cast_rays_numpy
+from .kernels import frame_kernel, v2i_to_vehicle
+from .raycast import cast_rays_numpy
+from .raycast_kernels import static_tables
 from .sensors import (
     CameraResult,
     CameraSpec,
@@ -37,8 +38,8 @@ from .sensors import (
     finish_lidar,
     plan_camera,
     plan_lidar,
-    rgb_to_lab,
 )
+from .surfaces import RayHits, rgb_to_lab
 from .v2i import V2ILink, V2ISpec, message_to_vehicle
 from .world import EgoPose, RoadsideUnit, WorldSnapshot
 

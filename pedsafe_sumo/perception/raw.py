@@ -27,16 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .raycast import (
-    KIND_CYLINDER,
-    KIND_GROUND,
-    KIND_NONE,
-    KIND_PEDESTRIAN,
-    KIND_PRISM,
-    KIND_VEHICLE,
-    cast_rays,
-)
+from .raycast import cast_rays
 from .sensors import LidarSpec, SensorPose
+from .surfaces import KIND_CYLINDER, KIND_GROUND, KIND_NONE, KIND_PEDESTRIAN, KIND_PRISM, KIND_VEHICLE
 from .world import WorldSnapshot
 
 #: Label codes of :class:`LidarLabels` (the ray cast's surface kinds).

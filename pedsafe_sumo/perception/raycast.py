@@ -1,6 +1,6 @@
 """First-hit ray casting against the world snapshot.
 
-:func:`cast_rays` runs the compiled kernel (:mod:`pedsafe_sumo.perception.kernels`);
+:func:`cast_rays` runs the compiled kernel (:mod:`pedsafe_sumo.perception.raycast_kernels`);
 :func:`cast_rays_numpy` is the vectorised numpy reference it is tested against (over rays and
 candidate objects at once). Both give the same hits.
 
@@ -17,27 +17,19 @@ at t = 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from .raycast_kernels import cast_rays_kernel, static_tables
+from .surfaces import (
+    KIND_CYLINDER,
+    KIND_GROUND,
+    KIND_NONE,
+    KIND_PEDESTRIAN,
+    KIND_PRISM,
+    KIND_VEHICLE,
+    RayHits,
+)
 from .world import WorldSnapshot
-
-KIND_NONE = 0  #: nothing within t_max (sky, or beyond range)
-KIND_GROUND = 1
-KIND_VEHICLE = 2
-KIND_PEDESTRIAN = 3
-KIND_PRISM = 4  #: building / canopy / hedge wall; index = polygon index
-KIND_CYLINDER = 5  #: tree trunk or crown; index = cylinder index
-
-
-@dataclass(frozen=True)
-class RayHits:
-    """Per ray: distance ``t_m`` to the first hit (inf when none), its ``kind`` and object ``index``."""
-
-    t_m: np.ndarray
-    kind: np.ndarray
-    index: np.ndarray
 
 
 def _expand(gi: np.ndarray, oi: np.ndarray, gstart: np.ndarray, gcount: np.ndarray):
@@ -99,8 +91,6 @@ def cast_rays(
     skip_vehicle=-1,
 ) -> RayHits:
     """First hit of each ray (compiled kernel; same arguments and results as :func:`cast_rays_numpy`)."""
-    from .kernels import cast_rays_kernel, static_tables
-
     n_groups = np.asarray(group_start).shape[0]
     skip = np.ascontiguousarray(np.broadcast_to(np.asarray(skip_vehicle, dtype=np.int64), (n_groups,)))
     veh, ped = world.vehicles, world.pedestrians

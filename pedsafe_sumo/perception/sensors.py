@@ -33,15 +33,20 @@ import functools
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from .geometry import intrinsic_matrix, world_to_camera_transform
-from .kernels import NEAR_CLIP_M
-from .raycast import KIND_CYLINDER, KIND_GROUND, KIND_PEDESTRIAN, KIND_PRISM, KIND_VEHICLE, RayHits
+from .surfaces import (
+    KIND_CYLINDER,
+    KIND_GROUND,
+    KIND_PEDESTRIAN,
+    KIND_PRISM,
+    KIND_VEHICLE,
+    NEAR_CLIP_M,
+    RayHits,
+    rgb_to_lab,
+)
 from .world import Pedestrians, WorldSnapshot
-
-_NEAR_CLIP_M = NEAR_CLIP_M  # camera near plane (m): nothing is imaged closer than this
 
 
 @dataclass(frozen=True)
@@ -171,7 +176,7 @@ def _plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPl
     base = peds.x_m[:, None] * rot[:, 0] + peds.y_m[:, None] * rot[:, 1] + trans
     top = base + peds.height_m[:, None] * rot[:, 2]
     zb, zt = base[:, 2], top[:, 2]
-    front = np.minimum(zb, zt) > _NEAR_CLIP_M + peds.radius_m
+    front = np.minimum(zb, zt) > NEAR_CLIP_M + peds.radius_m
     if not front.any():
         return _empty_plan(extra)
     ub, vb = f * base[:, 0] / zb + cx, f * base[:, 1] / zb + cy
@@ -205,7 +210,7 @@ def _plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPl
     pc = pts @ rot.T + trans
     u = f * pc[:, 0] / pc[:, 2] + cx
     v = f * pc[:, 1] / pc[:, 2] + cy
-    in_image = (pc[:, 2] > _NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
+    in_image = (pc[:, 2] > NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
     vec = pts - cam
     dist = np.sqrt((vec * vec).sum(axis=1))
     direction = vec / dist[:, None]
@@ -221,14 +226,6 @@ def _plan_camera(spec: CameraSpec, pose: SensorPose, peds: Pedestrians) -> RayPl
         group_count=np.full(cand.size, n_s, dtype=np.int64),
         extra=extra,
     )
-
-
-def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
-    """(K, 3) sRGB 0-255 -> (K, 3) CIELAB (L 0-100) through OpenCV (D65)."""
-    arr = (np.asarray(rgb, dtype=np.float32).reshape(1, -1, 3)) / np.float32(255.0)
-    if arr.shape[1] == 0:
-        return np.zeros((0, 3))
-    return cv2.cvtColor(arr, cv2.COLOR_RGB2Lab).reshape(-1, 3).astype(float)
 
 
 def delta_e_cie76(rgb_a: np.ndarray, rgb_b: np.ndarray) -> np.ndarray:

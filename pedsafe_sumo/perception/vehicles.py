@@ -20,13 +20,13 @@ import math
 
 import numpy as np
 
-from .raycast import KIND_VEHICLE, cast_rays
+from .raycast import cast_rays
 from .sensors import CameraSpec, LidarSpec, SensorPose
+from .surfaces import KIND_VEHICLE, NEAR_CLIP_M
 from .world import WorldSnapshot
 
 #: Where on each facing face the camera samples, as fractions of its width and of the box height.
 FACE_FRACTIONS = (0.2, 0.5, 0.8)
-_NEAR_CLIP_M = 0.05
 
 
 def _corners(x, y, yaw, length, width):
@@ -53,7 +53,7 @@ def camera_sees_vehicles(
         if i == skip_vehicle:
             continue
         centre = rot @ np.array([veh.x_m[i], veh.y_m[i], veh.height_m[i] / 2]) + trans
-        if centre[2] <= _NEAR_CLIP_M or f * veh.height_m[i] / centre[2] < spec.min_height_px:
+        if centre[2] <= NEAR_CLIP_M or f * veh.height_m[i] / centre[2] < spec.min_height_px:
             continue
         corners = _corners(veh.x_m[i], veh.y_m[i], veh.yaw_rad[i], veh.length_m[i], veh.width_m[i])
         pts = []
@@ -77,7 +77,7 @@ def camera_sees_vehicles(
     with np.errstate(divide="ignore", invalid="ignore"):
         u = f * pc[:, 0] / pc[:, 2] + cx
         v = f * pc[:, 1] / pc[:, 2] + cy
-    in_image = (pc[:, 2] > _NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
+    in_image = (pc[:, 2] > NEAR_CLIP_M) & (u >= 0) & (u < spec.width_px) & (v >= 0) & (v < spec.height_px)
     vec = surface_xyz - cam
     dist = np.sqrt((vec * vec).sum(axis=1))
     counts_arr = np.asarray(counts, dtype=np.int64)

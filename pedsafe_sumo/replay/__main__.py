@@ -26,6 +26,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from pedsafe_sumo.ncap.suite import NcapRunner
+from pedsafe_sumo.network.sumo_inputs import SumoInputError, check_gui_site
 from pedsafe_sumo.replay.check import CHECKED_OUTCOME, TrajectoryCheck, outcome_mismatches
 from pedsafe_sumo.replay.fcd import FcdRecorder, write_fcd
 from pedsafe_sumo.replay.rundir import LoggedEpisode, ReplayError, load_logged_episode
@@ -37,7 +39,8 @@ from pedsafe_sumo.replay.scene import (
     ScreenshotRequest,
     ScreenshotTaken,
 )
-from pedsafe_sumo.scenarios.registry import EpisodeSetup
+from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.settings import UsageError
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import EpisodeRunner
@@ -74,6 +77,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--site", help="the run's site (name or folder) when it is not where run.json says [its site_path]"
+    )
+    parser.add_argument(
+        "--algorithm",
+        metavar="MODULE:CLASS",
+        help="the AD stack to import (replaces the run's); needed for a stack run.json names that is not "
+        "installed (docs/trust.md)",
     )
     parser.add_argument(
         "--delay",
@@ -177,8 +186,6 @@ def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> 
 def runner_class(logged: LoggedEpisode) -> type[EpisodeRunner]:
     """The engine the run used: a Euro NCAP run (pedsafe_sumo.ncap) holds the ego's movement green."""
     if logged.run_info.get("kind") == "ncap":
-        from pedsafe_sumo.ncap.suite import NcapRunner
-
         return NcapRunner
     return EpisodeRunner
 
@@ -227,9 +234,17 @@ def main(argv: list[str] | None = None) -> int:
     try:
         size_px = check_args(args)
         logged = load_logged_episode(
-            args.run_dir, args.episode, args.condition, args.scenario, args.site, args.approach
+            args.run_dir,
+            args.episode,
+            args.condition,
+            args.scenario,
+            args.site,
+            args.approach,
+            args.algorithm,
         )
-    except (UsageError, ReplayError) as exc:
+        if args.export_fcd is None and args.export_xosc is None:  # sumo-gui loads the site's additionals
+            check_gui_site(logged.site, view=None)
+    except (UsageError, ReplayError, SumoInputError) as exc:
         return error(str(exc))
     if args.export_fcd is not None:
         say_header(logged, print)
@@ -305,8 +320,6 @@ def export_fcd(logged: LoggedEpisode, path: Path, say) -> int:
 
 def export_xosc(logged: LoggedEpisode, path: Path, say) -> int:
     """The episode as OpenSCENARIO + OpenDRIVE (pedsafe_sumo/replay/xosc.py), checked like --export-fcd."""
-    from pedsafe_sumo.replay.xosc import TrackRecorder, write_xosc
-
     runner = runner_class(logged)(
         logged.site, logged.params, logged.agent_class, step_length_s=logged.step_length_s
     )

@@ -27,7 +27,7 @@ from typing import Any
 from xml.sax.saxutils import quoteattr
 
 from pedsafe_sumo import OSM_ATTRIBUTION
-from pedsafe_sumo.sim.episode import PED_ID
+from pedsafe_sumo.sim.staging import PED_ID
 from pedsafe_sumo.units import yaw_rad_to_sumo_angle
 
 #: Decimal places of positions, angles and speeds (SUMO's --precision; 6 keeps micrometres).

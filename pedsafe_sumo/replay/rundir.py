@@ -1,12 +1,13 @@
 """Find one logged episode of a batch run, with everything needed to run it again as it was run.
 
-A run directory (DESIGN section 3) holds episodes.parquet, run.json and cases/. Replaying episode N of
-a scenario under a condition takes, from the run and never from today's defaults:
+A run directory (docs/design.md, 'Contracts') holds episodes.parquet, run.json and cases/. Replaying
+episode N of a scenario under a condition takes, from the run and never from today's defaults:
 - the episode seed: episodes.parquet's `seed` of (scenario, episode, condition);
-- the scenario: run.json["scenarios"][name], every field of the ScenarioSpec the batch used (with its
+- the scenario: `run.json["scenarios"][name]`, every field of the ScenarioSpec the batch used (with its
   --set overrides applied), rebuilt field by field so a changed default in the registry cannot leak in;
 - the parameters: run.json["parameters"], the full merged parameter file of the run;
-- the AD stack: run.json["algorithm"], loaded like --algorithm;
+- the AD stack: run.json["algorithm"], imported only when installed or shipped (control.stack_source),
+  or the one given as --algorithm;
 - the site: the folder run.json["site_path"] names (else the site named run.json["site"]), or the one
   given as --site; its files must be the run's (run.json["site_files_sha256"]);
 - the case, when there is one: cases/<scenario>_<condition>_<seed>.parquet (the per-step log the
@@ -29,12 +30,17 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import sumolib
 
+from pedsafe_sumo import __version__
+from pedsafe_sumo.batch.runner import site_file_digests
 from pedsafe_sumo.control.agent import Agent, AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.control.stack_source import stack_to_replay
 from pedsafe_sumo.io.cases import case_stem, read_case
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params, validate
-from pedsafe_sumo.scenarios.registry import ScenarioError, ScenarioSpec
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sim.episode import CONDITIONS, STEP_LENGTH_S
 
 EPISODES_FILE = "episodes.parquet"
@@ -97,11 +103,13 @@ def load_logged_episode(
     scenario: str | None = None,
     site: str | None = None,
     approach: str | None = None,
+    algorithm: str | None = None,
 ) -> LoggedEpisode:
     """Episode `episode` of `scenario` under `condition` in the run at `run_dir`; ReplayError if any of
     them is missing or the run's settings cannot be rebuilt. `site` (a name or folder) replaces the
     site the run recorded, e.g. a copy of its folder on another machine; its files must be the run's.
-    `approach` (N, E, S, W) picks the episode of a batch run with --approach on that arm."""
+    `approach` (N, E, S, W) picks the episode of a batch run with --approach on that arm. `algorithm`
+    (--algorithm) replaces the AD stack the run recorded (control.stack_source)."""
     run_dir = Path(run_dir)
     if not run_dir.exists():
         raise ReplayError(f"run directory {run_dir} does not exist")
@@ -149,8 +157,9 @@ def load_logged_episode(
     resolved_site = run_site(run_info, site)
     spec = scenario_from_record(run_info["scenarios"], unit, notes)
     params = params_from_record(run_info["parameters"], notes)
-    algorithm = str(run_info["algorithm"])
-    try:
+    try:  # a stack run.json names is imported only under control.stack_source's rule
+        algorithm, stack_note = stack_to_replay(str(run_info["algorithm"]), algorithm, run_dir)
+        notes += [stack_note] if stack_note else []
         agent_class = load_agent_class(algorithm)
     except AlgorithmLoadError as exc:
         raise ReplayError(f"the run's algorithm cannot be loaded: {exc}") from None
@@ -315,8 +324,6 @@ def _read_episodes(path: Path) -> pd.DataFrame:
 def run_site(run_info: dict[str, Any], given: str | None = None) -> Site:
     """The site of a run (see the module docstring); ReplayError, in one line, when it cannot be found
     or its files differ from the ones the run read."""
-    from pedsafe_sumo.batch.runner import site_file_digests
-
     recorded_path = run_info.get("site_path")
     if given is not None:
         reference = given
@@ -340,10 +347,6 @@ def run_site(run_info: dict[str, Any], given: str | None = None) -> Site:
 
 
 def _version_notes(run_info: dict[str, Any]) -> list[str]:
-    import sumolib
-
-    from pedsafe_sumo import __version__
-
     notes = []
     versions: dict[str, Any] = run_info["versions"] if isinstance(run_info.get("versions"), dict) else {}
     sumo_then, sumo_now = versions.get("sumo"), sumolib.version.gitDescribe()

@@ -28,12 +28,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.perception.sensors import CameraSpec
-from pedsafe_sumo.scenarios.registry import EpisodeSetup
-from pedsafe_sumo.sim.episode import EGO_ID, PED_ID
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
 VIEW_ID = "View #0"
 
@@ -389,8 +390,6 @@ def wait_for_file(path: Path, timeout_s: float) -> None:
 def crop_to(canvas_path: Path, path: Path, width_px: int, height_px: int) -> None:
     """The centre `width_px` x `height_px` of the rendered canvas (all of it where it is smaller), written
     to `path`; the canvas file is removed."""
-    import cv2
-
     image = cv2.imread(str(canvas_path), cv2.IMREAD_COLOR)
     if image is None:
         raise RuntimeError(f"sumo-gui wrote an unreadable screenshot {canvas_path}")

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo import OSM_ATTRIBUTION
-from pedsafe_sumo.sim.episode import EGO_ID, PED_ID
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 from pedsafe_sumo.sumo_binaries import sumo_binary
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
@@ -198,6 +198,8 @@ def _vehicle(xosc, name: str, track: Track):
 
 def build_scenario(recorder: TrackRecorder, xodr_name: str, description: str, step_length_s: float):
     """The scenariogeneration Scenario of a recorded episode."""
+    # Imported here, not at module top: scenariogeneration takes about half a second to import, and only
+    # --export-xosc needs it.
     from scenariogeneration import xosc
 
     entities = xosc.Entities()

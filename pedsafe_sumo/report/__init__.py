@@ -1,4 +1,4 @@
-"""The report of a batch run (DESIGN section 3): Table I with intervals, paired tests, figures.
+"""The report of a batch run (docs/report.md): Table I with intervals, paired tests, figures.
 
     python -m pedsafe_sumo.report DIR
 

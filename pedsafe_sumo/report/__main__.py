@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from pedsafe_sumo.confine import ConfinementError, check_tree
 from pedsafe_sumo.report import figures
 from pedsafe_sumo.report import indexes as idx
 from pedsafe_sumo.report.html import HTML_FILE, write_html_report
@@ -162,8 +163,8 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
         title = AGREEMENT_TITLE
         if not idx.sumo_collision_is_nullable(episodes):
             title += (
-                "\nnote: this run's sumo_collision is a plain boolean (from before issue 12): False also "
-                "where SUMO could not see, so those episodes are compared too"
+                "\nnote: this run's sumo_collision is a plain boolean (it cannot say 'SUMO cannot see'): "
+                "False also where SUMO could not see, so those episodes are compared too"
             )
         sections.append((title, "agreement.csv", agreement, idx.agreement_rows))
     if "pet_s" in episodes.columns:
@@ -233,6 +234,14 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path
     if run.selected_approach:
         out_dir = out_dir / f"approach_{run.selected_approach}"
+    try:  # no link in a received run directory leads the writes below out of it (docs/trust.md)
+        check_tree(
+            run.path,
+            [str(out_dir.relative_to(run.path) / n) for n in (TABLES_DIR, FIGURES_DIR, HTML_FILE)],
+            "report",
+        )
+    except ConfinementError as exc:
+        raise ReportError(str(exc)) from None
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
     written += index_checks(run, out_dir / TABLES_DIR, say)
     written += write_figures(run, out_dir / FIGURES_DIR, say)

@@ -1,6 +1,6 @@
 """The paper's qualitative findings, checked on a run's episodes, and where they hold across a sweep.
 
-Issue 13 item 5: sensitivity as a primary result. For each combination of a sweep the four findings
+Sensitivity as a primary result: for each combination of a sweep the four findings
 of the paper are evaluated on the point estimates of its episodes.parquet (with small runs, say so):
 
 - `v2i_safer_everywhere`: in every scenario of the run, V2I's collision rate is below SV's, or equal
@@ -86,11 +86,11 @@ def findings_table(run_dirs: dict[str, Path]) -> pd.DataFrame:
 
 def findings_figure(table: pd.DataFrame, path: Path, title: str = "") -> Path:
     """A grid: findings (rows) against runs (columns); green holds, red fails, grey not evaluated."""
-    import matplotlib
+    import matplotlib  # here, not at the top: Agg is a process-wide choice, made only when a figure is drawn
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import ListedColormap
+    import matplotlib.pyplot as plt  # after matplotlib.use
+    from matplotlib.colors import ListedColormap  # with pyplot, above
 
     values = table[list(FINDINGS)].to_numpy(dtype=float).T
     coded = np.where(np.isnan(values), 0, np.where(values > 0.5, 2, 1))
@@ -138,11 +138,11 @@ def findings_across_sweeps(sweep_dirs: list[Path]) -> pd.DataFrame:
 def findings_across_sweeps_figure(table: pd.DataFrame, path: Path, title: str = "") -> Path:
     """One panel per sweep, side by side: findings (rows) against the swept values (columns); green
     holds, red fails, grey not evaluated (the layout of findings_figure)."""
-    import matplotlib
+    import matplotlib  # here, not at the top: Agg is a process-wide choice, made only when a figure is drawn
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import ListedColormap
+    import matplotlib.pyplot as plt  # after matplotlib.use
+    from matplotlib.colors import ListedColormap  # with pyplot, above
 
     sweeps = list(dict.fromkeys(table["sweep"]))
     widths = [max(2, int((table["sweep"] == s).sum())) for s in sweeps]

@@ -1,4 +1,4 @@
-"""The report's checks of the indexes themselves (issue 12), per scenario and condition, as DataFrames.
+"""The report's checks of the indexes themselves, per scenario and condition, as DataFrames.
 
 - stationary contacts: `contact_stationary` (contact while the ego stands: neither a collision nor an
   injury in Table I), counted;
@@ -8,7 +8,7 @@
 - the proximity measure (`min_clearance_m`, `ego_speed_at_min_clearance_mps`, `drac_mps2`, `close_pass`).
 
 Every function takes the episodes table (and, for the PET reasons, the logs that were kept) and returns a
-table, or None with a one-line note when the run predates the columns it needs. Only status "ok" rows
+table, or None with a one-line note when the run lacks the columns it needs. Only status "ok" rows
 count, as in Table I. Nothing here draws or prints.
 """
 
@@ -20,13 +20,15 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pandas as pd
 
+from pedsafe_sumo.io.run_store import MANIFEST_FILE, Manifest, RunStoreError
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import first_polyline_crossing
+from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.safety.stats import wilson_interval
 
 OK_STATUS = "ok"
-#: Below this speed a road user counts as standing at the end of a log, m/s (the ego: DESIGN's 0.1 m/s
-#: for a stationary ego in issue 12; the same for the pedestrian).
+#: Below this speed a road user counts as standing at the end of a log, m/s (the ego: below it a contact is
+#: not a collision, safety.collision.STATIONARY_SPEED_MPS; the same for the pedestrian).
 STANDING_SPEED_MPS = 0.1
 PROXIMITY_COLUMNS = ("min_clearance_m", "ego_speed_at_min_clearance_mps", "drac_mps2", "close_pass")
 
@@ -61,7 +63,7 @@ def missing_note(episodes: pd.DataFrame, columns: tuple[str, ...], what: str) ->
     missing = [c for c in columns if c not in episodes.columns]
     if not missing:
         return ""
-    return f"note: no {', '.join(missing)} in this run (written before issue 12): {what} left out"
+    return f"note: no {', '.join(missing)} in this run (written without these columns): {what} left out"
 
 
 # ---------------------------------------------------------------- stationary contacts
@@ -133,7 +135,7 @@ def collision_agreement(episodes: pd.DataFrame) -> pd.DataFrame | None:
 
 
 def sumo_collision_is_nullable(episodes: pd.DataFrame) -> bool:
-    """Whether the run can say 'SUMO cannot see' (a nullable column, issue 12): older runs wrote a plain
+    """Whether the run can say 'SUMO cannot see' (a nullable column): a run without it holds a plain
     boolean, False also where SUMO could not have seen a collision."""
     column = episodes["sumo_collision"]
     # An error row's missing value says nothing: only rows that ran can hold SUMO's "cannot see".
@@ -253,8 +255,6 @@ def _median(values: np.ndarray) -> float:
 
 def proximity_model_of_run(run_info: Mapping | None):
     """The proximity thresholds the run was made with (run.json parameters), else the defaults file's."""
-    from pedsafe_sumo.safety.proximity import ProximityModel
-
     parameters = run_info.get("parameters") if isinstance(run_info, Mapping) else None
     try:
         return ProximityModel.from_params(parameters if isinstance(parameters, Mapping) else None)
@@ -269,8 +269,6 @@ class KeptLogs:
     Keeps one step-log file in memory at a time."""
 
     def __init__(self, run) -> None:
-        from pedsafe_sumo.io.run_store import MANIFEST_FILE, Manifest, RunStoreError
-
         self.run = run
         self.files: list[tuple[str, int, int, str]] = []
         try:

@@ -1,4 +1,4 @@
-"""Reading a batch's run directory (DESIGN section 3) for the report, with every problem as one message.
+"""Reading a batch's run directory (docs/batch.md) for the report, with every problem as one message.
 
 DIR/episodes.parquet   one row per episode and condition (required)
 DIR/run.json           the run's global information (optional: only its header line needs it)
@@ -33,7 +33,7 @@ from pedsafe_sumo.io.run_store import (
     read_parts,
 )
 
-#: The episodes.parquet columns the report reads (a subset of DESIGN section 3's).
+#: The episodes.parquet columns the report reads (a subset of docs/columns.md's).
 REQUIRED_COLUMNS = (
     "scenario",
     "condition",
@@ -65,7 +65,8 @@ class RunDirectory:
     run_info_problem: str = ""
     #: for a batch that has not finished, read with partial=True: one line saying how much is there
     incomplete: str = ""
-    #: The approach reported (report --approach, or the only one of the run; "" for older runs).
+    #: The approach reported (report --approach, or the only one of the run; "" for a run without an
+    #: approach column).
     approach: str = ""
     #: report --approach: the tables and figures go to DIR/approach_<arm>/ (one report per approach).
     selected_approach: str = ""
@@ -128,7 +129,7 @@ def _read_run(path: Path, partial: bool) -> tuple[pd.DataFrame, dict[str, Any] |
     run_info, problem = _read_run_info(path)
     episodes_path = path / EPISODES_FILE
     incomplete = ""
-    # run.json without a state: written by a batch from before resumable runs, always at its end.
+    # run.json without a state: written by a batch that could not be resumed, always at its end.
     if run_info is not None and run_info.get("state", STATE_COMPLETE) != STATE_COMPLETE:
         episodes, incomplete = _finished_parts(path, run_info, partial)
         source = path / MANIFEST_FILE
@@ -150,7 +151,7 @@ def _read_run(path: Path, partial: bool) -> tuple[pd.DataFrame, dict[str, Any] |
 
 
 def _approaches(episodes: pd.DataFrame) -> list[str]:
-    """The arms a run's rows are on, in the order first met ([] for runs from before --approach)."""
+    """The arms a run's rows are on, in the order first met ([] for a run without an approach column)."""
     return [str(a) for a in episodes["approach"].unique() if a] if "approach" in episodes.columns else []
 
 
@@ -181,7 +182,7 @@ def load_run(path: Path, partial: bool = False, approach: str | None = None) -> 
 
 def load_run_per_approach(path: Path, partial: bool = False) -> dict[str, RunDirectory]:
     """Every approach of a run as its own RunDirectory, as `load_run(path, approach=arm)` reads it, keyed by
-    the arm ("" for a run from before --approach); the rows are read once."""
+    the arm ("" for a run without an approach column); the rows are read once."""
     path = Path(path)
     episodes, run_info, problem, incomplete, _ = _read_run(path, partial)
     arms = _approaches(episodes)

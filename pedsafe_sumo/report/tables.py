@@ -20,9 +20,10 @@ from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS as CV_MIN_ROWS
 from pedsafe_sumo.sampling.importance import Estimate
-from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, V2I_ONLY_MIN_COLLISIONS
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS
 from pedsafe_sumo.sampling.pooling import StageRows, pooled_estimate, pooled_from_stage, stage_max_weight
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+from pedsafe_sumo.sampling.v2i_factor import V2I_ONLY_MIN_COLLISIONS
 
 CONDITION_LABELS = {"sv": "SV", "v2i": "V2I"}
 #: Outcomes of the paired test: column tested -> its name in the table. "table_conflict" is Table I's
@@ -133,9 +134,9 @@ def table_one_weighted(
             }
         )
     table = pd.DataFrame(rows)
-    if not controlled:  # no control variate anywhere: the table of runs before it, column for column
+    if not controlled:  # no control variate anywhere: no estimator column, the table of plain IS
         table = table.drop(columns="estimator", errors="ignore")
-    if not pooled:  # the final stage alone everywhere, as before --is-pool-from
+    if not pooled:  # the final stage alone everywhere (no --is-pool-from): no stages column
         table = table.drop(columns="stages", errors="ignore")
     return table
 
@@ -436,7 +437,7 @@ def v2i_only_note(run_info: Mapping[str, Any] | None) -> str:
     """One line per scenario of an importance-sampling run whose final proposal does not aim at V2I's
     collisions where SV does not collide although its pilots drew some (run.json's sampler_levels: the
     last stage's `v2i_only_pilot_collisions` > 0 without `v2i_only_terms`): V2I's interval may then be
-    too narrow (docs/sampling.md, Limits, "Another junction"); "" otherwise, and for runs recorded before
+    too narrow (docs/sampling.md, Limits, "Another junction"); "" otherwise, and for a run.json without
     the count."""
     levels = (run_info or {}).get("sampler_levels") or {}
     notes = []

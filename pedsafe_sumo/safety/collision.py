@@ -17,8 +17,8 @@ import numpy as np
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 
-#: Below this ego speed a contact is a stationary contact, not a collision [m/s] (issue 12: the 0.1 m/s
-#: below which the ego counts as standing, as in the pedestrian behaviour model).
+#: Below this ego speed a contact is a stationary contact, not a collision [m/s]: the 0.1 m/s
+#: below which the ego counts as standing, as in the pedestrian behaviour model.
 STATIONARY_SPEED_MPS = 0.1
 
 

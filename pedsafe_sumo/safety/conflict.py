@@ -33,7 +33,8 @@ STANDING_SPEED_MPS = 1e-6
 
 @dataclass(frozen=True)
 class ConflictModel:
-    """The pedestrian-car risk model of Amini et al. 2022 with the thresholds of DESIGN section 2."""
+    """The pedestrian-car risk model of Amini et al. 2022 with the thresholds of docs/design.md, 'Sources of
+    numbers'."""
 
     intercept: float = 4.327
     md_coef_per_m: float = -2.898

@@ -1,4 +1,5 @@
-"""All safety indexes of one episode, under the column names of `episodes.parquet` (DESIGN section 3)."""
+"""All safety indexes of one episode, under the column names of `episodes.parquet` (docs/design.md,
+'Contracts')."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pedsafe_sumo.safety.injury import episode_injury
 from pedsafe_sumo.safety.proximity import ProximityModel, default_proximity_model, episode_proximity
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
 
-#: The columns of episodes.parquet that `episode_indexes` fills, in DESIGN's order.
+#: The columns of episodes.parquet that `episode_indexes` fills, in the order of docs/design.md, 'Contracts'.
 INDEX_COLUMNS = (
     "collision",
     "impact_speed_mps",
@@ -27,12 +28,12 @@ INDEX_COLUMNS = (
     "first_detection_distance_m",
     "first_detection_time_s",
     "detected_by",
-    # the proximity measure (issue 12): close passes whatever the pedestrian's speed
+    # the proximity measure: close passes whatever the pedestrian's speed
     "min_clearance_m",
     "ego_speed_at_min_clearance_mps",
     "drac_mps2",
     "close_pass",
-    # contact with a standing ego: neither a collision nor an injury (issue 12)
+    # contact with a standing ego: neither a collision nor an injury
     "contact_stationary",
 )
 

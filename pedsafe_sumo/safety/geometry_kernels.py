@@ -1,7 +1,7 @@
 """Compiled (numba) scalar forms of :mod:`pedsafe_sumo.safety.geometry`'s rectangle-circle clearance, for
-the per-step callers of the episode loop (issue 19): the ego-pedestrian clearance of every step and the
-walker's body test (:meth:`PedestrianWalker._walks_into`), which ran a dozen numpy calls on scalars or
-on arrays of a few elements every step.
+the per-step callers of the episode loop: the ego-pedestrian clearance of every step and the walker's
+body test (:meth:`PedestrianWalker._walks_into`), where the numpy forms would make a dozen numpy calls on
+scalars or on arrays of a few elements every step.
 
 Bit-identical to the numpy functions: the same operations in the same order (``to_rectangle_frame``,
 ``box_signed_distance_m``, then minus the radius), and NaN propagates as in ``np.maximum``/``np.minimum``.
@@ -10,14 +10,14 @@ runs on (checked by ``tests/safety/test_geometry_kernels.py`` on random inputs, 
 ``tools/compare_runs_exact.py``); on a CPU with AVX512_SKX numpy has its own SIMD sin and cos, which may
 differ in the last bit (as the perception kernels may, see :mod:`pedsafe_sumo.perception.kernels`).
 Compiled on first use and cached on disk, as the
-perception kernels (:func:`pedsafe_sumo.perception.kernels._jit`).
+perception kernels (:func:`pedsafe_sumo.perception.raycast_kernels._jit`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from pedsafe_sumo.perception.kernels import _jit, _nmax, _nmin
+from pedsafe_sumo.perception.raycast_kernels import _jit, _nmax, _nmin
 
 
 @_jit  # type: ignore[untyped-decorator]  # numba compiles it; the annotations are for readers

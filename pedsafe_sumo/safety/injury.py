@@ -59,7 +59,7 @@ register_injury_model(
         "rosen_sander2009",
         "Fatality risk of an adult pedestrian hit by the front of a car, with age, after Rosen & Sander "
         "2009 (Accid. Anal. Prev. 41(3):536-542): P = sigmoid(-9.1 + 0.095 v + 0.040 age), v in km/h "
-        "(coefficients as in DESIGN section 2).",
+        "(coefficients as in docs/design.md, 'Sources of numbers').",
         lambda v_kmh, age: -9.1 + 0.095 * v_kmh + 0.040 * age,
     )
 )

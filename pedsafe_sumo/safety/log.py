@@ -74,7 +74,7 @@ class LogError(ValueError):
 class _ValidatedLog(dict[str, np.ndarray]):
     """What `as_arrays` returns: columns already checked. `episode_indexes` hands it to eight index
     functions, each of which calls `as_arrays` again; that call copies the mapping instead of checking
-    every column once more (the arrays were shared before too: asarray of a float64 array is itself)."""
+    every column once more (the arrays are shared either way: asarray of a float64 array is itself)."""
 
 
 def as_arrays(log: Any) -> dict[str, np.ndarray]:

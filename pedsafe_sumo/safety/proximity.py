@@ -1,4 +1,4 @@
-"""Proximity: how close the ego came to the pedestrian, whatever either was doing (issue 12).
+"""Proximity: how close the ego came to the pedestrian, whatever either was doing.
 
 The Amini conflict model (conflict.py) needs both road users moving on crossing paths, so a pedestrian
 standing at the kerb or stopped in the lane is never its candidate, and TTC is NaN for anyone the ego
@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from pedsafe_sumo.params import DEFAULTS_PATH
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import FloatOrArray, rectangle_circle_distance_m
 from pedsafe_sumo.safety.surrogates import ttc_steps_s
@@ -72,8 +73,6 @@ def default_proximity_model() -> ProximityModel:
 
 
 def _default_section() -> dict[str, Any]:
-    from pedsafe_sumo.params import DEFAULTS_PATH
-
     with open(DEFAULTS_PATH, "rb") as handle:
         return tomllib.load(handle)[PARAMS_SECTION]
 

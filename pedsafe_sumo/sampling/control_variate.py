@@ -17,7 +17,7 @@ is the known mean's own error, which the estimate carries through beta_hat mu_g.
 
 SV and V2I share the draws and weights of an episode. V2I's control is pi_hat too, except where the
 stage's proposal carries the V2I factor (sampling/joint.py): then it is the factor's model of V2I's
-collision, pi_hat r, with its own stored nominal mean `mean_pi_v2i` (session 12; condition_control).
+collision, pi_hat r, with its own stored nominal mean `mean_pi_v2i` (condition_control).
 """
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ ESTIMATOR_CV = "is+cv"
 ESTIMATOR_IS = "is"
 #: Below this many final-stage rows the plain estimate stands: the regression's slope, fitted on a handful
 #: of draws, extrapolates mean(C) to 0 on noise. Measured on the toy of tests/sampling/test_joint.py (a
-#: joint proposal fitted on 2,000 nominal draws, 1,000 replicates per n; EXPERIMENTS.md, "Importance
-#: sampling, session 8"): variance over plain IS's, and the 95% interval's coverage (plain's): n = 3
+#: joint proposal fitted on 2,000 nominal draws, 1,000 replicates per n; docs/sampling.md, "Control
+#: variate"): variance over plain IS's, and the 95% interval's coverage (plain's): n = 3
 #: 8.2x, 66% (96%); n = 10 1.25x, 80% (91%); n = 30 0.79x, 90% (92%); n = 100 0.77x, 93% (93%); n = 300
 #: 0.72x, 95% (94%). 30 is also about where Cochran (Sampling Techniques, 1977, chapter 6) takes the
 #: large-sample approximations of ratio estimators to hold.
@@ -47,7 +47,7 @@ MIN_ROWS = 30
 
 def control_of(proposal_json: str) -> JointProposal | None:
     """The stage's joint proposal when it can serve as a control variate (joint, with a finite stored
-    mean of pi_hat); None for the nominal, a product proposal, or a joint one stored before the mean."""
+    mean of pi_hat); None for the nominal, a product proposal, or a stored joint one without that mean."""
     if not proposal_json or not is_joint_json(proposal_json):
         return None
     proposal = JointProposal.from_json(proposal_json)

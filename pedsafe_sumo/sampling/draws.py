@@ -6,8 +6,8 @@ classes and colours, queue gaps, the mid-block distance, the parked and blend ga
 signal cycle) is drawn by name through it, and it keeps, per name, the value on the scale of its nominal
 family (`sampling.importance`: Normal, Categorical, Beta on an interval) and the family itself.
 
-Without a proposal (plain Monte Carlo, `--sampler mc`) each draw is the very Generator call the code made
-before this object existed, in the same order: the episodes are bit-identical to the earlier ones. With a
+Without a proposal (plain Monte Carlo, `--sampler mc`) each draw is the plain Generator call of the input's
+law, in the order the scenario makes them: the episodes are bit-identical to draws on a bare Generator. With a
 proposal (`--sampler is`), an input named in it is drawn from the proposal's family instead, and the
 episode's weight is the product of the likelihood ratios p(x) / q(x) of those inputs (every other input
 stays nominal and contributes 1). Background traffic has its own stream and is never proposed.
@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Family, Normal, Product
 
 #: The inputs a proposal may move (when the scenario draws them): those that decide whether the ego and
@@ -181,16 +182,14 @@ class _UniformSource:
 
 def as_draws(rng: np.random.Generator | Draws) -> Draws:
     """`rng` itself when it is a Draws, else a nominal Draws around the Generator (callers that pass a
-    bare Generator, as before, get the same values)."""
+    bare Generator get the values its own calls would give)."""
     return rng if isinstance(rng, Draws) else Draws(rng)
 
 
 def draw_pedestrian_traits(draws: Draws, pedestrians: Mapping[str, Any]) -> dict[str, Any]:
     """One pedestrian of the age-group mixture, through `draws`: the same Generator calls in the same
-    order as demand.sampling.sample_pedestrians(rng, pedestrians, 1) (group, risk type, gender, age,
-    walking speed), so that under no proposal the pedestrian is the same."""
-    from pedsafe_sumo.demand.sampling import age_group_speed_distributions
-
+    order as pedsafe_sumo.demand.sampling.sample_pedestrians(rng, pedestrians, 1) (group, risk type,
+    gender, age, walking speed), so that under no proposal the pedestrian is the same."""
     groups = list(pedestrians["age_groups"].items())
     weights = np.array([g["weight_share"] for _, g in groups], dtype=float)
     group_p = weights / weights.sum()

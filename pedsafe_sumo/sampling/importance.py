@@ -244,7 +244,7 @@ def is_estimate(
     and the central-limit interval would be [0, 0] as if certain; then the upper end is
     no_event_bound's -ln(alpha/2) W / n, with `max_weight` W a known bound on the weights p/q (f takes
     values in [0, 1]: indicators and probabilities). Without one (NaN), it is -ln(alpha/2) / ESS, the
-    rule of three on the effective sample: the bound of earlier runs, which can fall below the truth when
+    rule of three on the effective sample, which can fall below the truth when
     the event lies where q/p is lower than n / ESS (docs/sampling.md, "No event").
     """
     f = np.asarray(values, dtype=float)

@@ -2,7 +2,7 @@
 
 The cross-entropy stages fit a product of one family per input; a collision is a joint condition (a fast
 ego with an early, fast pedestrian), and the product puts mass on combinations that do not collide
-(EXPERIMENTS.md, "Importance sampling, session 6"). For an event that stays random given the inputs x,
+(docs/sampling.md, "A joint proposal"). For an event that stays random given the inputs x,
 with pi(x) = P(collision | x), the proposal of least variance is q ∝ p sqrt(pi) (Owen, Monte Carlo theory,
 methods and examples, 2013, section 9.1). Here
 
@@ -11,15 +11,16 @@ methods and examples, 2013, section 9.1). Here
 with pi_hat a ridge logistic regression of the SV collision on the pilots' inputs (each continuous input
 standardised by its nominal's mean and sd, its square and the pairwise products; categories as
 indicators), lambda the defensive share. pi is a conditional probability, so the rows of every pilot stage
-pool unweighted, whatever proposal drew them.
+pool unweighted, whatever proposal drew them. The fit from the pilot rows, and the guard that replaces it
+while the pilots hold few collisions: sampling/joint_fit.py. With the V2I factor (sampling/v2i_factor.py)
+sqrt(pi_hat) becomes h, which also aims at V2I's collisions; h <= 1 still.
 
 Drawing: by rejection from the nominal, with the episode's own Generator: a block of candidate vectors is
 drawn from the nominal families (in the order of the sorted input names), each kept with probability
 (q/p)(x) / B where B = lambda + (1 - lambda) / c >= q/p (sqrt(pi_hat) <= 1); the first kept one is the
 episode's. Its weight is p/q = 1 / (lambda + (1 - lambda) sqrt(pi_hat(x)) / c), at most 1/lambda.
 
-Kinematic features (session 8; measured offline in EXPERIMENTS.md, "Session 7: shaping pi_hat at pilot size",
-the `physics` variant): where the scenario draws the ego's speed, the pedestrian's walking speed and the
+Kinematic features: where the scenario draws the ego's speed, the pedestrian's walking speed and the
 conflict offset, three functions of x are appended to the design as further continuous inputs (their
 squares and their products with every continuous input): the ego's speed v = clip(exp(ego_speed_log)) to the
 scenario's bounds (before the approach's speed-limit scale), the pedestrian's time per metre 1/w with w =
@@ -29,69 +30,12 @@ exp(mu_g + sigma_g z) of the age group's lognormal (before the sex factor), and 
 
 (the seconds left, from the pedestrian's coming into view VISIBLE_M before the ego lane's centre, beyond the
 stack's reaction time t_r and the time a full stop from v at a_max takes: negative, no stop before the
-conflict point; scenarios/registry.py stages the ego to reach the conflict point conflict_offset_s after
+conflict point; scenarios/placements/ stages the ego to reach the conflict point conflict_offset_s after
 the pedestrian). Each is standardised by its moments on MOMENT_DRAWS nominal draws. They are features of a
 fit, not a model of the episode: a wrong VISIBLE_M or t_r costs efficiency, never bias (the weights are
-exact whatever pi_hat is). Offline on v5_full's rows, 2-stage pilot: per final episode right_turn 11.5 ->
-19.2, crossing 19.5 -> 55, background_blending 5.0 -> 6.3, jaywalking 4.9 -> 5.4.
-
-The guard (session 8): a 200-pair nominal stage 0 of a scenario whose collision rate is 0.75% (crossing)
-holds no collision one time in five, and a fit on one or two collisions hardly beats the nominal
-(session 7: seed 23's crossing, 3.6x per final episode). So a PILOT stage whose pooled pilot rows hold
-fewer than GUARD_MIN_COLLISIONS SV collisions draws from the region proposal instead: pi_hat a steep step
-down at margin_s = 0, q ≈ lambda p + (1 - lambda) p 1{margin_s < 0} / P_p(margin_s < 0). It needs no fit:
-on v5_full's rows 75 of 75 crossing collisions, 220 of 220 right_turn, 293 of 299 jaywalking (but 303 of
-504 blending) had margin_s < 0, where the collision rate is 17-71%. The final stage is always the fit
-on the pooled pilot rows (which the guard's stage makes rich in collisions). Pilot rows only train pi_hat,
-so a guard that misses collisions costs efficiency, never bias.
-
-The V2I factor (session 12; EXPERIMENTS.md, "Importance sampling, session 12"). V2I's collisions lie inside
-SV's region, but there the proposable inputs leave V2I's outcome largely to chance: on jaywalking 84% of
-V2I's collisions (4% of the SV-only ones) have the pedestrian's clothing within the roadside camera's
-contrast threshold of the parked car behind them, which the camera's colour rule then cannot tell apart
-(perception/sensors.py). So where the pilots' SV collisions hold at least GUARD_MIN_COLLISIONS V2I
-collisions, the proposal also draws the clothing and the vehicles' colours (uniform categories, as the
-scenarios draw them) and aims at V2I's collisions too, modelled as pi_v2i = pi_hat r(z) with
-
-    r(z) = P(V2I collision | SV collision, z) = expit(b_0 + sum_k b_k L[clothing, colour_k]),
-
-L[i, j] = 1 where clothing colour i and car colour j differ by less than the roadside camera's
-delta_e_threshold (CIE76), b a ridge logistic (RIDGE) on the pilots' pairs whose SV episode collided.
-Then sqrt(pi_hat) becomes
-
-    h(x, z) = sqrt(a pi_hat(x) + (1 - a) pi_hat(x) r(z)),    a = m_v2i^2 / (m_sv^2 + m_v2i^2),
-
-m = the nominal means E_p[pi_hat] and E_p[pi_hat r]: the proposal ∝ p sqrt(pi_sv / P_sv^2 + pi_v2i /
-P_v2i^2) that minimises the sum of the two rates' relative variances (Owen 2013, section 9.1, applied to
-the sum), with the fits for the pi and m for the P. h <= 1, so the envelope B is unchanged; pi_hat r is
-V2I's control variate (`mean_pi_v2i`). Where the clothing does not vary the contrast (background blending
-dresses the pedestrian in the waiting car's colour) the fit leaves r nearly constant and the proposal
-nearly the SV one.
-
-The V2I-only term (session 13; EXPERIMENTS.md, "Importance sampling, session 13", part 3). The factor
-models V2I's collisions as a subset of SV's. On Xueqing that holds (V2I-only collisions are 0-8% of V2I's
-rate), but on the zhixin junction 41% of V2I's jaywalking collisions happen where SV does not collide, and
-the proposal drew them at about its defensive floor (V2I 0.15x against MC). So where the pilot pairs hold
-enough V2I collisions whose SV episode did not collide (`v2i_only_engages`; `--is-v2i-factor
-contrast+v2i-only`), the factor also carries pi_vo, a ridge logistic of "V2I collides, SV does not" on every
-pilot pair over pi_hat's design, and V2I is modelled as
-
-    pi_v2i = min(1, pi_hat r + pi_vo),    h = sqrt(a pi_hat + (1 - a) pi_v2i),
-
-a by the same rule on m_v2i = E_p[pi_v2i]; pi_v2i is V2I's control variate. The factor then applies where
-either count is enough (r fitted on what SV collisions there are). h <= 1 still, so B stands.
-
-Enough (session 14; EXPERIMENTS.md, "Importance sampling, session 14"): GUARD_MIN_COLLISIONS V2I-only
-collisions, or V2I_ONLY_MIN_COLLISIONS that make up at least the defensive share lambda of the pilots' V2I
-collisions. The second arm is the case where leaving them out costs most: a share s of V2I's rate drawn at the
-floor lambda p adds s / lambda times plain Monte Carlo's variance to V2I's, so from s = lambda on, that
-region alone makes V2I's estimate no better than MC. Session 13's zhixin seeds held 2-3 such pilot
-collisions at shares of 0.15-0.30; the term fitted on their 2 collisions takes V2I from 1.7 and 2.6 to 4.0
-and 4.7 per final episode (offline, scored on MC pairs), and without it V2I's interval missed the pooled MC
-reference in one seed of three. Xueqing's pilots (21 runs of sessions 11-13) hold 0-13 at shares of
-0-0.11, none with 2-4 at a share of 0.1 or more; there a term fitted on 1-3 would cost efficiency
-(blending's SV 18% offline). The share is of the pilots' draws, which lean towards SV's collisions, so it
-understates the nominal one.
+exact whatever pi_hat is). Offline on the rows of paper-v5's 10,000-pair MC run, with a 2-stage pilot, they
+raise the efficiency per final episode: right_turn 11.5 -> 19.2, crossing 19.5 -> 55, background_blending
+5.0 -> 6.3, jaywalking 4.9 -> 5.4.
 
 c is estimated once, when the proposal is fitted, on NORM_DRAWS nominal draws of a fixed seed, and
 stored with the coefficients in the proposal's JSON (run.json's sampler_proposals), so resume, workers and
@@ -110,14 +54,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from scipy import optimize, special
 
+from pedsafe_sumo.sampling.draws import family_from_json, family_to_json, product_from_json
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Family, Normal
 
 KIND = "joint"
-#: Ridge penalty on the standardised features: tools/is_limits.py's value, chosen before the pilot-sized
-#: measurement (EXPERIMENTS.md, "joint proposal"); not tuned on it.
+#: Ridge penalty on the standardised features: research/is_limits.py's value, fixed before the measurement at
+#: pilot size and not tuned on it.
 RIDGE = 1.0
 #: Nominal draws that estimate c = E_p[sqrt(pi_hat)]: relative standard error about 1e-3 for the four
 #: Xueqing scenarios (stored per proposal).
@@ -126,7 +70,7 @@ NORM_DRAWS = 1_000_000
 NORM_SEED = 17_2026
 #: Nominal draws per block of that estimate.
 NORM_BLOCK = 100_000
-#: The condition whose collisions the V2I factor models (module docstring), and the inputs it draws: the
+#: The condition whose collisions the V2I factor models (sampling/v2i_factor.py), and the inputs it draws: the
 #: pedestrian's clothing and every vehicle colour the scenario draws (names ending in COLOUR_SUFFIX).
 V2I_CONDITION = "v2i"
 CLOTHING_INPUT = "clothing"
@@ -135,18 +79,15 @@ COLOUR_SUFFIX = ".colour"
 KINEMATIC_INPUTS = ("conflict_offset_s", "ego_speed_log", "ped_age_group", "ped_walking_speed_z")
 #: An assumption, not a measurement: SUMO's default lane width 3.2 m less half a car's width 0.9 m, the
 #: distance from an occluder's lane-side flank to the ego lane's centre. Offline the efficiency hardly
-#: moved between 1.6 and 3.2 m (the separate 1/w feature absorbs it; EXPERIMENTS.md, session 7).
+#: moves between 1.6 and 3.2 m (the separate 1/w feature absorbs it).
 VISIBLE_M = 2.3
 #: Nominal draws (of NORM_SEED + 1) that give the kinematic features' means and standard deviations.
 MOMENT_DRAWS = 100_000
-#: The guard: a pilot stage whose pooled pilot rows hold fewer SV collisions than this draws from the
-#: region proposal (margin_s < 0) instead of a fit on a handful of collisions (the `adaptive` variant's
-#: threshold of EXPERIMENTS.md, session 7, fixed there before its scores).
+#: The guard (sampling/joint_fit.py): a pilot stage whose pooled pilot rows hold fewer SV collisions than
+#: this draws from the region proposal (margin_s < 0) instead of a fit on a handful of collisions; the
+#: V2I factor needs as many V2I collisions. A threshold fixed before the offline scores of the guard's
+#: variants were seen, not tuned on them.
 GUARD_MIN_COLLISIONS = 5
-#: The V2I-only term's lower count (module docstring, "Enough"): a fit needs more than one point.
-V2I_ONLY_MIN_COLLISIONS = 2
-#: The guard's step: pi_hat = expit(-GUARD_STEEPNESS margin_s / sd(margin_s)).
-GUARD_STEEPNESS = 200.0
 #: Candidates drawn per block of the rejection step (the episode's Generator draws whole blocks).
 REJECTION_BLOCK = 64
 #: A proposal whose bound B needs more candidates than this per episode on average is refused.
@@ -160,8 +101,9 @@ Block = np.ndarray | list[np.ndarray]
 
 def quadratic_design(n_rows: int, blocks: list[Block]) -> np.ndarray:
     """The logistic model's features: an intercept; per input in order, its indicators or its z and z^2;
-    then the products of every pair of continuous inputs. Shared with tools/is_limits.py and
-    tools/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler does."""
+    then the products of every pair of continuous inputs. Shared with research/is_limits.py and
+    research/experiments/is_joint_pilot.py, so the offline measurements fit the very model the sampler
+    does."""
     columns, continuous = [np.ones(n_rows)], []
     for block in blocks:
         if isinstance(block, list):
@@ -248,7 +190,7 @@ class Kinematics:
 @dataclass(frozen=True)
 class ContrastFactor:
     """The V2I factor r(z) = expit(b_0 + sum_k b_k L[clothing, colour_k]) and the share a of pi_hat in h
-    (module docstring)."""
+    (sampling/v2i_factor.py, which fits it)."""
 
     #: The vehicle colour inputs, sorted; the clothing is CLOTHING_INPUT.
     colour_inputs: tuple[str, ...]
@@ -258,7 +200,7 @@ class ContrastFactor:
     coefficients: tuple[float, ...]
     #: a of h = sqrt(a pi_hat + (1 - a) pi_hat r); NaN until the proposal is normalised.
     target_share: float = math.nan
-    #: The V2I-only term (module docstring): coefficients of pi_vo on pi_hat's design; () without it.
+    #: The V2I-only term (sampling/v2i_factor.py): coefficients of pi_vo on pi_hat's design; () without it.
     v2i_only_coefficients: tuple[float, ...] = ()
 
     @property
@@ -289,7 +231,8 @@ class ContrastFactor:
             "low_contrast": [list(row) for row in self.low_contrast],
             "coefficients": list(self.coefficients),
             "target_share": self.target_share,
-            # Only with the term, so that a factor without it serialises as before (session 12).
+            # Only with the term: a factor without it serialises to the JSON that runs of
+            # --is-v2i-factor contrast store, so that they keep their identity.
             **(
                 {"v2i_only_coefficients": list(self.v2i_only_coefficients)}
                 if self.v2i_only_coefficients
@@ -308,24 +251,10 @@ class ContrastFactor:
         )
 
 
-def low_contrast_table(
-    clothing_rgb: Any, car_rgb: Any, delta_e_threshold: float
-) -> tuple[tuple[int, ...], ...]:
-    """L[i][j] = 1 where clothing colour i and car colour j differ by less than `delta_e_threshold` (CIE76,
-    the cameras' rule: perception/sensors.py)."""
-    from pedsafe_sumo.perception.sensors import delta_e_cie76
-
-    clothing, cars = np.asarray(clothing_rgb, dtype=float), np.asarray(car_rgb, dtype=float)
-    return tuple(
-        tuple(int(delta_e_cie76(colour[None, :], car[None, :])[0] < delta_e_threshold) for car in cars)
-        for colour in clothing
-    )
-
-
 @dataclass(frozen=True)
 class JointProposal:
     """q ∝ lambda p + (1 - lambda) p h / c over the inputs of `nominal`, h = sqrt(pi_hat) or, with the V2I
-    factor, sqrt(a pi_hat + (1 - a) pi_hat r) (module docstring)."""
+    factor, sqrt(a pi_hat + (1 - a) pi_hat r) (module docstring; sampling/v2i_factor.py)."""
 
     nominal: Mapping[str, Family]
     coefficients: tuple[float, ...]
@@ -333,13 +262,13 @@ class JointProposal:
     defensive_share: float
     norm_rel_se: float = 0.0
     #: E_p[pi_hat] and its standard error, on the very NORM_DRAWS nominal draws that give c: the known mean
-    #: of the control variate pi_hat (report/tables.py). NaN in proposals stored before it.
+    #: of the control variate pi_hat (report/tables.py). NaN in a stored proposal without it.
     mean_pi_hat: float = math.nan
     mean_pi_hat_se: float = math.nan
-    #: The kinematic features' maps (module docstring); None: the design of x alone (proposals stored
-    #: before session 8, scenarios that lack a KINEMATIC_INPUTS input).
+    #: The kinematic features' maps (module docstring); None: the design of x alone (a stored proposal
+    #: without them, a scenario that lacks a KINEMATIC_INPUTS input).
     kinematics: Kinematics | None = None
-    #: The V2I factor (module docstring); None: h = sqrt(pi_hat), the proposal of SV alone.
+    #: The V2I factor (sampling/v2i_factor.py); None: h = sqrt(pi_hat), the proposal of SV alone.
     v2i_factor: ContrastFactor | None = None
     #: E_p[pi_hat r] and its standard error, V2I's control variate's known mean; NaN without the factor.
     mean_pi_v2i: float = math.nan
@@ -400,11 +329,13 @@ class JointProposal:
         return self._pi_and_v2i(x)[1]
 
     def root_pi(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        """h: sqrt(pi_hat), or with the V2I factor sqrt(a pi_hat + (1 - a) pi_v2i) (module docstring)."""
+        """h: sqrt(pi_hat), or with the V2I factor sqrt(a pi_hat + (1 - a) pi_v2i) (v2i_factor.py)."""
         if self.v2i_factor is None:
             return np.sqrt(self.pi_hat(x))
         share = self.v2i_factor.target_share
-        if not self.v2i_factor.v2i_only_coefficients:  # session 12's expression, to the last bit
+        # Without the V2I-only term, pi (a + (1 - a) r) rather than a pi + (1 - a) pi r: the two differ in
+        # the last bit, and the runs of --is-v2i-factor contrast draw with this one.
+        if not self.v2i_factor.v2i_only_coefficients:
             pi = self.pi_hat(x)
             return np.sqrt(pi * (share + (1 - share) * self.v2i_factor.r(x)))
         pi, v2i = self._pi_and_v2i(x)
@@ -430,8 +361,6 @@ class JointProposal:
                 return {name: float(x[name][k]) for name in self.names}, -math.log(float(ratio[k]))
 
     def to_json(self) -> str:
-        from pedsafe_sumo.sampling.draws import family_to_json
-
         return json.dumps(
             {
                 "kind": KIND,
@@ -459,8 +388,6 @@ class JointProposal:
 
     @staticmethod
     def from_json(text: str) -> JointProposal:
-        from pedsafe_sumo.sampling.draws import family_from_json
-
         data = json.loads(text)
         if data.get("kind") != KIND:
             raise ValueError("not a joint proposal")
@@ -498,61 +425,6 @@ def fit_logistic(
         return nll + 0.5 * ridge * float(np.sum(b[1:] ** 2)), grad
 
     return optimize.minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
-
-
-def margin_column(nominal: Mapping[str, Family]) -> int:
-    """The design column of the standardised braking margin's linear term (JointProposal.features: the
-    intercept, each input's indicators or z and z^2 in sorted order, then v, 1/w and margin_s)."""
-    column = 1
-    for name in sorted(nominal):
-        family = nominal[name]
-        column += len(family.probabilities) - 1 if isinstance(family, Categorical) else 2
-    return column + 4
-
-
-def region_proposal(
-    nominal: Mapping[str, Family], kinematics: Kinematics | None, defensive_share: float
-) -> JointProposal | None:
-    """The guard of a pilot without collisions (module docstring): pi_hat a steep logistic step down at
-    margin_s = 0, so that q ≈ lambda p + (1 - lambda) p 1{margin_s < 0} / P_p(margin_s < 0); None where the
-    scenario lacks a kinematic input."""
-    if kinematics is None or not set(KINEMATIC_INPUTS) <= set(nominal):
-        return None
-    kinematics = kinematics.with_moments(nominal)
-    mean_s, sd_s = kinematics.moments[2]
-    shell = JointProposal(dict(nominal), (), 1.0, defensive_share, kinematics=kinematics)
-    probe = shell.features(shell.sample_nominal(np.random.default_rng(NORM_SEED), 1))
-    coefficients = np.zeros(probe.shape[1])
-    # eta = -GUARD_STEEPNESS margin_s / sd: pi_hat = 1/2 at margin_s = 0, sqrt(pi_hat) 4.5e-5 at +0.1 sd.
-    coefficients[margin_column(nominal)] = -GUARD_STEEPNESS
-    coefficients[0] = -GUARD_STEEPNESS * mean_s / sd_s
-    proposal = normalised(nominal, coefficients, defensive_share, kinematics)
-    return proposal if proposal.norm > 0 and proposal.bound <= MAX_MEAN_TRIES else None
-
-
-def fit_joint(
-    inputs: Mapping[str, np.ndarray],
-    collision: np.ndarray,
-    nominal: Mapping[str, Family],
-    defensive_share: float,
-    ridge: float = RIDGE,
-    kinematics: Kinematics | None = None,
-) -> JointProposal | None:
-    """The joint proposal fitted on pilot rows (`inputs` name -> values, `collision` 0/1); None when the
-    rows hold no collision (the next stage then stays nominal) or the envelope would be too loose. With
-    `kinematics`, the kinematic features join the design where every KINEMATIC_INPUTS input is drawn."""
-    y = np.asarray(collision, dtype=float)
-    if not y.any():
-        return None
-    if kinematics is not None:
-        kinematics = kinematics.with_moments(nominal) if set(KINEMATIC_INPUTS) <= set(nominal) else None
-    shell = JointProposal(dict(nominal), (), 1.0, defensive_share, kinematics=kinematics)
-    proposal = normalised(
-        nominal, fit_logistic(shell.features(inputs), y, ridge), defensive_share, kinematics
-    )
-    if not proposal.norm > 0 or proposal.bound > MAX_MEAN_TRIES:
-        return None
-    return proposal
 
 
 def normalised(
@@ -619,113 +491,10 @@ def normalised(
     )
 
 
-def sv_v2i_pairs(rows: pd.DataFrame) -> pd.DataFrame:
-    """The pairs of `rows` (both conditions, status ok on both sides) by episode: SV's collision and
-    sampler_inputs, V2I's collision as `collision_v2i`."""
-    from pedsafe_sumo.sampling.stages import ADAPT_CONDITION
-
-    ok = rows[rows["status"] == "ok"]
-    sv = ok[ok["condition"] == ADAPT_CONDITION].set_index("episode")
-    v2i = ok[ok["condition"] == V2I_CONDITION].set_index("episode")
-    return sv[["collision", "sampler_inputs"]].join(
-        v2i[["collision"]].rename(columns={"collision": "collision_v2i"}), how="inner"
-    )
-
-
-def v2i_only_count(rows: pd.DataFrame) -> int:
-    """How many pairs of `rows` have a V2I collision and no SV collision (the V2I-only term's data)."""
-    pairs = sv_v2i_pairs(rows)
-    return int((~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).sum())
-
-
-def v2i_only_engages(n_v2i_only: int, n_v2i: int, defensive_share: float) -> bool:
-    """Whether pilot pairs holding `n_v2i_only` V2I-only collisions among `n_v2i` V2I collisions are enough
-    for the V2I-only term (module docstring, "Enough")."""
-    if n_v2i_only >= GUARD_MIN_COLLISIONS:
-        return True
-    return n_v2i_only >= V2I_ONLY_MIN_COLLISIONS and n_v2i_only >= defensive_share * n_v2i
-
-
-def with_v2i_factor(
-    proposal: JointProposal,
-    rows: pd.DataFrame,
-    low_contrast: tuple[tuple[int, ...], ...],
-    v2i_only: bool = False,
-) -> JointProposal | None:
-    """`proposal` with the V2I factor (module docstring) fitted on the pairs of `rows` (pilot rows of both
-    conditions) whose SV episode collided; None where they hold fewer than GUARD_MIN_COLLISIONS V2I
-    collisions, the scenario draws no clothing or no vehicle colour in every pilot episode, or the
-    envelope would be too loose (the proposal of SV alone then stands).
-
-    With `v2i_only`, where the pairs hold enough V2I collisions whose SV episode did not collide
-    (`v2i_only_engages`), the factor also carries the V2I-only term pi_vo, a ridge logistic of those on
-    every pair over pi_hat's design (module docstring); the factor then applies where either count is
-    enough."""
-    pairs = sv_v2i_pairs(rows)
-    hit = pairs[pairs["collision"].astype(bool)]
-    y = hit["collision_v2i"].astype(float).to_numpy()
-    y_only = (~pairs["collision"].astype(bool) & pairs["collision_v2i"].astype(bool)).to_numpy(dtype=float)
-    n_v2i = int(pairs["collision_v2i"].astype(bool).sum())
-    with_only = v2i_only and v2i_only_engages(int(y_only.sum()), n_v2i, proposal.defensive_share)
-    if y.sum() < GUARD_MIN_COLLISIONS and not with_only:
-        return None
-    records = [json.loads(text)["inputs"] for text in pairs["sampler_inputs"]]
-    colour_inputs = sorted(
-        name for name in records[0] if name.endswith(COLOUR_SUFFIX) and all(name in r for r in records)
-    )
-    if not colour_inputs or not all(CLOTHING_INPUT in r for r in records):
-        return None
-    factor = ContrastFactor(tuple(colour_inputs), low_contrast, ())
-    hit_records = [json.loads(text)["inputs"] for text in hit["sampler_inputs"]]
-    z = {name: np.array([r[name] for r in hit_records], dtype=float) for name in factor.names}
-    coefficients = fit_logistic(factor.design(z), y, RIDGE)
-    factor = dataclasses.replace(factor, coefficients=tuple(float(b) for b in coefficients))
-    if with_only:
-        x = {name: np.array([r[name] for r in records], dtype=float) for name in proposal.names}
-        only = fit_logistic(proposal.features(x), y_only, RIDGE)
-        factor = dataclasses.replace(factor, v2i_only_coefficients=tuple(float(b) for b in only))
-    nominal = {**proposal.nominal, **factor.nominal()}
-    fitted = normalised(nominal, proposal.coefficients, proposal.defensive_share, proposal.kinematics, factor)
-    return fitted if fitted.norm > 0 and fitted.bound <= MAX_MEAN_TRIES else None
-
-
-def joint_update(
-    rows: pd.DataFrame,
-    condition: str,
-    defensive_share: float,
-    kinematics: Kinematics | None = None,
-    pilot_stage: bool = False,
-    low_contrast: tuple[tuple[int, ...], ...] | None = None,
-    v2i_only: bool = False,
-) -> tuple[JointProposal | None, int, bool]:
-    """The proposal of the next stage from every pilot row so far of `condition` (status ok), their
-    collisions, and whether it is the guard's region proposal (a `pilot_stage` with fewer than
-    GUARD_MIN_COLLISIONS collisions, where the scenario has the kinematic inputs) rather than the fit.
-    With `low_contrast` (the V2I factor's table L), the fit gains the V2I factor where with_v2i_factor
-    finds it can (the pairs of `rows` with both conditions), with `v2i_only` its V2I-only term."""
-    from pedsafe_sumo.sampling.stages import _inputs_and_nominal
-
-    both = rows
-    rows = rows[(rows["condition"] == condition) & (rows["status"] == "ok")]
-    inputs, nominal = _inputs_and_nominal(rows)
-    y = rows["collision"].astype(float).to_numpy()
-    n_collisions = int(y.sum())
-    if pilot_stage and kinematics is not None and n_collisions < GUARD_MIN_COLLISIONS:
-        region = region_proposal(nominal.families, kinematics, defensive_share)
-        if region is not None:
-            return region, n_collisions, True
-    proposal = fit_joint(inputs, y, nominal.families, defensive_share, kinematics=kinematics)
-    if proposal is not None and low_contrast is not None:
-        proposal = with_v2i_factor(proposal, both, low_contrast, v2i_only) or proposal
-    return proposal, n_collisions, False
-
-
 def proposal_of_json(text: str) -> Any:
     """A task's proposal: None (nominal), a JointProposal, or the product's families."""
     if not text:
         return None
     if is_joint_json(text):
         return JointProposal.from_json(text)
-    from pedsafe_sumo.sampling.draws import product_from_json
-
     return product_from_json(text).families

@@ -42,7 +42,7 @@ POOL_FROM_KEY = "estimate_from_stage"
 
 def pooled_from_stage(pool_from: int | None, pilot_stages: int) -> int:
     """The first stage Table I pools: `pool_from` (--is-pool-from) capped at the final stage
-    (`pilot_stages`); None, as in runs made before the flag, is the final stage alone."""
+    (`pilot_stages`); None (no --is-pool-from recorded) is the final stage alone."""
     return pilot_stages if pool_from is None else min(int(pool_from), int(pilot_stages))
 
 

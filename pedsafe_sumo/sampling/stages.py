@@ -63,16 +63,16 @@ MAX_DEFENSIVE_SHARE = 0.9
 #: inputs that do not matter enters by chance at a stage near 10%; chosen before any batch ran.
 SCREEN_P_VALUE = 0.01
 #: Values of --is-inputs: "screened" proposes only the inputs the screen selects, "all" every input of
-#: sampling.draws.PROPOSED_INPUTS the scenario draws (the method before the screen).
+#: sampling.draws.PROPOSED_INPUTS the scenario draws (the cross-entropy method without a screen).
 INPUTS_SCREENED = "screened"
 INPUTS_ALL = "all"
 INPUT_MODES = (INPUTS_SCREENED, INPUTS_ALL)
 #: Values of --is-score, how a pilot episode without a collision is ranked: "clearance" by minus its closest
-#: clearance [m] (the method's first score), "ttc" by minus its smallest time to collision [s] (Hayward
+#: clearance [m], "ttc" by minus its smallest time to collision [s] (Hayward
 #: 1972's surrogate). On the paper-v5 MC run's 10,000 SV crossing episodes the top 10% by clearance are 93%
 #: yielding pedestrians with a slower ego (4.3 m/s; all: 5.2), who stop about 1 m from the car, while the
 #: collisions are 63% unaware pedestrians and a fast ego (10.3 m/s): the clearance drives the proposal away
-#: from collisions. The top 10% by TTC: ego 7.0 m/s, 53% unaware (EXPERIMENTS.md, issue 17 session 5).
+#: from collisions. The top 10% by TTC: ego 7.0 m/s, 53% unaware (docs/decisions/2026-11-23-is-score-ttc.md).
 SCORE_CLEARANCE = "clearance"
 SCORE_TTC = "ttc"
 SCORES = (SCORE_CLEARANCE, SCORE_TTC)
@@ -92,9 +92,9 @@ MAX_PILOT_EPISODES = 100_000
 #: estimate (sampling/pooling.py). A stage's episodes add precision when its efficiency is above about half
 #: the final stage's (the pooled variance sum n_t s_t^2 / N^2 is then below the final stage's alone).
 #: Stage 0 is plain Monte Carlo and stage 1's proposal is fitted on one stage of 200 pairs; on ten-stage
-#: runs of jaywalking and blending (EXPERIMENTS.md, session 10) stage 1 was worth 1.7-6.1 per episode
-#: against the final's 4.8-12.3 with the control variate, and stage 2 5.7-10.3. So from stage 2, fixed
-#: before any run of this session; a run of fewer pilot stages pools from its final stage.
+#: runs of jaywalking and blending stage 1 is worth 1.7-6.1 per episode against the final's 4.8-12.3
+#: with the control variate, and stage 2 5.7-10.3 (docs/decisions/2026-11-23-is-pooling-and-pilot-stages.md).
+#: So from stage 2, fixed before any run that pools; a run of fewer pilot stages pools from its final stage.
 DEFAULT_POOL_FROM_STAGE = 2
 
 

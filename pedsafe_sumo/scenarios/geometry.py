@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -120,7 +121,8 @@ class Approach:
     #: The approach's speed limit (its fastest vehicle lane's) [m/s].
     speed_limit_mps: float = math.nan
     #: Whether the kerb-side vehicle lane lies right beside the sidewalk (no lane between them): a car
-    #: parked at the kerb of a one-lane approach stands next to that lane (registry.kerb_staging_problem).
+    #: parked at the kerb of a one-lane approach stands next to that lane (kerb_staging_problem in
+    #: placements/straight.py).
     sidewalk_beside_lane: bool = True
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
@@ -293,8 +295,6 @@ def refuge_walkingareas(site: Site) -> tuple[str, ...]:
     previous lane, the pedestrian router finds no way from the walking area to the route's end (itself),
     and the fallback for that case reads the previous lane (`prevLane->getLinkTo(...)`, a null pointer).
     The episode avoids it by giving the person a route whose end is a sidewalk (docs/sites.md)."""
-    import xml.etree.ElementTree as ET
-
     walking: set[str] = set()
     with_sidewalk: set[str] = set()
     for _, element in ET.iterparse(site.file("net.xml")):
@@ -313,9 +313,9 @@ def straight_staging_problem(approach: Approach, ego_lane: int | None = None) ->
     """Why a straight-through ego cannot be staged in vehicle lane `ego_lane` of the approach (None: the
     lane next to the kerb lane, where crossing, jaywalking and background blending put it; on a one-lane
     approach the lane itself, the vehicles that hide the pedestrian parked at the kerb beside it:
-    registry.kerb_staging_problem says whether they fit), or None. A lane that only turns (on Xueqing's
-    east approach the second lane turns left) would have the ego drive straight from a turning lane,
-    against the lane's marking."""
+    kerb_staging_problem in placements/straight.py says whether they fit), or None. A lane that only
+    turns (on Xueqing's east approach the second lane turns left) would have the ego drive straight from
+    a turning lane, against the lane's marking."""
     if ego_lane is None:
         ego_lane = 0 if len(approach.lane_ids) == 1 else 1
     if ego_lane >= len(approach.lane_ids):

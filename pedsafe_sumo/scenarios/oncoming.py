@@ -1,6 +1,6 @@
 """The oncoming through movement of a left-turning ego, and the oncoming vehicle that hides its pedestrian.
 
-left_turn (issue 13): "permissive left on green against the parallel crosswalk, hidden by opposing traffic".
+left_turn: "permissive left on green against the parallel crosswalk, hidden by opposing traffic".
 Where the signal program lets the opposing approach move while the ego turns left (a two-phase plan, e.g.
 networks/xueqing_two_phase), a vehicle of the opposing approach driving straight through the junction
 stands, at the start, between the ego and the pedestrian waiting at the crosswalk the ego turns across:
@@ -25,6 +25,7 @@ from pedsafe_sumo.scenarios.geometry import (
     load_approach,
     offset_to_lane_pos_m,
 )
+from pedsafe_sumo.scenarios.signals import SignalStagingError, load_junction_signals
 from pedsafe_sumo.sumo_net import read_net
 
 #: The arm across the junction from each arm.
@@ -107,7 +108,7 @@ def sight_line_pos_m(path: OncomingPath, eye_xy, target_xy) -> float | None:
     return None
 
 
-def placement(path: OncomingPath, front_pos_m: float) -> tuple[str, float]:
+def lane_position(path: OncomingPath, front_pos_m: float) -> tuple[str, float]:
     """(lane id, position on it) of a front `front_pos_m` SUMO metres along the path; beyond its end, the last
     lane's end."""
     done_m = 0.0
@@ -120,7 +121,7 @@ def placement(path: OncomingPath, front_pos_m: float) -> tuple[str, float]:
 
 def point_at(path: OncomingPath, pos_m: float) -> tuple[float, float]:
     """Where SUMO draws position `pos_m` (lane-length metres along the path)."""
-    lane_id, on_lane_m = placement(path, pos_m)
+    lane_id, on_lane_m = lane_position(path, pos_m)
     lane = next(ln for ln in path.lanes if ln.lane_id == lane_id)
     offset = lane_pos_to_offset_m(lane.shape, lane.length_m, on_lane_m)
     x_m, y_m = sumolib.geomhelper.positionAtShapeOffset(lane.shape, offset)[:2]
@@ -131,8 +132,6 @@ def oncoming_signal_problem(site: Site, arm: str | None, ego_lane_id: str, ego_t
     """Why the site's signal program cannot stage an oncoming vehicle for a left turn from `ego_lane_id` onto
     `ego_to_edge` (one line), or None: no oncoming through movement, or no phase showing green to it and to
     the ego's turn together (split phasing, as on Xueqing)."""
-    from pedsafe_sumo.scenarios.signals import SignalStagingError, load_junction_signals
-
     try:
         path = load_oncoming(site, arm)
         approach = load_approach(site, arm or default_arm(site))

@@ -10,7 +10,7 @@ One SUMO instance serves a worker for all its episodes: the first episode starts
 reload it with `load` (about 7 ms on the Xueqing network, against about 10 ms for a start and much
 more for a new sumo-gui process), which resets the simulation to time 0 with new options.
 
-Every episode loads (`restore_state=False`, the default since session 7). A session made with
+Every episode loads (`restore_state=False`, the default). A session made with
 `restore_state=True` restores instead, headless, an episode whose options differ from the last load's
 only in `--seed` and that loads no additional file, from the state saved right after that load
 (`simulation.loadState`, about 1.5 ms against about 10 ms; docs/engine.md "Restoring a saved state
@@ -19,15 +19,16 @@ SUMO's generators continue across a restore, and the staged vehicles (copies of 
 0.1) get their speed factors from them. On the dual-ring site, right_turn on the W approach (seed
 1641411168) ran after the same episode's SV run gave the leader a speed factor of 0.9932 instead of the
 0.9602 that every load with that seed gives, and its V2I run failed ("SUMO did not insert vehicle
-'leader_0'"), while it runs when loaded (tests/sim/test_episode_history.py). On Xueqing session 6 found
-80 of 80 rows equal (benchmarks/bench_load_state.py, tools/compare_runs_exact.py): the effect is rare, not
-absent. What the restore does, and its other limits:
+'leader_0'"), while it runs when loaded (tests/sim/test_episode_history.py). On Xueqing 80 of 80 rows
+came out equal with and without the restore (benchmarks/bench_load_state.py, tools/compare_runs_exact.py):
+the effect is rare, not absent (docs/decisions/2026-11-27-state-restore-off.md). What the restore does,
+and its other limits:
 - the state is saved without SUMO's random number generators (no --save-state.rng): with them in the
   file, restored episodes differ from loaded ones from the second on (measured, mechanism not found);
 - a restore keeps SUMO's generators where the last episode left them (generator states written into a
   state file did not reach SUMO 1.28's draws, and TraCI has no call to reseed): the episode's `--seed`
   is not applied.
-  Session 6 took the staging to draw nothing from SUMO that reaches a row (episodes loaded with another
+  The staging is built to draw nothing from SUMO that reaches a row (episodes loaded with another
   `--seed` gave the same 80 rows on Xueqing); the staged vehicles' speed factors do reach rows elsewhere
   (above), which is why the restore is off by default;
 - a state holds no traffic light programs (only which one runs, and its phase): a program that TraCI
@@ -82,13 +83,15 @@ class SumoSession:
         self._token = object()  # this session, in _libsumo_user (no reference to the session itself)
         self.api: ModuleType
         if gui:
+            # Imported here: a session loads only the API it uses (traci ~0.3 s to import; libsumo ~0.6 s
+            # and ~160 MiB of RSS, which a sumo-gui replay does not need).
             import traci
 
             self.api = traci
             self._exception = traci.TraCIException
             self._lost: type[Exception] = traci.FatalTraCIError
         else:
-            import libsumo
+            import libsumo  # here, not at the top: see traci above
 
             self.api = libsumo
             self._exception = libsumo.TraCIException

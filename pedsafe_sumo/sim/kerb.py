@@ -1,8 +1,8 @@
-"""Cars parked at the kerb of a one-lane approach, as SUMO parking spaces (issue 14 item 4).
+"""Cars parked at the kerb of a one-lane approach, as SUMO parking spaces.
 
 On a one-lane approach the vehicles that hide the pedestrian (crossing, jaywalking, background blending)
-stand parked at the kerb beside the lane (VehicleSetup.kerb_offset_m > 0, scenarios.registry). SUMO knows
-where: each stands in a parking area of its own, one `<space>` at the kerb, written per episode as an
+stand parked at the kerb beside the lane (VehicleSetup.kerb_offset_m > 0, scenarios/episode_setup.py). SUMO
+knows where: each stands in a parking area of its own, one `<space>` at the kerb, written per episode as an
 additional file. SUMO reports a vehicle parked in a space at the space's position and angle
 (MSParkingArea::getVehiclePosition, getVehicleAngle), so the perception world (which reads SUMO's
 positions), sumo-gui and the FCD output all put the car where the staging does.
@@ -27,8 +27,8 @@ import math
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, VehicleSetup
 from pedsafe_sumo.scenarios.geometry import Approach
-from pedsafe_sumo.scenarios.registry import EpisodeSetup, VehicleSetup
 
 #: How long a parked car's stop lasts [s]: beyond any episode (time_limit_s is at most 600 s).
 PARKED_DURATION_S = 1.0e6

@@ -65,7 +65,7 @@ def assert_refused(capsys, argv: list[str], message: str) -> str:
         ([*CROSSING, "--cluster", "local:2", "--workers", "2"], "exclude each other"),
         ([*CROSSING, "--workers", "0"], "--workers must be at least 1"),
         ([*CROSSING, "--resume"], "--resume needs --out DIR"),
-        # Upper bounds (issue 19): values that would make a batch run for ever are refused up front.
+        # Upper bounds: values that would make a batch run for ever are refused up front.
         ([*CROSSING, "--set", "queue_vehicles=1e9"], "queue_vehicles must be at most 20"),
         ([*CROSSING, "--set", "time_limit_s=1e12"], "time_limit_s must be at most 600"),
         ([*CROSSING, "--set", "traffic.headway_rate_per_s=1e9"], "headway_rate_per_s' must be at most 1 "),
@@ -210,7 +210,7 @@ def test_resume_needs_a_run_to_resume(capsys, tmp_path):
 
 
 def test_a_huge_queue_is_refused_by_the_real_command_line_not_run(tmp_path):
-    """The issue's example: `--set queue_vehicles=1e9` used to stage a billion vehicles (the batch hung)."""
+    """`--set queue_vehicles=1e9` would stage a billion vehicles (the batch would hang): refused up front."""
     out = tmp_path / "out"
     proc = batch(*CROSSING, "--set", "queue_vehicles=1e9", "--out", str(out), timeout=120)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
@@ -250,7 +250,8 @@ def test_out_refuses_a_directory_with_only_a_hidden_file(capsys, tmp_path):
 
 
 def test_out_accepts_an_empty_directory(tmp_path):
-    from pedsafe_sumo.batch.__main__ import parse_args, prepare
+    from pedsafe_sumo.batch.__main__ import parse_args
+    from pedsafe_sumo.batch.plan import prepare
 
     (tmp_path / "empty").mkdir()
     plan = prepare(parse_args([*CROSSING, "--out", str(tmp_path / "empty")]))

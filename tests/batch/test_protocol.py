@@ -1,4 +1,4 @@
-"""Protocols (issue 13 item 4): protocols/paper-v1.toml names every value with its reason, the batch
+"""Protocols: protocols/paper-v1.toml names every value with its reason, the batch
 runs it with --protocol (only --episodes and --workers may override it), and run.json records exactly
 the protocol's values and the file's hash. The expected values are read from the file with tomllib
 here, not through pedsafe_sumo.protocol."""
@@ -15,10 +15,10 @@ from batch_cli import batch
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
-#: The newest protocol: the one that runs on this code (older ones predate parameters added since, and
-#: are refused, as a protocol must name every value).
+#: The newest protocol: the one that runs on this code (older ones lack parameters the code has, and are
+#: refused, as a protocol must name every value).
 PROTOCOL = REPO_ROOT / "protocols" / "paper-v7.toml"
 
 

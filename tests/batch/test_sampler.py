@@ -1,4 +1,4 @@
-"""`batch --sampler is` (issue 17): flags checked in one line, the protocol accepted beside it, and a real
+"""`batch --sampler is`: flags checked in one line, the protocol accepted beside it, and a real
 run whose stages, stored proposals and weights are checked against an independent recomputation."""
 
 from __future__ import annotations
@@ -10,8 +10,10 @@ import pandas as pd
 import pytest
 from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 
-from pedsafe_sumo.batch.__main__ import main, parse_args, prepare, resumed_arguments
+from pedsafe_sumo.batch.__main__ import main, parse_args
+from pedsafe_sumo.batch.arguments import resumed_arguments
 from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.batch.plan import prepare
 from pedsafe_sumo.protocol import main as protocol_main
 from pedsafe_sumo.report.tables import table_one_of_run
 from pedsafe_sumo.sampling.draws import family_from_json, product_from_json
@@ -41,7 +43,7 @@ PRODUCT = ["--is-family", "product"]
         (["--sampler", "is", "--is-proposal", "X", "--is-pilot-stages", "2"], "leave out the other --is-*"),
         (["--sampler", "is", "--condition", "v2i"], "adapts its proposal on the SV condition"),
         (["--sampler", "is", "--is-family", "joint", "--is-score", "ttc"], "--is-score: not used by"),
-        # joint is the default since session 10: the product's own flags alone name the wrong family
+        # joint is the default family: the product's own flags alone name the wrong family
         (["--sampler", "is", "--is-inputs", "all"], "--is-inputs: not used by --is-family joint (give"),
         (
             ["--sampler", "is", "--is-family", "joint", "--is-inputs", "all", "--is-min-spread", "0.5"],
@@ -112,9 +114,9 @@ def test_the_sampler_may_be_given_beside_a_protocol(tmp_path):
 
 
 def test_the_ttc_score_is_the_default_and_older_runs_resume_with_the_clearance_score(tmp_path):
-    """Since session 6 the pilot stages rank a miss by its TTC unless told otherwise; a run recorded
-    before --is-score existed ranked by clearance, and --resume must keep that (a missing key is filled
-    with the value such runs had, not with today's default)."""
+    """The pilot stages rank a miss by its TTC unless told otherwise; a run.json without is_score ranked
+    by clearance, and --resume must keep that (a missing key is filled with the value such runs had, not
+    with the current default)."""
     plan = prepare(parse_args(["--scenario", "crossing", "--sampler", "is", "--out", str(tmp_path / "r")]))
     assert plan.identity["sampler"]["score_kind"] == "ttc"
     assert plan.identity["sampler"]["score"].endswith("-min_ttc_s")
@@ -129,24 +131,24 @@ def test_the_ttc_score_is_the_default_and_older_runs_resume_with_the_clearance_s
 
 
 def test_the_joint_family_is_the_default_and_older_runs_resume_with_the_product(tmp_path):
-    """Since session 10 --sampler is fits the joint proposal unless told otherwise; a run recorded before
-    --is-family existed drew from the product, and --resume must keep drawing from it."""
+    """--sampler is fits the joint proposal unless told otherwise; a run.json without is_family drew from
+    the product, and --resume must keep drawing from it."""
     plan = prepare(parse_args(["--scenario", "crossing", "--sampler", "is", "--out", str(tmp_path / "r")]))
     assert plan.identity["sampler"]["family"] == "joint"
     product = prepare(
         parse_args(["--scenario", "crossing", "--sampler", "is", *PRODUCT, "--out", str(tmp_path / "p")])
     )
-    assert "family" not in product.identity["sampler"]  # a product run's identity is as before
+    assert "family" not in product.identity["sampler"]  # a product run's identity has no family key
     older = {"scenario": "crossing", "sampler": "is", "episodes": 10}
     assert resumed_arguments(older, {})["is_family"] == "product"
     assert resumed_arguments({**older, "is_family": "joint"}, {})["is_family"] == "joint"
 
 
 def test_table_one_pools_from_stage_2_by_default_and_older_runs_resume_with_the_final_stage_alone(tmp_path):
-    """Since session 11 Table I pools the stages from 2 on (--is-pool-from, recorded in the sampler's
-    identity so that a resume cannot change it); a run of fewer pilot stages, or one given its final stage,
-    estimates from the final stage alone and keeps the identity runs had before the flag; a run recorded
-    before the flag resumes with the final stage alone."""
+    """Table I pools the stages from 2 on (--is-pool-from, recorded in the sampler's identity so that a
+    resume cannot change it); a run of fewer pilot stages, or one given its final stage, estimates from the
+    final stage alone and its identity has no estimate_from_stage key; a run.json without is_pool_from
+    resumes with the final stage alone."""
 
     def sampler_of(*extra: str) -> dict:
         args = parse_args(["--scenario", "crossing", "--sampler", "is", *extra, "--out", str(tmp_path / "r")])
@@ -165,16 +167,16 @@ def test_table_one_pools_from_stage_2_by_default_and_older_runs_resume_with_the_
 
 
 def test_the_v2i_factor_is_on_for_new_joint_runs_and_older_runs_resume_without_it(tmp_path):
-    """Since session 12 the joint proposal may aim at V2I's collisions too (--is-v2i-factor contrast,
-    recorded in the sampler's identity), since session 13 by default with the V2I-only term
-    (contrast+v2i-only, a key of its own); 'none', the product family and runs recorded before the flag
-    keep the identity they had, and runs of 'contrast' theirs."""
+    """The joint proposal may aim at V2I's collisions too (--is-v2i-factor contrast, recorded in the
+    sampler's identity), by default with the V2I-only term (contrast+v2i-only, a key of its own); the
+    identity of 'none', of the product family and of a run.json without is_v2i_factor has neither key, and
+    that of 'contrast' no v2i_only key."""
 
     def sampler_of(*extra: str) -> dict:
         args = parse_args(["--scenario", "crossing", "--sampler", "is", *extra, "--out", str(tmp_path / "r")])
         return prepare(args).identity["sampler"]
 
-    # since session 13 the default also carries the V2I-only term (its own key); 'contrast' is session 12's
+    # the default also carries the V2I-only term (its own key); 'contrast' is the factor without it
     assert "v2i_factor" in sampler_of() and "v2i_only" in sampler_of()
     contrast = sampler_of("--is-v2i-factor", "contrast")
     assert "v2i_factor" in contrast and "v2i_only" not in contrast

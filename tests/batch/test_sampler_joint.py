@@ -1,4 +1,4 @@
-"""`batch --sampler is --is-family joint` (issue 17, joint17): a real run whose joint proposal is fitted on
+"""`batch --sampler is --is-family joint`: a real run whose joint proposal is fitted on
 the pilot, whose weights are recomputed here from the stored coefficients, and whose rows are the same on
 1 and 2 workers."""
 
@@ -14,9 +14,9 @@ from batch_cli import batch, resume_after_a_stop_in_the_final_stage
 from scipy import special, stats
 
 from pedsafe_sumo.batch.chunks import episode_seed
-from pedsafe_sumo.demand.sampling import age_group_speed_distributions
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 JOINT_RUN = (
     "--scenario", "background_blending", "--episodes", "3", "--seed", "3", "--sampler", "is",
@@ -41,7 +41,7 @@ def _expected_weight(record: dict, data: dict) -> float:
         z = (x - law.mean()) / law.std()
         continuous.append(z)
         columns += [z, z * z]
-    if "kinematics" in data:  # session 8: v, 1/w and the braking margin, standardised by stored moments
+    if "kinematics" in data:  # v, 1/w and the braking margin, standardised by stored moments
         kin = data["kinematics"]
         x = record["inputs"]
         v = min(max(math.exp(x["ego_speed_log"]), kin["ego_speed_min_mps"]), kin["ego_speed_max_mps"])

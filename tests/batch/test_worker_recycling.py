@@ -1,4 +1,4 @@
-"""Worker recycling (--recycle-chunks, issue 19 item 3): the process pool replaces its worker processes
+"""Worker recycling (--recycle-chunks): the process pool replaces its worker processes
 after every N chunks per worker, so libsumo's per-`load` memory cannot pile up over a long run; the rows
 are those of a run without recycling, because an episode's rows depend on its seed, not on its process."""
 

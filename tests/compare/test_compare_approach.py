@@ -1,4 +1,4 @@
-"""compare's replay commands on runs made with batch --approach (issue 17 item 5): the episode lists B's
+"""compare's replay commands on runs made with batch --approach: the episode lists B's
 worse episodes with the command the HTML report prints (report.html.replay_commands), which names the
 scenario and the approach, and the command runs as printed.
 

@@ -1,5 +1,6 @@
-"""tools/compare_runs_exact.py: the bit-for-bit check of issue 19's optimisations must see a difference of
-one unit in the last place, a changed dtype, a missing step, and must treat NaN as equal to NaN."""
+"""tools/compare_runs_exact.py: the bit-for-bit check of runs (that a change keeps the rows) must see a
+difference of one unit in the last place, a changed dtype, a missing step, and must treat NaN as equal to
+NaN."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The place lookup (lane and crossing at a point) of the conflicts tool: the same answers as sumolib's
 own search, and no memory kept per lookup (sumolib's brute-force fallback, used when the rtree package
-is missing, appended every lane of the net to a list it keeps on every call: ~1 kB per interaction)."""
+is missing, appends every lane of the net to a list it keeps on every call: ~1 kB per interaction)."""
 
 from __future__ import annotations
 
@@ -54,5 +54,5 @@ def test_lookups_keep_no_memory():
         grown = tracemalloc.get_traced_memory()[0] - before
     finally:
         tracemalloc.stop()
-    # sumolib's fallback kept 135 lane references (1 kB) per call: 2 MB over 2,000 calls.
+    # sumolib's fallback keeps 135 lane references (1 kB) per call: 2 MB over 2,000 calls.
     assert grown < 100_000, grown

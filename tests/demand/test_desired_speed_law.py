@@ -1,6 +1,7 @@
-"""traffic.desired_speed_law (issue 14 item 6): "fit" keeps today's background bit for bit, "calibrated" draws
-the background's desired speeds from the calibrated lognormal in the route files and in the episodes alike,
-and on the open road at the paper's flow SUMO's loops measure speeds closer to the fit under it."""
+"""traffic.desired_speed_law: "fit" (the default) draws from the fitted lognormal whatever the calibrated
+values; "calibrated" draws the background's desired speeds from the calibrated lognormal in the route files
+and in the episodes alike, and on the open road at the paper's flow SUMO's loops measure speeds closer to the
+fit under it."""
 
 from __future__ import annotations
 
@@ -133,7 +134,7 @@ def test_the_episode_background_draws_from_the_same_law():
     each desired speed the calibrated law's value of the same normal score."""
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.network.sites import resolve_site
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     log_mu, log_sigma = 2.05, 0.33

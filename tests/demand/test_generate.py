@@ -79,7 +79,7 @@ def test_vehicle_headways_per_lane_are_exponential_and_speeds_lognormal(tmp_path
     # Departures are written with 0.01 s resolution; the KS test is insensitive to that.
     assert stats.kstest(headways, stats.expon(scale=1 / 0.1742).cdf).pvalue > 0.01
     # The fit was measured at 16.67 m/s (traffic.fit_speed_limit_mps): on 13.89 m/s lanes every draw is
-    # scaled by 13.89 / 16.67 (traffic.background_speed_limit_scaled, issue 14 item 5), the lognormal's
+    # scaled by 13.89 / 16.67 (traffic.background_speed_limit_scaled), the lognormal's
     # median with it.
     scaled = stats.lognorm(s=0.4857, scale=np.exp(1.8304) * 13.89 / 16.67)
     assert stats.kstest(speeds, scaled.cdf).pvalue > 0.01

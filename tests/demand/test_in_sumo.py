@@ -12,6 +12,7 @@ import pytest
 from pedsafe_sumo import NETWORKS_DIR, ROUTES_DIR
 from pedsafe_sumo.demand import validate
 from pedsafe_sumo.demand.generate import generate_demand, pedestrian_route_path, vehicle_route_path
+from pedsafe_sumo.demand.validation_page import measured_markers
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
 CROSS_NET = Path(__file__).parent / "data" / "cross.net.xml"
@@ -112,6 +113,6 @@ def test_validation_pipeline_on_the_test_cross(tmp_path):
     )  # fmt: skip
     assert code == 0
     page = (docs / "demand_validation.md").read_text()
-    assert validate.measured_markers("cross")[0] in page and "speed, mid-block approach" in page
+    assert measured_markers("cross")[0] in page and "speed, mid-block approach" in page
     figures = sorted(p.name for p in (docs / "figures").glob("*.png"))
     assert "demand_cross_configured_speed_midblock.png" in figures and len(figures) == 4

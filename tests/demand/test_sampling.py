@@ -9,15 +9,9 @@ import pytest
 from scipy import stats
 
 from pedsafe_sumo.demand.fit import fit_exponential, fit_lognormal
-from pedsafe_sumo.demand.sampling import (
-    Exponential,
-    Lognormal,
-    lognormal_from_mean_p15,
-    poisson_departures_s,
-    sample_pedestrians,
-    traffic_distributions,
-)
+from pedsafe_sumo.demand.sampling import poisson_departures_s, sample_pedestrians, traffic_distributions
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.sampling.distributions import Exponential, Lognormal, lognormal_from_mean_p15
 
 SEED = 20240607
 #: Intervals for the refit checks: 99.9% so that five checks at one seed fail by chance with ~0.5%

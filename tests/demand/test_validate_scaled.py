@@ -1,5 +1,5 @@
 """The demand validation compares each loop's speeds with the fit scaled to that loop's speed limit, as the
-background's desired speeds are scaled (issue 14 item 5, traffic.background_speed_limit_scaled): the
+background's desired speeds are scaled (traffic.background_speed_limit_scaled): the
 pooled speeds against the mixture of the scaled fits, weighted by each loop's records. Checked against a
 KS distance computed here by hand from the lognormal's formula (math.erf), not with scipy."""
 

@@ -3,7 +3,7 @@ never another's (before, any site run without --docs replaced Xueqing's numbers)
 
 from __future__ import annotations
 
-from pedsafe_sumo.demand.validate import measured_markers, write_report
+from pedsafe_sumo.demand.validation_page import measured_markers, write_report
 
 
 def _block(site: str, body: str) -> str:

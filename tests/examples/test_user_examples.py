@@ -13,11 +13,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from examples.cautious_stack import COMFORT_DECEL_MPS2, GAP_M, HEADWAY_S, STOP_SHORT_M, CautiousStack
+from examples.tracking_stack import COAST_S, TrackingStack
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.control.agent import load_agent_class, stack_spec
+from pedsafe_sumo.control.agent import (
+    EgoState,
+    Observation,
+    PerceivedPedestrian,
+    PerceivedVehicle,
+    TrafficLightState,
+    load_agent_class,
+    stack_spec,
+)
+from pedsafe_sumo.control.reference import CLEAR_HOLD_S, ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SITE = get_site("xueqing")
@@ -76,16 +87,12 @@ def test_the_batch_runs_a_perception_plugin_and_records_it_with_the_algorithm(tm
 
 
 def _observation(state, distance_m, speed_mps=10.0, vehicles=()):
-    from pedsafe_sumo.control.agent import EgoState, Observation, TrafficLightState
-
     light = TrafficLightState("J", 0, state, distance_m, math.nan, "onboard_camera", 0.0)
     ego = EgoState(0.0, 0.0, 0.0, speed_mps, 4.5, 1.8)
     return Observation(ego, (), 0.05, traffic_light=light, vehicles=tuple(vehicles))
 
 
 def test_the_cautious_stack_brakes_to_stop_at_a_red_light_and_drives_on_green():
-    from examples.cautious_stack import COMFORT_DECEL_MPS2, STOP_SHORT_M, CautiousStack
-
     stack = CautiousStack()
     stack.setup({"initial_speed_mps": 10.0})
     assert stack.run_step(_observation("G", 30.0), 0.0).target_speed_mps == pytest.approx(10.0)
@@ -102,9 +109,6 @@ def test_the_cautious_stack_brakes_to_stop_at_a_red_light_and_drives_on_green():
 
 
 def test_the_cautious_stack_keeps_its_gap_to_the_vehicle_ahead():
-    from examples.cautious_stack import GAP_M, HEADWAY_S, CautiousStack
-    from pedsafe_sumo.control.agent import PerceivedVehicle
-
     stack = CautiousStack()
     stack.setup({"initial_speed_mps": 10.0})
     ahead = PerceivedVehicle("v", 15.0, 0.0, 0.0, 4.5, 1.8, "onboard_lidar")
@@ -120,8 +124,6 @@ def test_the_cautious_stack_keeps_its_gap_to_the_vehicle_ahead():
 def _walking_into_the_path(time_s: float, perceived: bool):
     """The ego at the origin heading east at 10 m/s; a pedestrian 30 m ahead, 6 m to its right at t = 0,
     walking north at 1.5 m/s into its path (the corridor's edge, 0.9 + 0.5 m off centre, at t = 3.07 s)."""
-    from pedsafe_sumo.control.agent import EgoState, Observation, PerceivedPedestrian
-
     ego = EgoState(0.0, 0.0, 0.0, 10.0, 4.5, 1.8)
     pedestrians = (PerceivedPedestrian("p", 30.0, -6.0 + 1.5 * time_s, "v2i"),) if perceived else ()
     return Observation(ego, pedestrians, 0.05)
@@ -130,9 +132,6 @@ def _walking_into_the_path(time_s: float, perceived: bool):
 def test_the_tracking_stack_keeps_braking_for_a_pedestrian_it_lost_where_the_reference_forgets():
     """Perceived for 0.6 s, then lost: the reference stack drives on 0.5 s after the loss; the tracking
     stack keeps her where she walks (by hand) and brakes until 2 s after the loss, then the 0.5 s hold."""
-    from examples.tracking_stack import COAST_S, TrackingStack
-    from pedsafe_sumo.control.reference import CLEAR_HOLD_S, ReferenceStack
-
     stacks = {"reference": ReferenceStack(), "tracking": TrackingStack()}
     for stack in stacks.values():
         stack.setup({"initial_speed_mps": 10.0})

@@ -2,7 +2,7 @@
 
 from pedsafe_sumo.control.agent import Agent, Command
 
-#: The oracle's deceleration [m/s2] (the issue's 9 m/s2: a full emergency stop on dry asphalt).
+#: The oracle's deceleration [m/s2] (9 m/s2: a full emergency stop on dry asphalt).
 ORACLE_DECELERATION_MPS2 = 9.0
 
 

@@ -1,5 +1,5 @@
 """python -m pedsafe_sumo.ncap: bad input is one line and exit 2 and damages nothing; a small grid writes
-the files of the issue; any cell replays and exports FCD with the existing replay tool."""
+its result files; any cell replays and exports FCD with the existing replay tool."""
 
 from __future__ import annotations
 

@@ -14,12 +14,14 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from agents import ORACLE_DECELERATION_MPS2, BrakesFromFirstFrame, NeverBrakes  # noqa: E402
 
+from pedsafe_sumo.control.reference import ReferenceStack  # noqa: E402
 from pedsafe_sumo.ncap.protocol import load_protocol, select_cells  # noqa: E402
 from pedsafe_sumo.ncap.staging import stage_cell  # noqa: E402
 from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests  # noqa: E402
-from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, SHARED_OSM_SOURCE, Site, get_site  # noqa: E402
+from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, Site, get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
 from pedsafe_sumo.scenarios.geometry import load_approach  # noqa: E402
+from pedsafe_sumo.site.build_command import main as build_network  # noqa: E402
 
 PROTOCOL = load_protocol()
 SITE = get_site("xueqing")
@@ -179,10 +181,8 @@ def test_robustness_variations_stay_on_the_collision_course(never):
 def _second_site(folder: Path) -> Site:
     """Another signalised junction of the shared OSM export (Xueqing Road, 750 m south of the study site),
     built with tools/build_network.py into `folder`."""
-    from pedsafe_sumo.network.build import main as build_network
-
-    osm = SHARED_OSM_SOURCE
-    if not osm.is_file():
+    osm = SITE.source_osm  # the export the study site was clipped from
+    if osm is None or not osm.is_file():
         pytest.fail(f"the shared OSM export {osm} is missing")
     code = build_network(
         [
@@ -225,8 +225,6 @@ def test_every_test_stages_and_hits_where_it_should_on_a_second_site(tmp_path, m
 def test_the_same_seed_gives_the_same_results_and_the_staging_draws_nothing():
     # The reference stack under V2I draws perception noise from the seed: the same seed repeats the run
     # exactly; the staged world does not depend on the seed at all.
-    from pedsafe_sumo.control.reference import ReferenceStack
-
     cells = select_cells(PROTOCOL, "CPNCO-25,CPLA-50", (60.0,))
     runner = NcapRunner(SITE, load_params(), ReferenceStack)
     try:

@@ -1,4 +1,4 @@
-"""Every approach (issue 14 item 3): a pole pair per approach, --approach, the approach column.
+"""Every approach: a pole pair per approach, --approach, the approach column.
 
 Checked on the shipped Xueqing site against the network itself (sumolib), not against the code's output.
 """
@@ -98,9 +98,9 @@ def test_the_approach_from_each_arm_starts_on_that_arm():
 def test_a_lane_that_only_turns_is_no_lane_for_the_straight_ego():
     """On the east approach the lane next to the kerb turns left or back: crossing, jaywalking and
     background blending (the ego straight through in that lane) cannot be staged there."""
-    from pedsafe_sumo.network.hosting import site_hosting
     from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.scenarios.registry import SCENARIOS
+    from pedsafe_sumo.scenarios.hosting import site_hosting
+    from pedsafe_sumo.scenarios.specs import SCENARIOS
 
     approach = load_approach(SITE, "E")
     lane = NET.getLane(approach.lane_ids[1])
@@ -117,9 +117,9 @@ def test_a_one_lane_approach_stages_the_straight_scenarios_with_cars_parked_at_t
     """Linye Daxue North Road (the west arm) enters with one vehicle lane: the straight scenarios are staged
     there with the vehicles that hide the pedestrian parked at the kerb (tests/network/
     test_one_lane_straight.py); what is left is whether the W poles see them, said in one line."""
-    from pedsafe_sumo.network.hosting import site_hosting
     from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.scenarios.registry import SCENARIOS
+    from pedsafe_sumo.scenarios.hosting import site_hosting
+    from pedsafe_sumo.scenarios.specs import SCENARIOS
 
     approach = load_approach(SITE, "W")
     edge = NET.getEdge(approach.edge_id)
@@ -132,7 +132,7 @@ def test_a_one_lane_approach_stages_the_straight_scenarios_with_cars_parked_at_t
     # The turns are staged there (the SUMO crash once seen on a one-lane approach had another cause, a
     # median refuge: tests/network/test_one_lane_turns.py); whether the poles see them is another matter.
     assert problems["right_turn"] is None or problems["right_turn"].startswith("not seen under V2I")
-    # left_turn's oncoming vehicle would come from the E approach's median lane, which only turns (issue 13).
+    # left_turn's oncoming vehicle would come from the E approach's median lane, which only turns.
     assert problems["left_turn"] == (
         "cannot be staged: site xueqing: lane 121399195#0_2 of the E approach (the oncoming lane) has no "
         "straight movement"
@@ -144,7 +144,7 @@ def test_an_episode_on_another_approach_is_staged_there():
     that approach; the signal staged is that approach's."""
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     runner = EpisodeRunner(SITE, load_params(None), ReferenceStack)

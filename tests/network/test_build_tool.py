@@ -1,5 +1,5 @@
 """The build tool: a rebuild equals the committed files; bad input ends in one clear line and a non-zero
-exit and leaves the committed network untouched (issue 2, points 5 and 7)."""
+exit and leaves the committed network untouched."""
 
 from __future__ import annotations
 

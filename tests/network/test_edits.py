@@ -1,6 +1,6 @@
 """Edits a traffic engineer makes to the Xueqing network: each is refused in one line until the derived
 files are re-derived from the edited network (build_network --refresh), and then either adapts or is
-refused in one line (issue 14, item 5; docs/sites.md has the table). The shifted network is in
+refused in one line (docs/sites.md has the table). The shifted network is in
 test_sites.py."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.network.sites import SiteError, resolve_site
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sumo_binaries import sumo_binary
 from pedsafe_sumo.sumo_net import read_net
 
@@ -86,7 +86,7 @@ def test_a_lower_speed_limit(tmp_path):
     (paper-v5's model)."""
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.params import load_params, with_overrides
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     edges = f'<edges><edge id="{APPROACH}" speed="8.33"/><edge id="{SOUTH_ENTRY}" speed="8.33"/></edges>'
@@ -214,7 +214,7 @@ def test_a_new_signal_programme_changes_when_road_users_meet(tmp_path):
 
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     original = ET.parse(NETWORKS_DIR / "xueqing" / "xueqing.net.xml").getroot().find("tlLogic")

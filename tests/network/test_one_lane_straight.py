@@ -1,9 +1,9 @@
-"""Crossing, jaywalking and background blending on one-lane approaches (issue 14 item 4), on the zhixin clip
+"""Crossing, jaywalking and background blending on one-lane approaches, on the zhixin clip
 (tests/network/data/osm, ODbL) whose north and south approaches have one 3.2 m vehicle lane and a 3.0 m
 sidewalk each.
 
 The vehicles that hide the pedestrian stand parked at the kerb: on the sidewalk, their road-side flank on
-the kerb line (scenarios.registry.kerb_parking_offset_m), each in a SUMO parking space of its own
+the kerb line (scenarios.placements.straight.kerb_parking_offset_m), each in a SUMO parking space of its own
 (sim/kerb.py); the ego drives the one lane beside them. Checked here in real SUMO: where SUMO reports the
 parked cars (against the lane's shape and width, by hand), that SUMO's FCD output puts them there too, that
 they hide the pedestrian from the ego at the start, that every scenario runs under both conditions with the
@@ -42,7 +42,7 @@ def runner(zhixin):
 
 
 def _spec(name: str, arm: str):
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
 
     return get_scenario(name).with_overrides({"approach": arm})
 
@@ -127,7 +127,9 @@ def test_sumo_fcd_output_puts_a_parked_car_where_getposition_does(zhixin, tmp_pa
         import libsumo as api
         from pedsafe_sumo.network.sites import resolve_site
         from pedsafe_sumo.scenarios.geometry import load_approach
-        from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES, VehicleSetup, kerb_parking_offset_m
+        from pedsafe_sumo.scenarios.episode_setup import VehicleSetup
+        from pedsafe_sumo.scenarios.placements.straight import kerb_parking_offset_m
+        from pedsafe_sumo.scenarios.road_users import VEHICLE_CLASSES
         from pedsafe_sumo.sim.kerb import check_parked, park_at_kerb, parking_xml, space_pose
         site = resolve_site(sys.argv[1])
         approach = load_approach(site, "N")
@@ -325,7 +327,11 @@ def test_hosting_refuses_in_one_line_what_cannot_be_staged_at_the_kerb(zhixin):
     """No room at the kerb (a sidewalk narrower than the car), no kerb beside the lane, an approach too
     short for the row of parked cars: refused with the reason; two-lane approaches are not asked."""
     from pedsafe_sumo.scenarios.geometry import load_approach
-    from pedsafe_sumo.scenarios.registry import get_scenario, kerb_staging_problem
+    from pedsafe_sumo.scenarios.placements import placement_of
+    from pedsafe_sumo.scenarios.specs import get_scenario
+
+    def kerb_staging_problem(spec, approach):
+        return placement_of(spec).kerb_staging_problem(spec, approach)
 
     approach = load_approach(resolve_site(str(zhixin)), "N")
     assert approach.sidewalk_width_m == 3.0 and approach.sidewalk_beside_lane

@@ -1,14 +1,14 @@
-"""Turns from one-lane approaches (issue 14 item 4), on the zhixin clip (tests/network/data/osm, ODbL) whose
+"""Turns from one-lane approaches, on the zhixin clip (tests/network/data/osm, ODbL) whose
 north and south approaches have one vehicle lane each.
 
-They were refused after a right_turn episode from the north approach crashed libsumo 1.28 (segmentation
-fault). The mechanism (docs/sites.md): the scenario's pedestrian, moved by person.moveToXY, stepped off the
-crosswalk over the road turned into onto the median refuge of that divided road, a walking area no
-sidewalk reaches; SUMO had rebuilt the person's route to end on that walking area, its pedestrian router
-found no way from the refuge to the route's end (itself), and MSPModel_Striping::getNextLane's fallback for
-that case reads the previous lane, which PState::moveToXY passes as a null pointer. The engine now gives
-the person a walking route that ends on its sidewalk (sim.episode.add_pedestrian) on networks with
-refuges, and the turns are staged there.
+On networks with refuges the engine gives the scenario's pedestrian a walking route that ends on its
+sidewalk (sim.staging.add_pedestrian), because otherwise a right_turn episode from the north approach
+crashes libsumo 1.28 (segmentation fault). The mechanism (docs/sites.md): the pedestrian, moved by
+person.moveToXY, steps off the crosswalk over the road turned into onto the median refuge of that divided
+road, a walking area no sidewalk reaches; SUMO rebuilds the person's route to end on that walking area, its
+pedestrian router finds no way from the refuge to the route's end (itself), and
+MSPModel_Striping::getNextLane's fallback for that case reads the previous lane, which PState::moveToXY
+passes as a null pointer. With that route the turns are staged there.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import pytest
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.network.sites import resolve_site
 
-#: Moves the engine's pedestrian (sim.episode.add_pedestrian) along the north approach's right-turn
+#: Moves the engine's pedestrian (sim.staging.add_pedestrian) along the north approach's right-turn
 #: crosswalk and 2 m beyond its far end, as the behaviour model does (moveToXY, keepRoute=2, one step
 #: each), and prints the edge it ends on.
 MOVE_ONTO_REFUGE = textwrap.dedent(
@@ -34,7 +34,7 @@ MOVE_ONTO_REFUGE = textwrap.dedent(
     import libsumo as api
     from pedsafe_sumo.network.sites import resolve_site
     from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
-    from pedsafe_sumo.sim.episode import PED_ID, add_pedestrian
+    from pedsafe_sumo.sim.staging import PED_ID, add_pedestrian
     site = resolve_site(sys.argv[1])
     refuges = sys.argv[2] == "refuges"
     approach, turn = load_approach(site, "N"), load_turn(site, "right", "N")
@@ -95,7 +95,7 @@ def test_right_turns_from_the_one_lane_approaches_run_under_both_conditions(zhix
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.params import load_params
     from pedsafe_sumo.scenarios.geometry import load_approach
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sim.episode import EpisodeRunner
 
     site = resolve_site(str(zhixin))

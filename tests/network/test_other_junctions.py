@@ -1,6 +1,6 @@
 """Junctions other than Xueqing, built from OpenStreetMap clips (tests/network/data/osm, ODbL): each builds
 into a site folder that passes its checks, says which scenarios it can host and why not, and runs the
-ones it hosts with roadside detections under V2I (issue 14, items 4 and 7)."""
+ones it hosts with roadside detections under V2I."""
 
 from __future__ import annotations
 
@@ -132,7 +132,7 @@ def test_polygons_below_ground_are_not_occluders(built):
 @pytest.mark.slow
 def test_a_t_junction_of_one_way_roads_builds_and_says_why_it_hosts_nothing(built, tmp_path):
     folder, stdout = built["g6_link"]
-    summary = _run("-m", "pedsafe_sumo.network", "--site", str(folder), "--no-build")
+    summary = _run("-m", "pedsafe_sumo.site", "--site", str(folder), "--no-build")
     assert summary.returncode == 0, summary.stderr
     arms = [line for line in summary.stdout.splitlines() if line.startswith("    ") and " lane(s) in" in line]
     assert len(arms) == 3  # a T
@@ -212,7 +212,7 @@ def _hosting_by_approach(stdout: str, own: str) -> dict[tuple[str, str], str]:
 
 @pytest.mark.slow
 def test_every_hosted_scenario_runs_on_every_approach_with_roadside_detections(built, tmp_path):
-    """Issue 14 item 7 on the zhixin clip (two-lane Qinghua East Rd, one-lane tertiary side roads): what
+    """On the zhixin clip (two-lane Qinghua East Rd, one-lane tertiary side roads): what
     the build says it hosts on each approach is what `--scenario all --approach all` runs, under SV and
     V2I, each on the approach it names, with detections by the roadside camera under V2I."""
     folder, stdout = built["zhixin"]

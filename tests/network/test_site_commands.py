@@ -1,6 +1,5 @@
 """Every command takes --site NAME_OR_PATH: a copy of the Xueqing folder under another name, anywhere, is
-used by path; run.json records where it was, and replay finds it there and refuses it once it differs
-(issue 14, item 1)."""
+used by path; run.json records where it was, and replay finds it there and refuses it once it differs."""
 
 from __future__ import annotations
 
@@ -41,7 +40,7 @@ def test_demand_takes_a_site_folder(tmp_path):
 
 def test_network_summary_takes_a_site_folder(tmp_path):
     folder = _copy(tmp_path)
-    proc = _run("-m", "pedsafe_sumo.network", "--site", str(folder), "--no-build")
+    proc = _run("-m", "pedsafe_sumo.site", "--site", str(folder), "--no-build")
     assert proc.returncode == 0, proc.stderr
     assert "site xueqing: main junction" in proc.stdout and "crossing: hosted" in proc.stdout
 
@@ -51,7 +50,7 @@ def test_an_unknown_site_is_one_line_for_every_command(tmp_path):
     for command in (
         ["-m", "pedsafe_sumo.demand", "--out", str(tmp_path)],
         ["-m", "pedsafe_sumo.episode", "--scenario", "crossing"],
-        ["-m", "pedsafe_sumo.network", "--no-build"],
+        ["-m", "pedsafe_sumo.site", "--no-build"],
         [str(REPO_ROOT / "tools" / "screenshot_site.py"), "--out", str(tmp_path / "x.png")],
     ):
         proc = _run(*command, "--site", str(tmp_path / "nowhere"))

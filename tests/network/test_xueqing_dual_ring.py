@@ -1,4 +1,4 @@
-"""networks/xueqing_dual_ring (issue 14 item 6): the Xueqing junction with entrance widening and a dual-ring
+"""networks/xueqing_dual_ring: the Xueqing junction with entrance widening and a dual-ring
 plan with protected lefts, as patches. Checked against SUMO's own view of the built network: the foe matrix
 libsumo reports for the junction's internal lanes, the link table of the signal, the geometry of the paths."""
 

@@ -1,5 +1,5 @@
 """In real SUMO (libsumo): a vehicle through every arm and a pedestrian across every crosswalk of the
-main junction arrive, with no teleports and no errors (issue 2, point 7)."""
+main junction arrive, with no teleports and no errors."""
 
 from __future__ import annotations
 

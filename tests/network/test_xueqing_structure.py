@@ -1,4 +1,4 @@
-"""The Xueqing network is one a traffic engineer would accept (issue 2, point 6), checked with sumolib.
+"""The Xueqing network is one a traffic engineer would accept, checked with sumolib.
 
 Every number here is derived from the network file itself with sumolib or ElementTree, or is a
 property of the real intersection (four arms, Xueqing Road with two lanes per direction); nothing
@@ -121,7 +121,8 @@ def test_every_arm_has_a_signalised_crosswalk_with_green_time(tree, main_junctio
     for crossing, crossed in crossings.items():
         assert crossing in link_index, f"crosswalk {crossing} is not controlled by the traffic light"
         green_s = sum(d for d, state in phases if state[link_index[crossing]] in "Gg")
-        # Long enough for the slowest group (1.03 m/s over 60, DESIGN 2) to cross a 6.4 m carriageway.
+        # Long enough for the slowest group (over 60: 1.03 m/s, the paper's walking speeds) to cross a 6.4 m
+        # carriageway.
         assert green_s >= 6.4 / 1.03, f"crosswalk {crossing} has {green_s} s green in a {cycle_s} s cycle"
         for edge_id in crossed:
             if edge_id in edge_arm:

@@ -1,4 +1,4 @@
-"""Every number a user can set has a sane upper bound (issue 19): a scenario field or a parameter set
+"""Every number a user can set has a sane upper bound: a scenario field or a parameter set
 far out of range is refused with one line naming the key, the bound and the reason; the defaults are
 inside every bound."""
 
@@ -10,7 +10,8 @@ import re
 import pytest
 
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import SCENARIOS, SPEC_UPPER_BOUNDS, ScenarioError
+from pedsafe_sumo.scenarios.errors import ScenarioError
+from pedsafe_sumo.scenarios.specs import SCENARIOS, SPEC_UPPER_BOUNDS
 
 FAR_OUT = 1e12
 
@@ -83,7 +84,7 @@ def test_conflict_offset_has_a_lower_bound_too():
 
 
 def test_the_calibrated_desired_speed_law_is_bounded_like_the_fit():
-    """traffic.desired_speed_calibrated_* (issue 14 item 6) are among the checked keys, bounded as the fit."""
+    """traffic.desired_speed_calibrated_* are among the checked keys, bounded as the fit."""
     for key in ("traffic.desired_speed_calibrated_log_mu", "traffic.desired_speed_calibrated_log_sigma"):
         assert key in PARAM_KEYS
     with pytest.raises(ParameterError, match="desired_speed_calibrated_log_sigma' must be at most 2"):

@@ -10,8 +10,8 @@ import pytest
 from perception_scenes import world
 
 from pedsafe_sumo.perception.raw import lidar_point_cloud, render_image
-from pedsafe_sumo.perception.raycast import KIND_GROUND, KIND_VEHICLE
 from pedsafe_sumo.perception.sensors import LidarSpec, SensorPose
+from pedsafe_sumo.perception.surfaces import KIND_GROUND, KIND_VEHICLE
 
 SENSOR_HEIGHT_M = 1.9
 BOX_NEAR_X_M, BOX_LENGTH_M, BOX_HALF_WIDTH_M, BOX_HEIGHT_M = 10.0, 4.0, 1.0, 1.5

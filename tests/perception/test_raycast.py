@@ -9,14 +9,14 @@ import pytest
 from perception_scenes import world
 
 from pedsafe_sumo.perception import StaticOccluders
-from pedsafe_sumo.perception.raycast import (
+from pedsafe_sumo.perception.raycast import cast_rays
+from pedsafe_sumo.perception.surfaces import (
     KIND_CYLINDER,
     KIND_GROUND,
     KIND_NONE,
     KIND_PEDESTRIAN,
     KIND_PRISM,
     KIND_VEHICLE,
-    cast_rays,
 )
 
 

@@ -1,9 +1,9 @@
-"""Replaying the cases of a batch run with --approach (issue 14): the commands the HTML report prints for
+"""Replaying the cases of a batch run with --approach: the commands the HTML report prints for
 them work as printed.
 
 A batch with --approach runs the same episode seeds on every approach and names its case logs after the
-arm (`crossing_sv_<seed>_S`); run.json records its units as `crossing@S`. The report's replay commands
-used to name neither, and the replay looked for `crossing_sv_<seed>` and the settings of `crossing`.
+arm (`crossing_sv_<seed>_S`); run.json records its units as `crossing@S`. A replay command
+that named neither would look for `crossing_sv_<seed>` and the settings of `crossing`.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import pytest
 from replay_runs import NEVER_BRAKES, run_cli
 
 from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo.replay.rundir import ReplayError, _approach_unit
 
 HAVE_DISPLAY = bool(os.environ.get("DISPLAY")) or shutil.which("xvfb-run") is not None
 #: On Xueqing, crossing is staged on the N (the site's own), S and W approaches (docs/sites.md; on the
@@ -125,8 +126,6 @@ def test_a_run_of_several_approaches_needs_approach_and_refuses_one_it_did_not_r
 def test_which_settings_and_rows_an_approach_picks():
     """The logic alone (no SUMO): a unit `crossing@S` of run.json for --approach S, the only approach of a
     one-approach run without --approach, the plain `crossing` of a run made without --approach."""
-    from pedsafe_sumo.replay.rundir import ReplayError, _approach_unit
-
     rows = pd.DataFrame({"approach": ["N", "S", "N", "S"], "episode": [0, 0, 1, 1]})
     several = {"scenarios": {"crossing@N": {}, "crossing@S": {}}}
     unit, picked = _approach_unit(Path("run"), several, "crossing", rows, "S")

@@ -19,7 +19,8 @@ import pytest
 from replay_runs import episode_row, run_cli
 
 from pedsafe_sumo.replay.rundir import load_logged_episode
-from pedsafe_sumo.sim.episode import EGO_ID, PED_ID, EpisodeRunner
+from pedsafe_sumo.sim.episode import EpisodeRunner
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
 #: Index columns compared; both sides NaN counts as equal.
 COMPARED = ("md_m", "tmd_s", "cs_mps", "conflict_probability", "pet_s", "min_clearance_m", "drac_mps2")

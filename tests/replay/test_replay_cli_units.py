@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import xml.etree.ElementTree as ET
 from types import SimpleNamespace
 
 import pandas as pd
@@ -65,10 +66,6 @@ def test_replay_view_draws_the_signal_heads_states():
     """sumo-gui draws each controlled link's state (red, yellow, green bar at the stop line and on the
     crosswalks) when the view's <edges showLinkRules> is on; the replay's view turns it on, inside the
     scheme it uses (SUMO's GUISettingsHandler reads <edges> there)."""
-    import xml.etree.ElementTree as ET
-
-    from pedsafe_sumo.replay.__main__ import gui_settings
-
     root = ET.fromstring(gui_settings(50.0, 0.05))
     edges = root.find("scheme/edges")
     assert edges is not None and edges.get("showLinkRules") == "1"

@@ -140,8 +140,8 @@ def test_screenshot_moment_outside_the_episode(capsys, monkeypatch, replay_run, 
 def test_screenshot_of_a_collision_that_never_happened(capsys, monkeypatch, run_copy, tmp_path):
     # Without its case log and with a pedestrian who reacts at once and runs (x2, up to 3 m/s), the
     # pedestrian of episode 0 escapes: the replay (a headless run gives its course in advance) has no
-    # collision to show. (At x1.5 they no longer do: since issue 12 they react only once they see the
-    # ego, which the queue hides until they step out.)
+    # collision to show. (At x1.5 they do not: they react only once they see the ego,
+    # which the queue hides until they step out.)
     run_dir = run_copy()
     for condition in ("sv", "v2i"):
         for path in case_files(run_dir, 0, condition):

@@ -7,6 +7,7 @@ tests/sim/test_gui_equals_headless.py holds sumo-gui to the headless log.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pandas as pd
@@ -14,8 +15,8 @@ import pytest
 from replay_runs import case_files, edit_run_json, episode_row, run_cli
 
 from pedsafe_sumo.io.cases import read_case
-from pedsafe_sumo.replay.rundir import load_logged_episode
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.replay.rundir import load_logged_episode, scenario_from_record
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 
@@ -78,7 +79,7 @@ def test_a_log_that_differs_from_the_replay_is_reported_at_its_first_step(run_co
 
 @pytest.mark.slow
 def test_a_changed_run_parameter_changes_the_replay_and_the_difference_is_reported(run_copy, tmp_path):
-    # Back to today's default hasten factor (1.5): the hastening pedestrian now walks faster than logged.
+    # Back to the default hasten factor (1.5): the hastening pedestrian walks faster than logged.
     run_dir = run_copy()
     edit_run_json(run_dir, lambda info: info["parameters"]["pedestrians"].update(hasten_factor=1.5))
     proc = export(run_dir, 1, "sv", tmp_path / "case.fcd.xml")
@@ -136,11 +137,6 @@ def test_a_recorded_world_that_differs_from_todays_draw_is_the_one_replayed(run_
 
 
 def test_a_run_recorded_before_scenarios_named_their_poles_replays_with_the_one_pole_of_that_time():
-    import dataclasses
-
-    from pedsafe_sumo.replay.rundir import scenario_from_record
-    from pedsafe_sumo.scenarios.registry import get_scenario
-
     recorded = dataclasses.asdict(get_scenario("background_blending"))
     assert recorded["roadside_units"] == "rsu_camera_0,rsu_camera_1"  # today's default
     del recorded["roadside_units"]

@@ -92,7 +92,7 @@ def test_asam_opendrive_checker_passes(exported, tmp_path):
 
 @pytest.mark.slow
 def test_read_back_the_trajectories_are_the_case_log(exported, replay_run):
-    from scenariogeneration import xosc
+    from scenariogeneration import xosc  # only this test reads the export back; half a second to import
 
     xosc_path = exported[0]
     scenario = xosc.ParseOpenScenario(str(xosc_path))

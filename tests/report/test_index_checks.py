@@ -1,4 +1,4 @@
-"""The report's checks of the indexes (issue 12) on hand-made tables with known counts."""
+"""The report's checks of the indexes on hand-made tables with known counts."""
 
 from __future__ import annotations
 
@@ -164,7 +164,7 @@ def test_an_older_run_still_reports_and_says_what_is_missing(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "note: no contact_stationary in this run" in out
     assert "note: no min_clearance_m, ego_speed_at_min_clearance_mps, drac_mps2, close_pass" in out
-    assert "plain boolean" in out  # the old sumo_collision: compared everywhere, and it says so
+    assert "plain boolean" in out  # a boolean sumo_collision: compared everywhere, and it says so
     assert (run / "tables" / "agreement.csv").is_file() and (run / "tables" / "pet.csv").is_file()
     assert not (run / "tables" / "proximity.csv").exists()
     assert "Post-encroachment time" in (run / "tables" / "indexes.md").read_text()

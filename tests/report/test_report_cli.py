@@ -78,8 +78,8 @@ def test_without_jaywalking_the_injury_figures_are_skipped(tmp_path, capsys):
     assert not out.startswith("run ")  # no run.json, no header
     assert sorted(p.name for p in (run / "figures").iterdir()) == ["first_detection_distance.png"]
     assert_real_png(run / "figures" / "first_detection_distance.png", 5.0, 4.2)
-    # Table I, the paired tests, and the checks of the indexes this run has columns for (issue 12;
-    # the episodes carry every column of EPISODE_COLUMNS, contact_stationary included)
+    # Table I, the paired tests, and the checks of the indexes this run has columns for (the episodes
+    # carry every column of EPISODE_COLUMNS, contact_stationary included)
     index_tables = ("agreement.csv", "contacts.csv", "pet.csv", "proximity.csv", "indexes.md")
     assert sorted(p.name for p in (run / "tables").iterdir()) == sorted(TABLES + index_tables)
 

@@ -1,4 +1,4 @@
-"""The report on a small real batch (issue 6, point 6): every table and figure written.
+"""The report on a small real batch: every table and figure written.
 
 The AD stack never brakes, so every pair collides and is kept as a case: the case figure has a pair
 to draw whatever the seed.
@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 
 
 @pytest.mark.slow

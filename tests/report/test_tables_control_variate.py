@@ -29,7 +29,7 @@ NOMINAL = {
 COEFFICIENTS = (-3.0, 0.8, -0.2, 1.5, 0.1, 0.6, -0.4, 0.3)
 MEAN_PI_HAT, MEAN_PI_HAT_SE = 0.09, 2.0e-4
 PROPOSAL = JointProposal(NOMINAL, COEFFICIENTS, 0.25, 0.1, 1e-3, MEAN_PI_HAT, MEAN_PI_HAT_SE)
-#: table1.csv's columns of an importance-sampling run before the control variate.
+#: table1.csv's columns of an importance-sampling run without the control variate.
 PLAIN_COLUMNS = [
     "scenario", "condition", "n", "n_error", "collision_rate", "collision_low", "collision_high",
     "injury_mean", "injury_low", "injury_high", "conflict_rate", "conflict_low", "conflict_high", "ess",
@@ -134,7 +134,7 @@ def test_table_estimates_are_the_regression_written_out():
 
 
 def test_product_or_meanless_joint_proposals_leave_the_table_as_it_was():
-    """Bit-identical: a product proposal and a joint one stored before E_p[pi_hat] (its JSON without the
+    """Bit-identical: a product proposal and a stored joint one without E_p[pi_hat] (its JSON without the
     keys) give the table of no proposals, with its columns; and that table is the plain weighted one."""
     episodes = _episodes()
     plain = table_one_of_run(episodes)
@@ -296,7 +296,7 @@ def test_v2i_takes_pi_hat_r_as_its_control_under_the_v2i_factor():
 def test_a_condition_with_no_collision_is_bounded_by_its_stages_weight_bounds():
     """No V2I collision anywhere: the upper end is -ln(0.025) / (n_0 / 1 + n_1 / 10), the nominal stage's
     rows counted whole and the joint stage's (defensive share 0.1: weights at most 10) at a tenth; without
-    the proposals, the rule of three on the ESS of the weights, as before."""
+    the proposals, the rule of three on the ESS of the weights."""
     episodes = _episodes()
     v2i = episodes["condition"] == "v2i"
     episodes.loc[v2i, "collision"] = False

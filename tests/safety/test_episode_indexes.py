@@ -16,7 +16,7 @@ DESIGN_COLUMNS = (
     "collision impact_speed_mps injury_probability conflict md_m tmd_s cs_mps conflict_probability "
     "min_ttc_s pet_s "
     "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error "
-    # the proximity measure's own columns (issue 12)
+    # the proximity measure's own columns
     "min_clearance_m ego_speed_at_min_clearance_mps drac_mps2 close_pass "
     "contact_stationary"
 ).split()

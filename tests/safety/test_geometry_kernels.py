@@ -1,7 +1,7 @@
-"""The compiled scalar clearance and body test (issue 19) give the numpy geometry's bits.
+"""The compiled scalar clearance and body test give the numpy geometry's bits.
 
-The references are safety.geometry's numpy functions, and the walker's body test as it was written in
-numpy before it was compiled (below): same inputs, every output compared bit for bit."""
+The references are safety.geometry's numpy functions, and the walker's body test written in numpy
+(below): same inputs, every output compared bit for bit."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pedsafe_sumo.safety.geometry_kernels import rectangle_circle_clearance_m, w
 
 
 def _walks_into_numpy(x, y, yaw, length, width, half_diagonal, x0, y0, x1, y1, r, margin, graze_m) -> bool:
-    """PedestrianWalker._walks_into's numpy body (before the compiled kernel), for the comparison."""
+    """PedestrianWalker._walks_into's body written in numpy, for the comparison."""
     dx, dy, reach = x - x1, y - y1, half_diagonal + (r + margin)
     near = dx * dx + dy * dy <= reach * reach
     if not near.any():

@@ -23,7 +23,7 @@ def closed_form_wilson(k: int, n: int) -> tuple[float, float]:
 
 def test_all_zero_episodes_do_not_give_a_certain_zero():
     # 150 episodes, no injury: mean 0, interval (0, z^2 / (n + z^2)) = 3.841459 / 153.841459 = 0.0249702,
-    # where the Student t interval of the old table gave [0, 0].
+    # where a Student t interval gives [0, 0].
     mean, low, high = zero_inflated_mean_interval(np.zeros(150))
     assert (mean, low) == (0.0, 0.0)
     assert high == pytest.approx(3.841459 / 153.841459, abs=1e-6)
@@ -93,9 +93,9 @@ def test_coverage_with_few_injuries():
     # n = 2000 episodes, injury in 0.3 % of them: about 6 positive values, 99.8 % zeros.
     got = coverage(zero_inflated_mean_interval, 2000, 0.003, seed=12)
     assert abs(got - 0.95) <= TOLERANCE, got
-    # The same simulation fails the old Student t interval: it can tell a bad interval from a good one.
-    old = coverage(student_t_interval, 2000, 0.003, seed=12)
-    assert old < 0.95 - TOLERANCE, old
+    # The same simulation fails the Student t interval: it can tell a bad interval from a good one.
+    student_t = coverage(student_t_interval, 2000, 0.003, seed=12)
+    assert student_t < 0.95 - TOLERANCE, student_t
 
 
 def test_coverage_with_many_injuries():

@@ -14,7 +14,7 @@ from test_joint import LOG_MU, LOG_SIGMA, NOMINAL, TOY_OFFSET_S, TOY_P, TOY_SPEE
 from pedsafe_sumo.sampling.control_variate import MIN_ROWS, cv_estimate
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal
 from pedsafe_sumo.sampling.importance import is_estimate
-from pedsafe_sumo.sampling.joint import fit_joint
+from pedsafe_sumo.sampling.joint_fit import fit_joint
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 

@@ -1,5 +1,5 @@
-"""The per-episode draws object (sampling/draws.py): nominal draws equal the code's earlier Generator
-calls; under a proposal the weight is p/q and averages to 1 over the proposal (issue 17, item 6)."""
+"""The per-episode draws object (sampling/draws.py): nominal draws equal the bare Generator's calls;
+under a proposal the weight is p/q and averages to 1 over the proposal."""
 
 from __future__ import annotations
 

@@ -8,19 +8,12 @@ import numpy as np
 import pytest
 from scipy import special, stats
 
-from pedsafe_sumo.demand.sampling import age_group_speed_distributions
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.sampling.distributions import age_group_speed_distributions
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal, is_estimate
-from pedsafe_sumo.sampling.joint import (
-    JointProposal,
-    Kinematics,
-    fit_joint,
-    fit_logistic,
-    normalised,
-    proposal_of_json,
-    region_proposal,
-)
+from pedsafe_sumo.sampling.joint import JointProposal, Kinematics, fit_logistic, normalised, proposal_of_json
+from pedsafe_sumo.sampling.joint_fit import fit_joint, region_proposal
 from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
 
 PEDESTRIANS = load_params()["pedestrians"]
@@ -140,7 +133,7 @@ def test_mean_pi_hat_is_the_nominal_mean_of_the_fitted_probability():
     assert again.mean_pi_hat == proposal.mean_pi_hat and again.mean_pi_hat_se == proposal.mean_pi_hat_se
 
 
-# ---------------------------------------------------------------- kinematic features (session 8)
+# ---------------------------------------------------------------- kinematic features
 GROUP_LAWS = list(age_group_speed_distributions(dict(PEDESTRIANS)).values())
 GROUP_SHARES = np.array([g["weight_share"] for g in PEDESTRIANS["age_groups"].values()], dtype=float)
 GROUP_SHARES = GROUP_SHARES / GROUP_SHARES.sum()

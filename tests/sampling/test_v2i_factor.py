@@ -1,4 +1,4 @@
-"""The V2I factor of the joint proposal (sampling/joint.py, session 12): the contrast table against CIELAB
+"""The V2I factor of the joint proposal (sampling/v2i_factor.py): the contrast table against CIELAB
 worked out here, h and the weights by hand, exact sampling through Draws, the fit of r, V2I's control."""
 
 from __future__ import annotations
@@ -15,18 +15,16 @@ from scipy import special, stats
 from pedsafe_sumo.sampling.control_variate import condition_control
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal
 from pedsafe_sumo.sampling.importance import Beta, Categorical, Normal
-from pedsafe_sumo.sampling.joint import (
-    GUARD_MIN_COLLISIONS,
-    ContrastFactor,
-    JointProposal,
-    joint_update,
+from pedsafe_sumo.sampling.joint import GUARD_MIN_COLLISIONS, ContrastFactor, JointProposal, normalised
+from pedsafe_sumo.sampling.joint_fit import joint_update
+from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
+from pedsafe_sumo.sampling.v2i_factor import (
     low_contrast_table,
-    normalised,
+    v2i_only_count,
     v2i_only_engages,
     with_v2i_factor,
 )
-from pedsafe_sumo.sampling.stages import DEFENSIVE_SHARE
-from pedsafe_sumo.scenarios.registry import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
+from pedsafe_sumo.scenarios.road_users import CAR_COLOURS_RGB, CLOTHING_COLOURS_RGB
 
 LOG_MU, LOG_SIGMA = 1.5853, 0.3827
 NOMINAL = {"ego_speed_log": Normal(LOG_MU, LOG_SIGMA), "conflict_offset_s": Beta(1.0, 1.0, -1.0, 1.5)}
@@ -233,7 +231,7 @@ def test_json_round_trip_keeps_the_factor_and_a_proposal_without_it_has_no_new_k
     assert isinstance(proposal.nominal["clothing"], Categorical)
 
 
-# ---------------------------------------------------------------- the V2I-only term (session 13)
+# ---------------------------------------------------------------- the V2I-only term
 #: The toy's V2I also collides where SV does not: a slow ego (below 3 m/s) with the offset below -0.8 s.
 TOY_V2I_ONLY_P = stats.norm.cdf((math.log(3.0) - LOG_MU) / LOG_SIGMA) * 0.2 / 2.5
 #: pi_vo's coefficients on pi_hat's design (1, z_o, z_o^2, z_e, z_e^2, z_o z_e).
@@ -338,9 +336,8 @@ def test_too_few_v2i_only_collisions_leave_the_factor_without_the_term() -> None
 
 def test_the_v2i_only_pilot_count_and_the_tables_note() -> None:
     """v2i_only_count against the pairs counted here; Table I's note where the last stage's pilots saw
-    V2I-only collisions and the proposal has no term for them, and none otherwise or before the count."""
+    V2I-only collisions and the proposal has no term for them, and none otherwise or without the count."""
     from pedsafe_sumo.report.tables import v2i_only_note
-    from pedsafe_sumo.sampling.joint import v2i_only_count
 
     rng = np.random.default_rng(25)
     rows = _rows([_episode_with_v2i_only(rng, None) for _ in range(800)], 0)

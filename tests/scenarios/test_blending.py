@@ -1,4 +1,4 @@
-"""Background blending as the paper defines it (issue 13 item 3): dressed in the colour of the vehicle
+"""Background blending as the paper defines it: dressed in the colour of the vehicle
 behind them and close enough that the LiDAR cannot separate them, the standing pedestrian is detected
 by neither onboard sensor at the start under SV, in every episode of a seed sweep (real SUMO and the
 real sensor models)."""
@@ -12,7 +12,7 @@ import pytest
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 
 @pytest.mark.slow
@@ -32,9 +32,9 @@ def test_blending_pedestrian_is_not_detected_onboard_at_the_start_under_sv():
             assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
             if first["detected_onboard_camera"] or first["detected_onboard_lidar"]:
                 seen_at_start.append(seed)
-            # And they do step out: standing against the rear, their path a fraction of a degree off its
-            # line, they once stood "blocked" until the time limit (issue 19 perf19's finding). Unless the
-            # ego stands in their way, 2 s after the start delay they are at least 1 m from where they stood.
+            # And they do step out: standing against the rear with their path a fraction of a degree off
+            # its line, a pedestrian can stand "blocked" until the time limit. Unless the ego stands in
+            # their way, 2 s after the start delay they are at least 1 m from where they stood.
             log = result.log
             later = log[log["time_s"] >= setup.pedestrian.start_delay_s + 2.0]
             if len(later) and not (later["ego_speed_mps"].iloc[0] < 0.1):

@@ -18,7 +18,7 @@ from pedsafe_sumo.scenarios.geometry import (
     path_pos_m,
     shape_length_m,
 )
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 
 def test_conversion_scales_by_drawn_over_lane_length():
@@ -75,6 +75,7 @@ def test_sumo_draws_the_staged_vehicles_at_the_intended_points(name):
     from pedsafe_sumo.control.reference import ReferenceStack
     from pedsafe_sumo.params import load_params
     from pedsafe_sumo.sim.episode import EpisodeRunner
+    from pedsafe_sumo.sim.staging import place_on_junction
 
     spec = get_scenario(name).with_overrides({"background_traffic": 0})
     # left_turn needs a program that lets the oncoming vehicle move with the ego's left (not Xueqing's).
@@ -84,11 +85,11 @@ def test_sumo_draws_the_staged_vehicles_at_the_intended_points(name):
     try:
         for seed in range(3):
             setup = runner.draw_setup(spec, seed)
-            runner.session.run(runner._sumo_args(seed))
+            runner.session.run(runner.staging.sumo_args(seed))
             api = runner.session.api
-            runner._populate(api, setup)
+            runner.staging.populate(api, setup, approach)
             api.simulation.step()  # inserts everything, as the engine does
-            runner._place_on_junction(api, setup)
+            place_on_junction(api, setup)
             dt = api.simulation.getDeltaT()
             assert api.vehicle.getLanePosition("ego") == pytest.approx(setup.ego.front_pos_m, abs=1e-6)
             parked = {v.vehicle_id: v for v in setup.parked}

@@ -1,4 +1,4 @@
-"""Signals (issue 13 item 1): the program read from the network, start times in the cycle, and the
+"""Signals: the program read from the network, start times in the cycle, and the
 signal states SUMO shows at the conflict of real episodes.
 
 Expected values come from a hand-built program (worked by hand), from the .net.xml parsed here with
@@ -16,7 +16,6 @@ from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.scenarios.geometry import load_approach
-from pedsafe_sumo.scenarios.registry import SCENARIOS, get_scenario
 from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     SignalProgram,
@@ -26,6 +25,7 @@ from pedsafe_sumo.scenarios.signals import (
     draw_cycle_start_s,
     load_junction_signals,
 )
+from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario
 
 #: Hand-built program: link 0 green 0-10 s, yellow 10-13 s, red 13-33 s; link 1 red 0-13 s, green 13-33 s.
 PROGRAM = SignalProgram("tls", "0", (10.0, 3.0, 20.0), ("Gr", "yr", "rG"))
@@ -184,8 +184,8 @@ class _FakeTrafficLight:
 def test_start_signals_sets_the_phase_and_what_is_left_of_it():
     from types import SimpleNamespace
 
-    from pedsafe_sumo.scenarios.registry import SignalStaging
-    from pedsafe_sumo.sim.episode import start_signals
+    from pedsafe_sumo.scenarios.episode_setup import SignalStaging
+    from pedsafe_sumo.sim.staging import start_signals
 
     light = _FakeTrafficLight(PROGRAM.durations_s, PROGRAM.states)
     staging = SignalStaging("tls", "0", cycle_start_s=11.5, ego_link_index=0, ped_link_index=1)
@@ -200,7 +200,7 @@ def test_start_signals_sets_the_phase_and_what_is_left_of_it():
 def test_a_junction_without_a_traffic_light_stages_no_signal():
     """Another site's unsignalised junction: nothing to place, and the episode records none for both."""
     from pedsafe_sumo.scenarios.geometry import load_turn  # noqa: F401 - the module the staging uses
-    from pedsafe_sumo.scenarios.registry import draw_episode, stage_signals
+    from pedsafe_sumo.scenarios.staging import draw_episode, stage_signals
 
     approach = load_approach(get_site("xueqing"))
     traits = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}

@@ -1,4 +1,4 @@
-"""The turning scenarios' occlusion (issue 13 items 2 and 7): right_turn's leader hides the pedestrian
+"""The turning scenarios' occlusion: right_turn's leader hides the pedestrian
 waiting at the far end of the crosswalk at the start under SV, with the real sensor models in real SUMO,
 and without it the same world shows them; both turning scenarios run under both conditions."""
 
@@ -13,8 +13,11 @@ import pytest
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import Turn, load_turn
-from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES, ScenarioError, _turn_leader, get_scenario
+from pedsafe_sumo.scenarios.placements.turn import turn_leader
+from pedsafe_sumo.scenarios.road_users import VEHICLE_CLASSES
+from pedsafe_sumo.scenarios.specs import get_scenario
 
 
 def _turn(exit_start_m: float) -> Turn:
@@ -28,11 +31,11 @@ def test_leader_geometry_by_hand():
     0.3 m body after (2.3 + 0.3) / 5 = 0.52 s. A leader already past them leaves no wait."""
     spec = get_scenario("right_turn")
     assert spec.occluder_class == "suv"
-    leader, clear_s = _turn_leader(spec, _turn(22.0), 20.0, 5.0, (1, 2, 3), 0.5)
+    leader, clear_s = turn_leader(spec, _turn(22.0), 20.0, 5.0, (1, 2, 3), 0.5)
     assert leader.lane_id == "out_1" and leader.route == ("out",) and leader.front_pos_m == 0.5
     assert leader.speed_mps == 5.0 and leader.size == VEHICLE_CLASSES["suv"]
     assert clear_s == pytest.approx(2.6 / 5.0)
-    _, clear_s = _turn_leader(spec, _turn(30.0), 20.0, 5.0, (1, 2, 3), 0.5)
+    _, clear_s = turn_leader(spec, _turn(30.0), 20.0, 5.0, (1, 2, 3), 0.5)
     assert clear_s == 0.0
 
 
@@ -145,8 +148,8 @@ def test_left_turn_is_hosted_on_the_two_phase_plan_and_refused_on_xueqing():
     """The hosting check reads the program: on Xueqing's split phasing no phase shows green to the oncoming
     through movement (S approach, median lane) with the ego's left (N approach, median lane); on the two-phase
     plan phase 1 does, and the SE corner pole sees where the pedestrian starts."""
-    from pedsafe_sumo.network.hosting import site_hosting
-    from pedsafe_sumo.scenarios.registry import SCENARIOS
+    from pedsafe_sumo.scenarios.hosting import site_hosting
+    from pedsafe_sumo.scenarios.specs import SCENARIOS
 
     spec = {"left_turn": SCENARIOS["left_turn"]}
     refused = site_hosting(get_site("xueqing"), spec, load_params())["left_turn"]

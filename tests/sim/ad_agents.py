@@ -1,4 +1,4 @@
-"""AD stacks of the AD-interface tests (issue 15), loaded like a user's plugin."""
+"""AD stacks of the AD-interface tests, loaded like a user's plugin."""
 
 from pedsafe_sumo.control.agent import Agent, Command, Perception
 

@@ -1,5 +1,5 @@
-"""The AD interface in real SUMO (issue 15): raw data and world feeds only on request, lane changes and
-paths actuated in SUMO (and refused off the road), the traffic light as SUMO has it (over V2I with the
+"""The AD interface in real SUMO: raw data and world feeds only on request, lane changes and paths
+actuated in SUMO (and refused off the road), the traffic light as SUMO has it (over V2I with the
 link's latency), the map from the network, unknown sensors refused in one line."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.control.agent import KNOWN_SENSORS, AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.perception.raycast import KIND_PEDESTRIAN
-from pedsafe_sumo.scenarios.registry import SCENARIOS
+from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
+from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.observation import ObservationFeeds
 from pedsafe_sumo.sumo_net import read_net

@@ -8,7 +8,7 @@ from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.io.cases import read_case, write_case
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 

@@ -14,9 +14,9 @@ from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
-from pedsafe_sumo.params import load_params
+from pedsafe_sumo.params import load_params, with_overrides
 from pedsafe_sumo.safety.log import REQUIRED_COLUMNS
-from pedsafe_sumo.scenarios.registry import SCENARIOS, get_scenario
+from pedsafe_sumo.scenarios.specs import SCENARIOS, get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SITE = get_site("xueqing")
@@ -191,11 +191,11 @@ def test_bad_input_to_the_episode_cli_is_one_line_and_exit_2(args, message):
 @pytest.mark.slow
 def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_both_poles(runner):
     """In SUMO, 1-3 s into the episode the pedestrian walks out from behind the waiting vehicle (centred
-    on its rear since issue 13). Frames with a raw roadside detection, per pole, over 12 seeds: each
-    pole sees frames the other misses, and the scenario's default (both poles) sees whenever either
-    does. (With the pedestrian on the vehicle's kerb-side half the far pole saw them in more than
-    three times as many frames as the corner pole; centred with the body touching the bumper, the far
-    pole sees almost all of them: corner 4, far 281, both 292 of 480 in November 2026.)"""
+    on its rear). Frames with a raw roadside detection, per pole, over 12 seeds: each pole sees frames
+    the other misses, and the scenario's default (both poles) sees whenever either does. (Placed on the
+    vehicle's kerb-side half, the pedestrian is seen by the far pole in more than three times as many
+    frames as by the corner pole; centred with the body touching the bumper, the far pole sees almost
+    all of them: corner 4, far 281, both 292 of 480 in November 2026.)"""
     spec = get_scenario("background_blending").with_overrides({"time_limit_s": "3.0"})
 
     def frames_seen(units: str, seed: int) -> int:
@@ -217,8 +217,6 @@ def test_blending_pedestrian_walking_out_behind_the_vehicle_is_seen_by_both_pole
 
 def _braking_delays_s(reaction_time_s: float) -> list[float]:
     """Per seed (crossing, V2I): first braking step minus first step that perceives the pedestrian."""
-    from pedsafe_sumo.params import with_overrides
-
     params = with_overrides(load_params(), {"algorithm.reaction_time_s": reaction_time_s})
     runner = EpisodeRunner(SITE, params, ReferenceStack)
     delays = []

@@ -1,10 +1,10 @@
 """An episode's rows are a function of its seed, not of the episodes its worker ran before.
 
-Found on the dual-ring site (session 7): right_turn on the W approach, seed 1641411168, run after that
-episode's SV run in the same process with the state restore (sim/connection.py) gave the turning leader a
-speed factor SUMO drew from generators left where the previous episode put them (0.9932; every load with
-that seed gives 0.9602), and its V2I run failed ("SUMO did not insert vehicle 'leader_0'"). The engine now
-loads every episode; these tests run the same episodes in one process and one by one in fresh runners.
+Found on the dual-ring site: right_turn on the W approach, seed 1641411168, run after that episode's SV
+run in the same process with the state restore (sim/connection.py) gave the turning leader a speed factor
+SUMO drew from generators left where the previous episode put them (0.9932; every load with that seed
+gives 0.9602), and its V2I run failed ("SUMO did not insert vehicle 'leader_0'"). The engine loads every
+episode; these tests run the same episodes in one process and one by one in fresh runners.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import pytest
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
+from pedsafe_sumo.sim import staging
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SEED = 1641411168
@@ -23,14 +24,16 @@ SEED = 1641411168
 EPISODES = (("S", "sv"), ("W", "sv"), ("W", "v2i"))
 
 
-def _leader_speed_factor(runner: EpisodeRunner, seen: list[float]) -> None:
-    real_place = runner._place_on_junction
+def _leader_speed_factor(mp: pytest.MonkeyPatch, seen: list[float]) -> None:
+    """Record the leader's speed factor as staged, right before the staging moves vehicles onto the
+    junction (after SUMO's inserting step)."""
+    real_place = staging.place_on_junction
 
     def place(api, setup):
         seen.append(api.vehicle.getSpeedFactor("leader_0") if "leader_0" in api.vehicle.getIDList() else -1.0)
         return real_place(api, setup)
 
-    runner._place_on_junction = place
+    mp.setattr(staging, "place_on_junction", place)
 
 
 def _run(episodes, restore: bool | None = None):
@@ -38,10 +41,13 @@ def _run(episodes, restore: bool | None = None):
     if restore is not None:
         runner.session.restore_state = restore
     factors: list[float] = []
-    _leader_speed_factor(runner, factors)
     spec = get_scenario("right_turn")
     try:
-        results = [runner.run(spec.with_overrides({"approach": arm}), cond, SEED) for arm, cond in episodes]
+        with pytest.MonkeyPatch.context() as mp:
+            _leader_speed_factor(mp, factors)
+            results = [
+                runner.run(spec.with_overrides({"approach": arm}), cond, SEED) for arm, cond in episodes
+            ]
     finally:
         runner.close()
     return results, factors

@@ -1,7 +1,7 @@
-"""The per-step log as the loop now keeps it (one tuple per step, issue 19): the replay hook still gets
-each step as a dict equal to the logged row, the columns and their types are the log contract's, and the
-ego's logged pose is SUMO's own (front bumper and angle, converted here by hand), with background traffic
-entering and leaving the snapshot."""
+"""The per-step log as the loop keeps it (one tuple per step): the replay hook gets each step as a dict
+equal to the logged row, the columns and their types are the log contract's, and the ego's logged pose
+is SUMO's own (front bumper and angle, converted here by hand), with background traffic entering and
+leaving the snapshot."""
 
 from __future__ import annotations
 
@@ -14,8 +14,10 @@ from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.safety.log import BOOLEAN_COLUMNS, NUMERIC_COLUMNS
-from pedsafe_sumo.scenarios.registry import get_scenario
-from pedsafe_sumo.sim.episode import EGO_ID, LOG_COLUMNS, EpisodeRunner
+from pedsafe_sumo.scenarios.specs import get_scenario
+from pedsafe_sumo.sim.episode import EpisodeRunner
+from pedsafe_sumo.sim.outcome import LOG_COLUMNS
+from pedsafe_sumo.sim.staging import EGO_ID
 
 
 @pytest.mark.slow

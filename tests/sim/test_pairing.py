@@ -6,7 +6,7 @@ from __future__ import annotations
 from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params, with_overrides
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 

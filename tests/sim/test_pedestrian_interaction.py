@@ -1,4 +1,4 @@
-"""Pedestrian-vehicle interaction in real SUMO (issue 12): no 0 km/h contact from a yielder, PET of a
+"""Pedestrian-vehicle interaction in real SUMO: no 0 km/h contact from a yielder, PET of a
 staged crossing measured because the episode runs until both road users cleared, and SUMO's own
 collision check agreeing with ours on the crosswalk."""
 
@@ -14,7 +14,8 @@ from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import VEHICLE_CLASSES, get_scenario
+from pedsafe_sumo.scenarios.road_users import VEHICLE_CLASSES
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
 SITE = get_site("xueqing")
@@ -31,9 +32,9 @@ def never_brakes():
 @pytest.mark.slow
 def test_the_yielder_of_the_audit_never_touches_the_stopped_ego():
     """Crossing, SV, seed 788773747 (episode 266 of `batch --scenario crossing --condition sv --episodes
-    300 --seed 2026`): before issue 12 the yielder stepped back to 0.19 m from the ego's flank, walked on
+    300 --seed 2026`). The bug it pins: the yielder stepped back to 0.19 m from the ego's flank, walked on
     the moment the braking ego dropped below 0.1 m/s and touched it at 0 km/h (collision, P_I 0.30).
-    Now they stand 1.0 m from the flank and walk on only behind it or once it stood for them."""
+    They must stand 1.0 m from the flank and walk on only behind it or once it stood for them."""
     runner = EpisodeRunner(SITE, load_params(), ReferenceStack)
     try:
         result = runner.run(get_scenario("crossing"), "sv", 788773747)
@@ -74,8 +75,8 @@ def test_pet_of_a_staged_crossing_where_the_ego_passes_first(never_brakes):
       moves them): their circle (0.3 m) reaches P at t_ped = delay + (|P - start| - 0.3) / w;
     - the ego's rear leaves P when its centre is 2.3 m past P along its heading (interpolated between
       the logged steps, where the ego moves 0.4 m in a straight line);
-    PET = t_ped - t_ego_rear. Before issue 12 the episode ended as soon as the ego had passed the
-    pedestrian, so PET was never measured here."""
+    PET = t_ped - t_ego_rear. The episode runs until both road users have cleared, not only until the
+    ego has passed the pedestrian, so PET is measured here."""
     spec = get_scenario("crossing").with_overrides(
         {
             "conflict_offset_min_s": -2.5,
@@ -138,11 +139,12 @@ def _standing_beside_the_far_flank(runner, seed: int, gap_m: float):
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_sumo_and_we_agree_on_a_close_pass_and_on_a_contact_on_the_crosswalk(never_brakes, seed):
     """A pedestrian standing 0.15 m beyond the ego's far flank is passed, not hit, by both checks. (With
-    SUMO's person box trailing 0.6 m behind the position we gave it, as before issue 12, SUMO reported
-    a collision here, at seed 0.) Standing with 0.3 m of their body inside the flank line, they are hit
-    by both in the same step, unless the first step in contact is a graze of under 0.1 m: the ego's front
-    corner reaches them first, and how deep it is in the first step depends on where the steps fall (0.02-
-    0.04 m at seeds 1 and 4 once staging used SUMO's lane positions, 0.14-0.20 m at seeds 0, 2, 3, 5).
+    SUMO's person box trailing 0.6 m behind the position it is given, instead of centred on the
+    pedestrian as sim.staging.move_pedestrian places it, SUMO reports a collision here, at seed 0.)
+    Standing with 0.3 m of their body inside the flank line, they are hit by both in the same step,
+    unless the first step in contact is a graze of under 0.1 m: the ego's front corner reaches them
+    first, and how deep it is in the first step depends on where the steps fall (0.02-0.04 m at seeds 1
+    and 4 with the staging on SUMO's lane positions, 0.14-0.20 m at seeds 0, 2, 3, 5).
     SUMO misses such a graze: its vehicle box, laid along the approach lane and the junction's internal
     lane, sits about 0.1 m from ours at the far front corner while the ego turns into the junction
     (docs/engine.md)."""
@@ -170,7 +172,7 @@ def test_the_right_turn_deadlock_ends_with_both_road_users_clear():
     """right_turn, SV, seed 691683199 (episode 36 of `batch --scenario right_turn --episodes 100 --seed 1`):
     a hastening pedestrian ran out in front of the turning ego, which stopped with its front corner 0.3 m
     into their line, 0.11 m from them; the body rule refused every step, the stack waited for the
-    pedestrian in its path, and the episode ran to the 30 s limit (both conditions). Now the pedestrian,
+    pedestrian in its path, and the episode ran to the 30 s limit (both conditions). The pedestrian,
     blocked for 2 s (detour_wait_s) by the standing car, sidesteps in front of its bumper, walks on, and
     the ego drives on once they have left its path."""
     params = load_params()

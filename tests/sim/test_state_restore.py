@@ -1,11 +1,11 @@
-"""SumoSession's state restore instead of `load` (issue 19, session 6; sim/connection.py), in real SUMO.
+"""SumoSession's state restore instead of `load` (sim/connection.py), in real SUMO.
 
 The reference is the same episodes run with `restore_state=False` (a `load` each): every step of every
 log and every outcome must be equal, and the restore must actually have been used. Also what a restore
 leaves: SUMO's time, vehicles, persons, subscriptions; and that an episode with an additional file loads
 (a state carries no parking areas, and a restore after it would keep them).
 
-The restore is off by default since session 7: its rows can depend on the episodes run before it in the
+The restore is off by default: its rows can depend on the episodes run before it in the
 process (tests/sim/test_episode_history.py). These tests keep the mechanism right for a session that asks
 for it (`restore_state=True`).
 """
@@ -15,10 +15,13 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
+from pedsafe_sumo.batch import runner as batch_runner
+from pedsafe_sumo.batch.__main__ import parse_args
+from pedsafe_sumo.batch.chunks import plan_chunks
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.registry import get_scenario
+from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim import connection
 from pedsafe_sumo.sim.episode import EpisodeRunner
 
@@ -168,9 +171,7 @@ def test_options_that_differ_in_more_than_the_seed_load():
 
 def _batch_rows(restore: bool, calls: list[str]) -> pd.DataFrame:
     """The worker side of a batch (one pair per scenario, as a pool worker runs them) in this process."""
-    from pedsafe_sumo.batch import runner as batch_runner
-    from pedsafe_sumo.batch.__main__ import parse_args, prepare
-    from pedsafe_sumo.batch.chunks import plan_chunks
+    from pedsafe_sumo.batch.plan import prepare
 
     plan = prepare(parse_args(["--scenario", "crossing,jaywalking,background_blending,right_turn",
                                "--episodes", "1", "--out", "/nonexistent"]))  # fmt: skip

@@ -84,10 +84,10 @@ def test_a_sweep_needs_a_vary_or_a_known_preset(tmp_path, args, message):
 
 
 def test_each_preset_is_one_key_over_a_range_that_holds_its_default():
-    """The sweeps of issue 13 item 5: every preset varies one key, validated like --vary, and its values
+    """The sensitivity sweeps: every preset varies one key, validated like --vary, and its values
     include the default of that key (defaults.toml or the scenario registry)."""
     from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.scenarios.registry import get_scenario
+    from pedsafe_sumo.scenarios.specs import get_scenario
     from pedsafe_sumo.sweep import PRESETS, parse_args, validate
 
     params = load_params()

@@ -1,0 +1,150 @@
+"""From a scenario spec and a seed to one episode's initial world: `draw_episode` places the road users
+(through the spec's placement, scenarios/placements/), `stage_signals` places the episode in the
+junction's signal program."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pedsafe_sumo.sampling.draws import Draws, as_draws
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, SignalStaging
+from pedsafe_sumo.scenarios.geometry import Approach, Turn
+from pedsafe_sumo.scenarios.oncoming import OncomingPath
+from pedsafe_sumo.scenarios.placements import placement_of
+from pedsafe_sumo.scenarios.placements.base import StagingInputs
+from pedsafe_sumo.scenarios.road_users import CLOTHING_COLOURS_RGB, PEDESTRIAN_RADIUS_M, pedestrian_height_m
+from pedsafe_sumo.scenarios.signals import (
+    NO_LINK,
+    JunctionSignals,
+    SignalStagingError,
+    draw_cycle_start_s,
+)
+from pedsafe_sumo.scenarios.specs import ScenarioSpec
+
+
+def draw_episode(
+    spec: ScenarioSpec,
+    approach: Approach,
+    seed: int,
+    pedestrian_traits: dict,
+    ego_speed_mps: float,
+    rng: np.random.Generator | Draws,
+    turn: Turn | None = None,
+    oncoming: OncomingPath | None = None,
+) -> EpisodeSetup:
+    """Place one episode of `spec` on the approach (for a turning scenario, on `turn`; with an oncoming
+    vehicle, on the `oncoming` path).
+
+    `pedestrian_traits` (age_years, gender, risk, walking_speed_mps) and `ego_speed_mps` come from the
+    demand model's samplers, drawn from the same seeded `rng` before this is called; the draws here
+    (offsets, gaps, colours) follow in a fixed order so the world is a function of the seed alone: the
+    conflict offset, the clothing, then the placement's own. `rng` may be a Draws (sampling/draws.py):
+    the named draws then go through it, recorded (and under importance sampling drawn from its
+    proposal); a bare Generator draws them all nominally.
+    """
+    draws = as_draws(rng)
+    conflict_offset_s = draws.uniform(
+        "conflict_offset_s", spec.conflict_offset_min_s, spec.conflict_offset_max_s
+    )
+    clothing = CLOTHING_COLOURS_RGB[draws.index("clothing", len(CLOTHING_COLOURS_RGB))]
+    scene = placement_of(spec).stage(
+        StagingInputs(
+            spec=spec,
+            approach=approach,
+            traits=pedestrian_traits,
+            ego_speed_mps=float(np.clip(ego_speed_mps, spec.ego_speed_min_mps, spec.ego_speed_max_mps)),
+            conflict_offset_s=conflict_offset_s,
+            clothing_rgb=clothing,
+            draws=draws,
+            turn=turn,
+            oncoming=oncoming,
+        )
+    )
+    return EpisodeSetup(
+        scenario=spec.name,
+        seed=seed,
+        ego=scene.ego,
+        ego_route=scene.ego_route,
+        pedestrian=pedestrian(pedestrian_traits, scene.clothing_rgb, scene.start_delay_s, scene.path),
+        parked=scene.parked,
+        conflict_xy=(float(scene.conflict_xy[0]), float(scene.conflict_xy[1])),
+        conflict_offset_s=conflict_offset_s,
+        time_limit_s=spec.time_limit_s,
+        conflict_time_s=float(scene.conflict_time_s),
+        ped_crossing_id=scene.ped_crossing_id,
+    )
+
+
+def pedestrian(traits: dict, clothing, start_delay_s: float, path) -> PedestrianSetup:
+    """The pedestrian of an episode: its traits, its body (road_users), where it walks and when."""
+    return PedestrianSetup(
+        path_xy=tuple((float(p[0]), float(p[1])) for p in path),
+        start_delay_s=start_delay_s,
+        age_years=float(traits["age_years"]),
+        gender=str(traits["gender"]),
+        risk=str(traits["risk"]),
+        walking_speed_mps=float(traits["walking_speed_mps"]),
+        clothing_rgb=(int(clothing[0]), int(clothing[1]), int(clothing[2])),
+        radius_m=PEDESTRIAN_RADIUS_M,
+        height_m=pedestrian_height_m(traits["gender"], traits["age_years"]),
+    )
+
+
+def stage_signals(
+    spec: ScenarioSpec,
+    setup: EpisodeSetup,
+    junction: JunctionSignals | None,
+    rng: np.random.Generator | Draws,
+) -> EpisodeSetup:
+    """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
+    (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
+    start, and the pedestrian's from the moment they step off, until `signal_hold_after_s` after the
+    staged conflict. SignalStagingError when the program has no such time (the message says which)."""
+    if junction is None:
+        # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so
+        # (ego_signal and ped_signal "none").
+        return setup
+    ego_link = junction.vehicle_link(setup.ego.lane_id, setup.ego_route[1])
+    ped_link = junction.crossing_link(setup.ped_crossing_id) if setup.ped_crossing_id else NO_LINK
+    if (ped_link == NO_LINK) != (spec.ped_signal == "none"):
+        where = f"crossing {setup.ped_crossing_id}" if setup.ped_crossing_id else "a mid-block crossing"
+        raise SignalStagingError(
+            f"scenario '{spec.name}': ped_signal {spec.ped_signal} does not fit {where} "
+            f"({'signalised' if ped_link != NO_LINK else 'no signal'})"
+        )
+    until_s = setup.conflict_time_s + spec.signal_hold_after_s
+    # The ego from the start (it sees its signal all the way to the stop line), the pedestrian from
+    # stepping off the kerb, both until after the conflict.
+    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
+    if ped_link != NO_LINK:
+        step_off_s = min(setup.pedestrian.start_delay_s, until_s)
+        ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
+        required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
+    # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too.
+    oncoming_links = [
+        junction.vehicle_link(v.lane_id, v.route[1])
+        for v in setup.parked
+        if v.vehicle_id.startswith("oncoming_") and len(v.route) == 2
+    ]
+    for link in oncoming_links:
+        required[link] = ("green", 0.0, until_s)
+    # The point in the cycle is one uniform draw on [0, 1), recorded (never proposed) as signal_cycle_u.
+    source = as_draws(rng).uniform_source("signal_cycle_u")
+    cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, source)  # type: ignore[arg-type]
+    staging = SignalStaging(
+        tls_id=junction.program.tls_id,
+        program_id=junction.program.program_id,
+        cycle_start_s=round(cycle_start_s, 6),
+        ego_link_index=ego_link,
+        ped_link_index=ped_link,
+        occluder_link_index=(
+            oncoming_links[0]
+            if oncoming_links
+            else junction.turn_link(setup.parked[0].lane_id, "r")
+            if setup.parked
+            else NO_LINK
+        ),
+    )
+    return dataclasses.replace(setup, signals=staging)

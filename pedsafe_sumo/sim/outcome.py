@@ -1,0 +1,175 @@
+"""An episode judged: what the loop recorded (EpisodeTrace) turned into its row of episodes.parquet.
+
+The indexes come from the per-step log (pedsafe_sumo.safety.episode); SUMO's own collision check is
+read during the loop (`sumo_collision_record`) and counts only where SUMO looks; the signals are those
+SUMO showed at the staged conflict (`conflict_step`, `signals_at_conflict`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
+from pedsafe_sumo.safety.episode import episode_indexes
+from pedsafe_sumo.safety.proximity import ProximityModel
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
+from pedsafe_sumo.scenarios.signals import colour_of_link
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
+
+#: The per-step log's columns, in order (pedsafe_sumo.safety.log's contract plus the command and
+#: diagnostics): the loop appends one tuple of these per step.
+LOG_COLUMNS = (
+    "time_s",
+    "ego_x_m",
+    "ego_y_m",
+    "ego_yaw_rad",
+    "ego_speed_mps",
+    "ego_length_m",
+    "ego_width_m",
+    "ped_x_m",
+    "ped_y_m",
+    "ped_vx_mps",
+    "ped_vy_mps",
+    "ped_radius_m",
+    "detected_onboard_camera",
+    "detected_onboard_lidar",
+    "detected_roadside",
+    "perceived",
+    "roadside_raw",
+    "clearance_m",
+    "command_speed_mps",
+    "braking",
+    "ped_state",
+    "sumo_collision",
+    "command_refused",
+)
+
+
+@dataclass
+class EpisodeResult:
+    setup: EpisodeSetup
+    condition: str
+    #: One row per step (columns of pedsafe_sumo.safety.log plus the command and diagnostics).
+    log: pd.DataFrame
+    #: The columns of this episode (one row of episodes.parquet, docs/design.md, 'Contracts').
+    outcome: dict[str, Any]
+    end_reason: str
+    timings_s: dict[str, float] = field(default_factory=dict)
+    #: SUMO's own record of the ego-pedestrian collision: {"time_s", "ego_speed_mps", "type"}, or {}.
+    sumo_collision: dict[str, Any] = field(default_factory=dict)
+    #: SUMO's link-state string of the junction's traffic light at every logged step ("" without one).
+    signal_states: list[str] = field(default_factory=list)
+
+
+@dataclass
+class EpisodeTrace:
+    """What the loop recorded of one episode, for judging."""
+
+    #: One row per step (LOG_COLUMNS); empty when no step was logged.
+    log: pd.DataFrame
+    #: Why the episode ended: "collision", "both_cleared", "ego_left_network" or "time_limit".
+    end_reason: str
+    #: SUMO's link-state string of the junction's traffic light at every logged step ("" without one).
+    signal_states: list[str]
+    #: SUMO's own record of the ego-pedestrian collision (sumo_collision_record), or {}.
+    sumo_record: dict[str, Any]
+    #: The pedestrian's SUMO edge at the closest approach ("" when no step was logged).
+    closest_edge: str
+    #: Seconds spent in each part of the loop: sumo_s, snapshot_s, perception_s, agent_s, logging_s.
+    timings_s: dict[str, float]
+
+
+def sumo_collision_record(api, time_s: float) -> dict[str, Any]:
+    """SUMO's collision between the moving ego and the pedestrian in the last step, if it saw one.
+
+    Same definition as ours: a contact while the ego is slower than STATIONARY_SPEED_MPS is none.
+    """
+    for collision in api.simulation.getCollisions():
+        if {collision.collider, collision.victim} == {EGO_ID, PED_ID}:
+            speed = collision.colliderSpeed if collision.collider == EGO_ID else collision.victimSpeed
+            if speed >= STATIONARY_SPEED_MPS:
+                return {"time_s": time_s, "ego_speed_mps": float(speed), "type": collision.type}
+    return {}
+
+
+def is_crossing_or_walkingarea(edge_id: str) -> bool:
+    """SUMO's netconvert names crossings ':<junction>_c<k>' and walking areas ':<junction>_w<k>'."""
+    if not edge_id.startswith(":"):
+        return False
+    tail = edge_id.rsplit("_", 1)[-1]
+    return len(tail) > 1 and tail[0] in "cw" and tail[1:].isdigit()
+
+
+def conflict_step(log: pd.DataFrame, setup: EpisodeSetup) -> int:
+    """Row of the log at the staged conflict: the first step at or after `setup.conflict_time_s` (the
+    ego's front at the conflict point had nobody reacted), or the last step when the episode ended
+    before it (a collision just before it). Not the closest approach: once an ego has stopped for the
+    pedestrian their closest approach can come many seconds later, under the next phase."""
+    times = log["time_s"].to_numpy()
+    index = int(np.searchsorted(times, setup.conflict_time_s - 1e-9))
+    return min(index, len(times) - 1)
+
+
+def signals_at_conflict(log: pd.DataFrame, states: Sequence[str], setup: EpisodeSetup) -> tuple[str, str]:
+    """(ego_signal, ped_signal) that SUMO showed at the staged conflict (conflict_step). `states` holds
+    SUMO's link-state string of every logged step."""
+    staging = setup.signals
+    if staging is None or not len(log):
+        return "none", "none"
+    state = states[conflict_step(log, setup)]
+    return colour_of_link(state, staging.ego_link_index), colour_of_link(state, staging.ped_link_index)
+
+
+def judge_episode(
+    setup: EpisodeSetup,
+    condition: str,
+    seed: int,
+    trace: EpisodeTrace,
+    arm: str,
+    injury_model: str = "saade2020",
+    proximity_model: ProximityModel | None = None,
+) -> EpisodeResult:
+    """The episode's result: its outcome row (the drawn pedestrian and ego, the indexes of the log,
+    SUMO's verdict, the signals at the conflict, the approach `arm`) beside what the loop recorded."""
+    log, ped = trace.log, setup.pedestrian
+    # SUMO checks vehicle-person contact only on crossings and walking areas: its verdict counts where
+    # it looks, a pedestrian on a crossing or walking area at the closest approach. Elsewhere
+    # (mid-block: a person moved across the road stays logically on its sidewalk lane, where SUMO
+    # never checks against vehicles) it is unknown, not False.
+    sumo_collision = bool(trace.sumo_record)
+    sumo_witness = sumo_collision if is_crossing_or_walkingarea(trace.closest_edge) else None
+    indexes = episode_indexes(log, ped.age_years, injury_model=injury_model, proximity_model=proximity_model)
+    ego_signal, ped_signal = signals_at_conflict(log, trace.signal_states, setup)
+    outcome = {
+        "scenario": setup.scenario,
+        "condition": condition,
+        "seed": seed,
+        "ped_age": ped.age_years,
+        "ped_gender": ped.gender,
+        "ped_risk": ped.risk,
+        "ped_speed_mps": ped.walking_speed_mps,
+        "ego_initial_speed_mps": setup.ego.speed_mps,
+        **indexes,
+        "sumo_collision": sumo_witness,
+        "end_reason": trace.end_reason,
+        "ego_signal": ego_signal,
+        "ped_signal": ped_signal,
+        "approach": arm,
+        "status": "ok",
+        "error": "",
+    }
+    return EpisodeResult(
+        setup,
+        condition,
+        log,
+        outcome,
+        trace.end_reason,
+        trace.timings_s,
+        trace.sumo_record,
+        trace.signal_states,
+    )

@@ -1,0 +1,187 @@
+"""The command line of the site build (tools/build_network.py): build a site folder, or re-derive one from its
+edited network, and print what the site can host.
+
+Usage: see :mod:`pedsafe_sumo.network.build`. The pole placements are judged by the scenarios' hosting
+check (`hosting_scorer`), and the summary lists the scenarios the site hosts: this module is where the
+network build meets the scenarios.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
+from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
+from pedsafe_sumo.network.sites import SiteError, resolve_site
+from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
+
+#: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
+DEFAULT_RADIUS_M = 200.0
+
+
+def _parse_center(text: str) -> tuple[float, float]:
+    try:
+        lat, lon = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"centre must be LAT,LON in degrees, got '{text}'") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise argparse.ArgumentTypeError(f"centre {text} is not a latitude,longitude pair")
+    return lat, lon
+
+
+def _refresh(parser, folder: Path) -> BuildReport:
+    """Re-derive a site folder's site file, poles and polygons from its (edited) network."""
+    try:
+        site = resolve_site(folder if "/" in str(folder) else f"./{folder}", verify=False)
+    except SiteError as exc:
+        parser.exit(2, f"build_network: error: {exc}\n")
+    clip_to_read(site)  # a clip where the site file may name it, and no link out (docs/trust.md)
+    check_targets(None, site.directory, site.name, None)
+    if not site.clip_osm.is_file():
+        parser.exit(
+            2,
+            f"build_network: error: {site.clip_osm} (the site's OSM clip, for the polygons) is missing\n",
+        )
+    return build_site(
+        site.clip_osm,
+        site.center_lat,
+        site.center_lon,
+        site.radius_m,
+        site.name,
+        site.directory,
+        site.clip_osm,
+        clip=False,
+        rsu_corner=site.rsu_corner,
+        rsu_watch_arm=site.rsu_watch_arm,
+        description=site.description,
+        source_osm=site.source_osm,
+        net_from=site.file("net.xml"),
+        hosting_scorer=hosting_scorer,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="build_network",
+        description="Build a SUMO study site folder (net, polygons, roadside units, sumocfg, site file) from "
+        "OpenStreetMap; every command takes the folder as --site.",
+    )
+    parser.add_argument(
+        "--site",
+        default="xueqing",
+        help="existing site (name or folder) whose settings are the defaults [xueqing]",
+    )
+    parser.add_argument("--osm", type=Path, help="OSM XML file to clip (default: the site's source extract)")
+    parser.add_argument(
+        "--center", type=_parse_center, help="LAT,LON of the intersection (default: the site's)"
+    )
+    parser.add_argument("--radius", type=float, help="clip radius in metres (default: the site's)")
+    parser.add_argument("--name", help="name of the built site (default: --site's)")
+    parser.add_argument("--description", help="one line saying where the junction is")
+    parser.add_argument(
+        "--out",
+        "--out-dir",
+        dest="out_dir",
+        type=Path,
+        help="the site folder to write (default: networks/NAME)",
+    )
+    parser.add_argument("--osm-out", type=Path, help="where the clipped OSM goes (default: the site's clip)")
+    parser.add_argument(
+        "--patches",
+        type=Path,
+        help="folder of *.nod/edg/con/tll.xml patches (default: networks/NAME/patches)",
+    )
+    parser.add_argument("--rsu-corner", choices=["NE", "NW", "SE", "SW"], help="corner of the camera pole")
+    parser.add_argument("--rsu-watch", choices=list("NESW"), help="arm the roadside camera watches")
+    parser.add_argument(
+        "--no-clip",
+        action="store_true",
+        help="use --osm as it is (an already clipped file, e.g. osm/xueqing.osm)",
+    )
+    parser.add_argument(
+        "--refresh",
+        type=Path,
+        metavar="DIR",
+        help="keep the network of site folder DIR as it is (e.g. edited in netedit) and re-derive its site "
+        "file, poles and polygons from it",
+    )
+    args = parser.parse_args(argv)
+    try:
+        if args.refresh is not None:
+            report = _refresh(parser, args.refresh)
+        else:
+            report = _build(parser, args)
+    except (BuildError, SiteError) as exc:
+        parser.exit(2, f"build_network: error: {exc}\n")
+    print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
+    if report.signal_nodes and len(report.signal_nodes) > 1:
+        print(
+            f"  the intersection has {len(report.signal_nodes)} signal nodes: "
+            + ", ".join(report.signal_nodes)
+        )
+    for road_type, entry in (report.lane_defaults or {}).items():
+        print(
+            f"  lane default: {entry['ways']} {road_type} way(s) without a lane tag get "
+            f"{entry['lanes_per_direction']} lane(s) per direction"
+        )
+    for path in report.written:
+        print(f"  wrote     {path}")
+    for path in report.unchanged:
+        print(f"  unchanged {path}")
+    print("scenarios:")
+    for line in hosting_lines(resolve_site(str(report.out_dir.resolve()))):
+        print(line)
+    print(f"  use it: --site {report.out_dir}")
+    return 0
+
+
+def _build(parser, args) -> BuildReport:
+    new_site = args.name is not None and args.center is not None and args.osm is not None
+    site = None
+    if not new_site:
+        try:
+            site = resolve_site(args.site, verify=False)
+        except SiteError as exc:
+            parser.exit(2, f"build_network: error: {exc}\n")
+    name = args.name or site.name
+    same_site = site is not None and site.name == name
+    lat, lon = args.center or (site.center_lat, site.center_lon)
+    radius_m = args.radius if args.radius is not None else (site.radius_m if site else DEFAULT_RADIUS_M)
+    if radius_m <= 0:
+        parser.exit(2, f"build_network: error: radius must be positive, got {radius_m}\n")
+    out_dir = args.out_dir or (site.directory.parent / name if site else NETWORKS_DIR / name)
+    if site is not None and args.osm is None:
+        osm = clip_to_read(site) if args.no_clip else source_to_read(site, refuse=True)
+        if osm is None:
+            parser.exit(2, f"build_network: error: site {site.name} records no source OSM: give --osm\n")
+    else:
+        osm = args.osm
+    # The clip stays where the site keeps it (osm/xueqing.osm for the shipped site), else in its folder.
+    default_clip = site.clip_osm if same_site and args.out_dir is None else out_dir / f"{name}.osm"
+    if site is not None and args.out_dir is None and args.name is None:  # what the site file decides
+        check_site_folder(site, out_dir)  # network/site_paths.py, docs/trust.md
+    site_clip = same_site and args.out_dir is None and args.osm_out is None and not args.no_clip
+    check_targets(site, out_dir, name, default_clip if site_clip else None)
+    return build_site(
+        osm,
+        lat,
+        lon,
+        radius_m,
+        name,
+        out_dir,
+        args.osm_out or default_clip,
+        clip=not args.no_clip,
+        patches_dir=args.patches or (site.directory if same_site else out_dir) / "patches",
+        # A new site's watched arm is chosen by the build (choose_approach), its pole on that arm's kerb.
+        rsu_corner=args.rsu_corner or (site.rsu_corner if same_site else None),
+        rsu_watch_arm=args.rsu_watch or (site.rsu_watch_arm if same_site else None),
+        description=args.description if args.description is not None else (site.description if site else ""),
+        source_osm=(site.source_osm if same_site else None) if args.no_clip else osm,
+        hosting_scorer=hosting_scorer,
+    )
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
