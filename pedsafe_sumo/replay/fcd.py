@@ -149,6 +149,10 @@ def write_fcd(path: Path, timesteps: list[Timestep], comment: str = "") -> Path:
         lines.append("    </timestep>")
     lines.append("</fcd-export>")
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    try:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)  # a failed write leaves nothing beside the target
+        raise
     return path
