@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
@@ -18,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
@@ -68,6 +70,34 @@ def a_run(name: str) -> Callable[[Path], None]:
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         module.write_standard_run(folder / name)
+
+    return make
+
+
+def an_unfinished_run(name: str, **entry_values: object) -> Callable[[Path], None]:
+    """An unfinished batch run ./`name` with one finished chunk whose manifest entry has `entry_values`."""
+
+    def make(folder: Path) -> None:
+        run = folder / name
+        (run / "parts").mkdir(parents=True)
+        part = run / "parts" / "crossing-000000-000000.parquet"
+        pd.DataFrame({"episode": [0]}).to_parquet(part, index=False)
+        entry = {
+            "key": "crossing-000000-000000",
+            "scenario": "crossing",
+            "first_episode": 0,
+            "last_episode": 0,
+            "file": str(part.relative_to(run)),
+            "rows": 1,
+            "sha256": hashlib.sha256(part.read_bytes()).hexdigest(),
+            "n_error": 0,
+            "session": 0,
+            "completed_utc": "2026-01-01T00:00:00.000+00:00",
+            "session_elapsed_s": 1.0,
+            **entry_values,
+        }
+        (run / "manifest.json").write_text(json.dumps({"format": 1, "chunks": {entry["key"]: entry}}))
+        (run / "run.json").write_text(json.dumps({"state": "running", "chunks_total": 2}))
 
     return make
 
@@ -231,6 +261,25 @@ ROWS = [
         module("demand.validate", "--docs", "taken/docs"),
         "--docs",
         (a_file("taken"),),
+    ),
+    # 5. Hand-edited run files with values of the wrong JSON type.
+    *(
+        Row(
+            f"report --partial: manifest {key} of the wrong type",
+            module("report", "run", "--partial"),
+            key,
+            (an_unfinished_run("run", **{key: value}),),
+        )
+        for key, value in (("rows", "1"), ("file", 3), ("first_episode", 0.5), ("n_error", True))
+    ),
+    Row(
+        "report --partial: manifest entry not an object",
+        module("report", "run", "--partial"),
+        "not a JSON object",
+        (
+            a_file("run/run.json", '{"state": "running"}'),
+            a_file("run/manifest.json", '{"format": 1, "chunks": {"k": [1]}}'),
+        ),
     ),
 ]
 
