@@ -272,6 +272,25 @@ ROWS = [
         )
         for key, value in (("rows", "1"), ("file", 3), ("first_episode", 0.5), ("n_error", True))
     ),
+    *(
+        Row(
+            f"batch --resume: run.json {where} of the wrong type",
+            module("batch", "--resume", "--out", "run"),
+            where,
+            (
+                a_file(
+                    "run/run.json",
+                    json.dumps({"state": "running", "arguments": {}, "sessions": [], **values}),
+                ),
+            ),
+        )
+        for where, values in (
+            ("arguments.seed", {"arguments": {"seed": "1"}}),
+            ("arguments.episodes", {"arguments": {"episodes": [10]}}),
+            ("sessions", {"sessions": "x"}),
+            ("versions", {"versions": []}),
+        )
+    ),
     Row(
         "report --partial: manifest entry not an object",
         module("report", "run", "--partial"),
