@@ -254,6 +254,16 @@ ROWS = [
         "interaction_radius_m",
         (a_file("p.toml", "[conflicts]\ninteraction_radius_m = nan\n"),),
     ),
+    Row(
+        "demand.validate --duration inf",
+        module("demand.validate", "--docs", "d", "--duration", "inf"),
+        "--duration",
+    ),
+    Row(
+        "demand.validate --warmup nan",
+        module("demand.validate", "--docs", "d", "--warmup", "nan"),
+        "--warmup",
+    ),
     # 4. demand.validate writes only where it is told to.
     Row("demand.validate without --docs", module("demand.validate", "--site", "xueqing"), "--docs"),
     Row(

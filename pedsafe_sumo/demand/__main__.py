@@ -8,15 +8,11 @@ import time
 from pathlib import Path
 
 from pedsafe_sumo import ROUTES_DIR
-from pedsafe_sumo.demand.generate import generate_demand
+from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.site import SiteError
 from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.params import ParameterError
-
-#: Longest demand horizon [s]: one day; the route files grow with it (about 1.5 MB per simulated hour
-#: at the xueqing site).
-MAX_DURATION_S = 86400.0
 
 
 def main(argv: list[str] | None = None) -> int:

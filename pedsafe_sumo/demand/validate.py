@@ -45,7 +45,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from pedsafe_sumo import NETWORKS_DIR
-from pedsafe_sumo.demand.generate import generate_demand
+from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
@@ -456,8 +456,15 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
-    parser.add_argument("--duration", type=float, default=3600.0, help="simulated time in s (default 3600)")
-    parser.add_argument("--warmup", type=float, default=300.0, help="s of records ignored at the start")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=3600.0,
+        help=f"simulated time in s, at most {MAX_DURATION_S:g} (default 3600)",
+    )
+    parser.add_argument(
+        "--warmup", type=float, default=300.0, help="s of records ignored at the start, less than --duration"
+    )
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--params", type=Path, help="parameter TOML laid over the defaults")
     parser.add_argument("--net", type=Path, help="use this .net.xml instead of the site's network")
@@ -475,6 +482,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.docs is None:
             raise ValueError("give --docs DIR, the folder to write demand_validation.md and figures/ into")
         check_output_dir(args.docs, "--docs", ValueError)
+        if not 0 < args.duration <= MAX_DURATION_S:  # also false for NaN
+            raise ValueError(f"--duration must be in (0, {MAX_DURATION_S:g}] s, got {args.duration:g}")
+        if not 0 <= args.warmup < args.duration:
+            raise ValueError(f"--warmup must be >= 0 s and less than --duration, got {args.warmup:g}")
         if args.net is None:  # with --net, --site only names the output files
             site = resolve_site(args.site)
             args.site, args.net = site.name, site.file("net.xml")
