@@ -62,8 +62,10 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)  # a failed write leaves nothing beside the target
+    except Exception:
+        # A write that fails (no room, a folder at the target) leaves nothing beside the target; a process
+        # that dies on the way leaves the temporary file, which the next write (or --resume) removes.
+        tmp.unlink(missing_ok=True)
         raise
 
 

@@ -152,7 +152,9 @@ def write_fcd(path: Path, timesteps: list[Timestep], comment: str = "") -> Path:
     try:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
         tmp.replace(path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)  # a failed write leaves nothing beside the target
+    except Exception:
+        # A write that fails (no room, a folder at the target) leaves nothing beside the target; a process
+        # that dies on the way leaves the temporary file, which the next write (or --resume) removes.
+        tmp.unlink(missing_ok=True)
         raise
     return path
