@@ -35,7 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     try:
         if not 0 < args.duration <= MAX_DURATION_S:  # also false for NaN
-            raise ValueError(f"--duration must be in (0, {MAX_DURATION_S:g}] s, got {args.duration:g}")
+            raise ValueError(
+                f"--duration must be > 0 and at most {MAX_DURATION_S:g} s, got {args.duration:g}"
+            )
         check_output_dir(args.out, "--out", ValueError)
         if args.net is None:  # with --net, --site only names the output files
             site = resolve_site(args.site)

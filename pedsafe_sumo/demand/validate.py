@@ -483,7 +483,9 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("give --docs DIR, the folder to write demand_validation.md and figures/ into")
         check_output_dir(args.docs, "--docs", ValueError)
         if not 0 < args.duration <= MAX_DURATION_S:  # also false for NaN
-            raise ValueError(f"--duration must be in (0, {MAX_DURATION_S:g}] s, got {args.duration:g}")
+            raise ValueError(
+                f"--duration must be > 0 and at most {MAX_DURATION_S:g} s, got {args.duration:g}"
+            )
         if not 0 <= args.warmup < args.duration:
             raise ValueError(f"--warmup must be >= 0 s and less than --duration, got {args.warmup:g}")
         if args.net is None:  # with --net, --site only names the output files

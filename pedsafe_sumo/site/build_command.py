@@ -155,7 +155,10 @@ def _build(parser, args) -> BuildReport:
     lat, lon = args.center or (site.center_lat, site.center_lon)
     radius_m = args.radius if args.radius is not None else (site.radius_m if site else DEFAULT_RADIUS_M)
     if not 0 < radius_m <= MAX_RADIUS_M:  # also false for NaN
-        parser.exit(2, f"build_network: error: radius must be in (0, {MAX_RADIUS_M:g}] m, got {radius_m}\n")
+        parser.exit(
+            2,
+            f"build_network: error: radius must be positive and at most {MAX_RADIUS_M:g} m, got {radius_m}\n",
+        )
     out_dir = args.out_dir or (site.directory.parent / name if site else NETWORKS_DIR / name)
     try:
         check_output_dir(out_dir, "--out", BuildError)
