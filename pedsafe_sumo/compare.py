@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special
 
+from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.report.html import replay_commands
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, load_run_per_approach
 from pedsafe_sumo.safety.conflict import conflict_without_collision
@@ -315,6 +316,8 @@ def main(argv: list[str] | None = None) -> int:
         if not 0.5 <= args.confidence < 1:
             raise CompareError(f"--confidence must lie in [0.5, 1), got {args.confidence}")
         margins = _parse_margins(args.margin)
+        if args.out is not None:
+            check_output_dir(args.out, "--out", CompareError)
         tables, worse_lists, run_b_of = [], [], {}
         for arm, run_a, run_b in runs_by_approach(args.run_a, args.run_b, args.approach):
             arm_table, arm_worse = compare_runs(

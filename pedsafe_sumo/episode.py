@@ -21,6 +21,7 @@ from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, sta
 from pedsafe_sumo.control.stack_calls import StackError
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
+from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
@@ -177,6 +178,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.seed < 0:
             raise UsageError(f"--seed must not be negative, got {args.seed}")
         agent_timeout_s = check_timeout_s(args.agent_timeout)
+        if args.log is not None:
+            check_output_file(args.log, "--log", UsageError)
+        if args.case_dir is not None:
+            check_output_dir(args.case_dir, "--case-dir", UsageError)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

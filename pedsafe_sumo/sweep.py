@@ -31,6 +31,7 @@ import pandas as pd
 
 from pedsafe_sumo.batch.__main__ import main as batch_main
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
+from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.report.findings import (
@@ -199,6 +200,11 @@ def plot(table: pd.DataFrame, keys: list[str], path: Path) -> None:
 
 
 def combine(dirs: list[Path], out: Path) -> int:
+    try:
+        check_output_dir(out, "--out", UsageError)
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     """--combine: the findings of one-key sweeps side by side (OUT/findings_across_sweeps.csv, .png)."""
     missing = [str(d) for d in dirs if not (d / "findings.csv").is_file()]
     if missing:
@@ -224,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
         return combine(args.combine, args.out)
     try:
         combos = validate(args)
+        check_output_dir(args.out, "--out", UsageError)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from pedsafe_sumo.batch.arguments import RUN_ARGUMENT_DEFAULTS
 from pedsafe_sumo.io.run_store import RUN_FILE, RunStoreError, holds_run, read_json
 from pedsafe_sumo.settings import UsageError
 
@@ -87,7 +88,42 @@ def recorded_run(out: Path) -> dict[str, Any]:
         raise UsageError(f"cannot resume: {exc}") from None
     if not isinstance(recorded.get("arguments"), dict) or "sessions" not in recorded:
         raise UsageError(f"{out / RUN_FILE} was written by a batch that cannot be resumed (no arguments)")
+    check_recorded_types(out / RUN_FILE, recorded)
     return recorded
+
+
+def _json_type(value: Any) -> str:
+    return {
+        bool: "boolean",
+        int: "number",
+        float: "number",
+        str: "string",
+        list: "array",
+        dict: "object",
+    }.get(type(value), type(value).__name__)
+
+
+def check_recorded_types(path: Path, recorded: dict[str, Any]) -> None:
+    """UsageError (one line) where a hand-edited run.json holds a value of another JSON type than the
+    batch writes: the recorded arguments (of the type of their default) and the tables --resume reads."""
+    for key, value in recorded["arguments"].items():
+        default = RUN_ARGUMENT_DEFAULTS.get(key)
+        if value is None or default is None:
+            continue
+        if _json_type(value) != _json_type(default):
+            raise UsageError(
+                f"{path}: arguments.{key} must be a JSON {_json_type(default)}, got {value!r}: "
+                "the file was edited; resume a run with the run.json its batch wrote"
+            )
+    expected = {"sessions": list, "versions": dict, "protocol": dict}
+    for key, kind in expected.items():
+        if key in recorded and recorded[key] is not None and not isinstance(recorded[key], kind):
+            raise UsageError(
+                f"{path}: {key} must be a JSON {_json_type(kind())}, got {recorded[key]!r}: "
+                "the file was edited; resume a run with the run.json its batch wrote"
+            )
+    if not all(isinstance(session, dict) for session in recorded["sessions"]):
+        raise UsageError(f"{path}: every entry of sessions must be a JSON object")
 
 
 def check_same_run(

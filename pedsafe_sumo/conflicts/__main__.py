@@ -23,6 +23,7 @@ from pedsafe_sumo.conflicts.interactions import InteractionTracker
 from pedsafe_sumo.conflicts.output import TABLE_SUFFIXES, SsmWriter, TableWriter
 from pedsafe_sumo.conflicts.places import NetError, PlaceFinder
 from pedsafe_sumo.conflicts.sizes import SizeBook, TypesError
+from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params
 from pedsafe_sumo.settings import UsageError
@@ -80,6 +81,9 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         raise UsageError(f"--ssm writes XML: give a file name ending in .xml, got {args.ssm}")
     if not args.fcd.is_file():
         raise UsageError(f"FCD file not found: {args.fcd}")
+    check_output_file(args.out, "--out", UsageError)
+    if args.ssm is not None:
+        check_output_file(args.ssm, "--ssm", UsageError)
     args.net = site_net(args.net, args.site)
     section = load_params(args.params)["conflicts"]
     for key, value in section.items():

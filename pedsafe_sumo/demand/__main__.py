@@ -8,8 +8,9 @@ import time
 from pathlib import Path
 
 from pedsafe_sumo import ROUTES_DIR
-from pedsafe_sumo.demand.generate import generate_demand
+from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.site import SiteError
+from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.params import ParameterError
 
@@ -20,7 +21,12 @@ def main(argv: list[str] | None = None) -> int:
         description="Write the site's background vehicle and pedestrian demand as SUMO route files.",
     )
     parser.add_argument("--site", required=True, help=SITE_HELP)
-    parser.add_argument("--duration", type=float, default=3600.0, help="demand horizon in s (default 3600)")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=3600.0,
+        help=f"demand horizon in s, at most {MAX_DURATION_S:g} (default 3600)",
+    )
     parser.add_argument("--seed", type=int, default=1, help="run seed (default 1)")
     parser.add_argument("--out", type=Path, default=ROUTES_DIR, help="output folder (default routes/)")
     parser.add_argument("--params", type=Path, help="parameter TOML laid over the defaults")
@@ -28,6 +34,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     start = time.perf_counter()
     try:
+        if not 0 < args.duration <= MAX_DURATION_S:  # also false for NaN
+            raise ValueError(
+                f"--duration must be > 0 and at most {MAX_DURATION_S:g} s, got {args.duration:g}"
+            )
+        check_output_dir(args.out, "--out", ValueError)
         if args.net is None:  # with --net, --site only names the output files
             site = resolve_site(args.site)
             args.site, args.net = site.name, site.file("net.xml")

@@ -26,6 +26,11 @@ class DemandFiles:
     movement_shares: dict[str, float]  # realised share of vehicles per movement
 
 
+#: Longest demand horizon [s]: one day; the route files grow with it (about 1.5 MB per simulated hour
+#: at the xueqing site).
+MAX_DURATION_S = 86400.0
+
+
 def vehicle_route_path(out_dir: Path, site: str) -> Path:
     return Path(out_dir) / f"{site}.vehicles.rou.xml"
 

@@ -44,13 +44,14 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize, stats
 
-from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
-from pedsafe_sumo.demand.generate import generate_demand
+from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.site import VEHICLE_CLASS, Site, SiteError, load_site
 from pedsafe_sumo.demand.validation_page import measured_markdown, plot_ecdfs, write_report
 from pedsafe_sumo.demand.vehicles import background_speed_scale
+from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.network.sites import SITE_HELP, resolve_site
 from pedsafe_sumo.network.sumo_inputs import config_inputs
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
@@ -65,8 +66,6 @@ MIDBLOCK_SPEED_KS_MAX = 0.10
 MIDBLOCK_OFFSET_M = 30.0
 #: A run whose share of vehicles never inserted exceeds this is oversaturated (queues reach the entries).
 BACKLOG_MAX_SHARE = 0.01
-DOCS_DIR = REPO_ROOT / "docs"
-FIGURES_DIR = DOCS_DIR / "figures"
 
 
 @dataclass(frozen=True)
@@ -457,18 +456,38 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
-    parser.add_argument("--duration", type=float, default=3600.0, help="simulated time in s (default 3600)")
-    parser.add_argument("--warmup", type=float, default=300.0, help="s of records ignored at the start")
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=3600.0,
+        help=f"simulated time in s, at most {MAX_DURATION_S:g} (default 3600)",
+    )
+    parser.add_argument(
+        "--warmup", type=float, default=300.0, help="s of records ignored at the start, less than --duration"
+    )
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--params", type=Path, help="parameter TOML laid over the defaults")
     parser.add_argument("--net", type=Path, help="use this .net.xml instead of the site's network")
     parser.add_argument(
-        "--docs", type=Path, default=DOCS_DIR, help="folder of demand_validation.md and figures/"
+        "--docs",
+        type=Path,
+        metavar="DIR",
+        help="folder to write demand_validation.md and figures/ into (required: the command never writes "
+        "into the repository unasked; give the repository's docs/ to refresh the page there)",
     )
     parser.add_argument("--work", type=Path, help="keep the routes, loops and SUMO output here")
     args = parser.parse_args(argv)
     started = time.perf_counter()
     try:
+        if args.docs is None:
+            raise ValueError("give --docs DIR, the folder to write demand_validation.md and figures/ into")
+        check_output_dir(args.docs, "--docs", ValueError)
+        if not 0 < args.duration <= MAX_DURATION_S:  # also false for NaN
+            raise ValueError(
+                f"--duration must be > 0 and at most {MAX_DURATION_S:g} s, got {args.duration:g}"
+            )
+        if not 0 <= args.warmup < args.duration:
+            raise ValueError(f"--warmup must be >= 0 s and less than --duration, got {args.warmup:g}")
         if args.net is None:  # with --net, --site only names the output files
             site = resolve_site(args.site)
             args.site, args.net = site.name, site.file("net.xml")

@@ -23,7 +23,7 @@ import hashlib
 import io
 import json
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -56,11 +56,17 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write `data` to `path` through a temporary file, flushed and fsynced before the rename."""
     tmp = path.with_name(path.name + TMP_SUFFIX)
     tmp.unlink(missing_ok=True)  # a link left at the temporary name would carry the write elsewhere
-    with open(tmp, "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except Exception:
+        # A write that fails (no room, a folder at the target) leaves nothing beside the target; a process
+        # that dies on the way leaves the temporary file, which the next write (or --resume) removes.
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:
@@ -130,6 +136,24 @@ class ChunkRecord:
     steplog_sha256: str = ""
 
 
+#: The JSON types a manifest entry's fields may have, by the field's annotation (a bool is no number here).
+_ENTRY_TYPES: dict[str, tuple[type, ...]] = {"str": (str,), "int": (int,), "float": (int, float)}
+
+
+def _check_chunk_entry(path: Path, key: str, entry: Any) -> None:
+    """RunStoreError (one line) when a manifest entry is not an object or a field has the wrong type."""
+    if not isinstance(entry, dict):
+        raise RunStoreError(f"{path} entry {key} is not a JSON object")
+    for field in fields(ChunkRecord):
+        if field.name not in entry:
+            continue  # a missing field is ChunkRecord's TypeError, reported as a malformed entry
+        value = entry[field.name]
+        if isinstance(value, bool) or not isinstance(value, _ENTRY_TYPES[str(field.type)]):
+            raise RunStoreError(
+                f"{path} entry {key}: {field.name} must be of type {field.type}, got {value!r}"
+            )
+
+
 class Manifest:
     """DIR/manifest.json: the chunks whose part files are complete. Written by the driver only."""
 
@@ -146,6 +170,8 @@ class Manifest:
         if data.get("format") != MANIFEST_FORMAT or not isinstance(data.get("chunks"), dict):
             raise RunStoreError(f"{path} is not a manifest of format {MANIFEST_FORMAT}")
         try:
+            for key, entry in data["chunks"].items():
+                _check_chunk_entry(path, key, entry)
             chunks = {key: ChunkRecord(**entry) for key, entry in data["chunks"].items()}
         except TypeError as exc:
             raise RunStoreError(f"{path} has a malformed chunk entry: {exc}") from None

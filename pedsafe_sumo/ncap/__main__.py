@@ -32,6 +32,7 @@ from pedsafe_sumo import __version__
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
+from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.ncap.figure import grid_figure
 from pedsafe_sumo.ncap.protocol import NcapError, load_protocol, parse_speeds, select_cells
 from pedsafe_sumo.ncap.staging import spec_for, stage_cell
@@ -97,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         out = args.out
         if out.exists() and not out.is_dir():
             raise NcapError(f"--out {out} exists and is not a directory")
+        check_output_dir(out, "--out", NcapError)
         taken = [name for name in RESULT_FILES if (out / name).exists()]
         if taken:
             raise NcapError(f"--out {out} already holds results ({', '.join(taken)}): choose a new directory")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import importlib
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -106,7 +107,20 @@ def load_params(path: str | Path | None = None) -> dict[str, Any]:
     return params
 
 
+def check_finite(value: Any, where: str) -> None:
+    """Every number in `value` (a table, a list or a scalar) is finite: NaN and infinity mean nothing here."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            check_finite(item, f"{where}.{key}" if where else key)
+    elif isinstance(value, list):
+        for item in value:
+            check_finite(item, where)
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise ParameterError(f"parameter '{where}' must be a finite number, got {value}")
+
+
 def validate(params: dict[str, Any]) -> None:
+    check_finite(params, "")
     # Importing the domain modules registers their validators.
     _import_validator_modules()
     for section, validator in VALIDATORS.items():

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.ncap.suite import NcapRunner
 from pedsafe_sumo.network.sumo_inputs import SumoInputError, check_gui_site
 from pedsafe_sumo.replay.check import CHECKED_OUTCOME, TrajectoryCheck, outcome_mismatches
@@ -154,6 +155,13 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         raise UsageError(f"--size must be between 16 and 8000 pixels each way, got {args.size}")
     if args.screenshot is not None and args.screenshot.suffix.lower() != ".png":
         raise UsageError(f"--screenshot writes a PNG: give a file name ending in .png, got {args.screenshot}")
+    for option, path in (
+        ("--export-fcd", args.export_fcd),
+        ("--export-xosc", args.export_xosc),
+        ("--screenshot", args.screenshot),
+    ):
+        if path is not None:
+            check_output_file(path, option, UsageError, make_parents=True)
     return width_px, height_px
 
 

@@ -149,6 +149,12 @@ def write_fcd(path: Path, timesteps: list[Timestep], comment: str = "") -> Path:
         lines.append("    </timestep>")
     lines.append("</fcd-export>")
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    try:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        tmp.replace(path)
+    except Exception:
+        # A write that fails (no room, a folder at the target) leaves nothing beside the target; a process
+        # that dies on the way leaves the temporary file, which the next write (or --resume) removes.
+        tmp.unlink(missing_ok=True)
+        raise
     return path

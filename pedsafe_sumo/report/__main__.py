@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from pedsafe_sumo.confine import ConfinementError, check_tree
+from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.report import figures
 from pedsafe_sumo.report import indexes as idx
 from pedsafe_sumo.report.html import HTML_FILE, write_html_report
@@ -242,6 +243,9 @@ def report(run: RunDirectory, say=print) -> list[Path]:
         )
     except ConfinementError as exc:
         raise ReportError(str(exc)) from None
+    for directory in (out_dir, out_dir / TABLES_DIR, out_dir / FIGURES_DIR):
+        check_output_dir(directory, "report into", ReportError)
+    check_output_file(out_dir / HTML_FILE, "report into", ReportError, make_parents=True)
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
     written += index_checks(run, out_dir / TABLES_DIR, say)
     written += write_figures(run, out_dir / FIGURES_DIR, say)

@@ -12,6 +12,7 @@ import argparse
 from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SiteError, resolve_site
@@ -19,6 +20,8 @@ from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
 DEFAULT_RADIUS_M = 200.0
+#: Largest clip radius [m]: an intersection study site, not a town; netconvert's time grows with the area.
+MAX_RADIUS_M = 2000.0
 
 
 def _parse_center(text: str) -> tuple[float, float]:
@@ -77,7 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--center", type=_parse_center, help="LAT,LON of the intersection (default: the site's)"
     )
-    parser.add_argument("--radius", type=float, help="clip radius in metres (default: the site's)")
+    parser.add_argument(
+        "--radius", type=float, help=f"clip radius in metres, at most {MAX_RADIUS_M:g} (default: the site's)"
+    )
     parser.add_argument("--name", help="name of the built site (default: --site's)")
     parser.add_argument("--description", help="one line saying where the junction is")
     parser.add_argument(
@@ -149,9 +154,18 @@ def _build(parser, args) -> BuildReport:
     same_site = site is not None and site.name == name
     lat, lon = args.center or (site.center_lat, site.center_lon)
     radius_m = args.radius if args.radius is not None else (site.radius_m if site else DEFAULT_RADIUS_M)
-    if radius_m <= 0:
-        parser.exit(2, f"build_network: error: radius must be positive, got {radius_m}\n")
+    if not 0 < radius_m <= MAX_RADIUS_M:  # also false for NaN
+        parser.exit(
+            2,
+            f"build_network: error: radius must be positive and at most {MAX_RADIUS_M:g} m, got {radius_m}\n",
+        )
     out_dir = args.out_dir or (site.directory.parent / name if site else NETWORKS_DIR / name)
+    try:
+        check_output_dir(out_dir, "--out", BuildError)
+        if args.osm_out is not None:
+            check_output_file(args.osm_out, "--osm-out", BuildError, make_parents=True)
+    except BuildError as exc:
+        parser.exit(2, f"build_network: error: {exc}\n")
     if site is not None and args.osm is None:
         osm = clip_to_read(site) if args.no_clip else source_to_read(site, refuse=True)
         if osm is None:
