@@ -331,9 +331,7 @@ def main(argv: list[str] | None = None) -> int:
             worse_lists.append(arm_worse.assign(approach=arm))
             run_b_of[arm] = run_b
         table, worse = pd.concat(tables, ignore_index=True), pd.concat(worse_lists, ignore_index=True)
-        if args.out is not None:
-            if args.out.exists() and not args.out.is_dir():
-                raise CompareError(f"--out {args.out} is a file, not a directory")
+        if args.out is not None:  # checked before the comparison (check_output_dir)
             args.out.mkdir(parents=True, exist_ok=True)
             table.to_csv(args.out / "compare.csv", index=False)
             worse.to_csv(args.out / "worse_episodes.csv", index=False)
