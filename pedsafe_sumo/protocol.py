@@ -78,7 +78,9 @@ class Protocol:
 
     def params(self) -> dict[str, Any]:
         params = load_params(None)
-        missing = sorted(set(_flatten(params)) - set(_flatten(self.parameters)))
+        named = _flatten(self.parameters)
+        named = with_values_before(named, VALUES_BEFORE["parameters"])
+        missing = sorted(set(_flatten(params)) - set(named))
         if missing:
             raise ProtocolError(
                 f"protocol {self.path} does not fix parameter(s) {', '.join(missing[:5])}"
@@ -87,6 +89,13 @@ class Protocol:
             )
         try:
             overlay(params, self.parameters, "")
+            for dotted, value in named.items():
+                if dotted in VALUES_BEFORE["parameters"]:
+                    *tables, key = dotted.split(".")
+                    target = params
+                    for table in tables:
+                        target = target[table]
+                    target[key] = value
             validate(params)
         except ParameterError as exc:
             raise ProtocolError(f"protocol {self.path}: {exc}") from None
@@ -125,6 +134,31 @@ def spec_fields(spec: ScenarioSpec) -> dict[str, Any]:
     return {k: v for k, v in dataclasses.asdict(spec).items() if k not in ("name", "description")}
 
 
+#: Values a protocol written before they existed does not name, with the value that gives the behaviour
+#: it was run with: scenario fields (by field) and parameters (dotted). A protocol that names none of a
+#: group gets these; one that names some must name all.
+VALUES_BEFORE: dict[str, dict[str, Any]] = {
+    # The approach staging (ScenarioSpec.staging): the fixed staging never reads the other fields.
+    "scenarios": {
+        "staging": "fixed",
+        "ego_start_min_m": 100.0,
+        "ego_start_max_m": 160.0,
+        "ped_appear_min_s": 3.0,
+        "walk_in_min_s": 2.0,
+        "walk_in_max_s": 10.0,
+        "walk_on_m": 15.0,
+    },
+    "parameters": {},
+}
+
+
+def with_values_before(given: dict[str, Any], before: dict[str, Any]) -> dict[str, Any]:
+    """`given` completed with the `before` values when it names none of them."""
+    if before and not set(before) & set(given):
+        return {**given, **before}
+    return given
+
+
 def load_protocol(path: Path) -> Protocol:
     """Read and check a protocol file; raises ProtocolError naming the first problem."""
     try:
@@ -159,6 +193,7 @@ def load_protocol(path: Path) -> Protocol:
         given = fields.get(name)
         if given is None:
             raise ProtocolError(f"protocol {path}: no [scenarios.{name}] table")
+        given = fields[name] = with_values_before(given, VALUES_BEFORE["scenarios"])
         wanted = set(spec_fields(get_scenario(name)))
         if set(given) != wanted:
             lacks, unknown_fields = sorted(wanted - set(given)), sorted(set(given) - wanted)

@@ -28,7 +28,14 @@ EPISODE_COLUMNS = (
     # (1 under plain Monte Carlo), its sampler stage (0..k-1 the cross-entropy pilots, k the final stage;
     # 0 under mc) and its random inputs as JSON.
     "weight", "sampler_stage", "sampler_inputs",
+    # Staging (docs/columns.md): the ego's start along its path to the conflict point, when the
+    # pedestrian entered the scene, and who struck whom (COLLISION_TYPES).
+    "ego_start_distance_m", "ped_appear_time_s", "collision_type",
 )  # fmt: skip
+#: collision_type: no collision; the moving ego's front or corner strikes the pedestrian; the pedestrian
+#: walks or runs into the side of the moving ego. A contact with a standing ego is no collision
+#: (contact_stationary).
+COLLISION_TYPES = ("none", "ego_strikes_pedestrian", "pedestrian_strikes_side")
 #: Flags every row states (True or False; an errored episode's writer states False): the Table I rates
 #: count them, so a row without one is refused, never filled with a guess.
 BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
@@ -37,7 +44,7 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal", "approach", "sampler_inputs",
+    "ego_signal", "ped_signal", "approach", "sampler_inputs", "collision_type",
 )  # fmt: skip
 INT_COLUMNS = ("episode", "seed", "sampler_stage")
 #: Values of the sampling columns in rows written before they existed (plain Monte Carlo).

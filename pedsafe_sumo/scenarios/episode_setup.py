@@ -25,6 +25,15 @@ class PedestrianSetup:
     #: People do not walk into a vehicle's body (pedsafe_sumo.behaviour.pedestrian); a test-track dummy
     #: on its platform (the Euro NCAP grid) does: it keeps its speed and path whatever is in its way.
     avoids_vehicle_bodies: bool = True
+    #: The pedestrian enters the scene at this time [s]: before it they are nowhere (no sensor can report
+    #: them). 0 in the fixed staging, where they stand at their step-off point from the start.
+    appear_time_s: float = 0.0
+    #: Index in `path_xy` of the step-off point, where they wait `start_delay_s` before crossing: the
+    #: points before it are their walk on the sidewalk to it (approach staging; 0 in the fixed staging).
+    kerb_index: int = 0
+    #: At the end of `path_xy` they leave the scene (approach staging: they walk on off it) instead of
+    #: standing there (fixed staging).
+    leaves_scene: bool = False
 
 
 @dataclass(frozen=True)
@@ -90,6 +99,9 @@ class EpisodeSetup:
     signals: SignalStaging | None = None
     #: The arm the ego comes in on (N, E, S, W; "" in a case file that does not record it).
     approach: str = ""
+    #: Distance along the ego's path from its front at the start to the conflict point [m] (NaN in a
+    #: case file that does not record it).
+    ego_start_distance_m: float = math.nan
 
 
 @dataclass(frozen=True)

@@ -38,8 +38,11 @@ from pedsafe_sumo.scenarios.signals import SIGNAL_STATES
 #: Scenario fields that hold text; every other field is a number.
 STRING_FIELDS = (
     "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
-    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class", "approach",
+    "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class", "approach", "staging",
 )  # fmt: skip
+
+#: How an episode is staged (ScenarioSpec.staging).
+STAGINGS = ("fixed", "approach")
 
 #: Upper bound of every numeric scenario field, with why: above it a value stages no meaningful scene,
 #: or makes an episode (or the drawing of one) run for ever. `--set` beyond one is refused in one line.
@@ -64,6 +67,11 @@ SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
     "signal_hold_after_s": (180.0, "longer than a signal cycle: no start point in the cycle satisfies it"),
     # Beyond a car length onto the road turned into, the leader is no longer across the crosswalk.
     "turn_leader_front_max_m": (5.0, "a car length: the leader would have left the crosswalk"),
+    # Beyond 500 m the approach takes minutes at urban speeds; no site's approach is that long.
+    "ego_start_max_m": (500.0, "longer than any approach a site holds"),
+    "ped_appear_min_s": (120.0, "the episode would be minutes of an empty approach"),
+    "walk_in_max_s": (120.0, "two minutes of walking is another street"),
+    "walk_on_m": (100.0, "beyond the scene the episode watches"),
 }
 
 
@@ -166,6 +174,27 @@ class ScenarioSpec:
     #: The arm the ego comes in on (N, E, S or W; batch --approach): staging, poles and signals follow
     #: it. "" is the site's own approach, the one its first roadside pole watches.
     approach: str = ""
+    #: How the episode is staged. "fixed": the ego and the pedestrian are placed at t = 0 on a
+    #: collision course, the pedestrian standing at their step-off point from the start (the staging of
+    #: protocol paper-v7). "approach": the ego starts on its approach, out of every sensor's reach of the
+    #: pedestrian; the pedestrian enters the scene later on the sidewalk, walks to their step-off point,
+    #: crosses, and walks on off the scene (docs/engine.md, "Approach staging").
+    staging: str = "fixed"
+    #: Approach staging: the ego's front starts this far before the conflict point along its path
+    #: (uniform draw, within what the approach's road holds) [m]. The minimum is the onboard LiDAR's
+    #: range (perception.lidar.range_m, 100 m), the longest reach of any onboard sensor: no onboard sensor
+    #: can report a pedestrian at the conflict point from the start.
+    ego_start_min_m: float = 100.0
+    ego_start_max_m: float = 160.0
+    #: Approach staging: the pedestrian enters the scene no earlier than this after the start [s], so no
+    #: sensor, onboard or roadside over V2I, can report them in the first seconds.
+    ped_appear_min_s: float = 3.0
+    #: Approach staging: the pedestrian walks on the walkable network this long before reaching their
+    #: step-off point (uniform draw; shortened, down to 0, where the ego's approach is too short) [s].
+    walk_in_min_s: float = 2.0
+    walk_in_max_s: float = 10.0
+    #: Approach staging: after crossing, the pedestrian walks on this far and leaves the scene [m].
+    walk_on_m: float = 15.0
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -185,6 +214,11 @@ class ScenarioSpec:
             ),
             (self.approach in ("", "N", "E", "S", "W"), "approach is N, E, S, W or empty"),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
+            (self.staging in STAGINGS, f"staging in {STAGINGS}"),
+            (0 < self.ego_start_min_m <= self.ego_start_max_m, "0 < ego_start_min_m <= ego_start_max_m"),
+            (self.ped_appear_min_s >= 0, "ped_appear_min_s >= 0"),
+            (0 <= self.walk_in_min_s <= self.walk_in_max_s, "0 <= walk_in_min_s <= walk_in_max_s"),
+            (self.walk_on_m >= 0, "walk_on_m >= 0"),
             (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
                 self.conflict_offset_min_s <= self.conflict_offset_max_s,

@@ -160,6 +160,9 @@ def judge_episode(
         "ego_signal": ego_signal,
         "ped_signal": ped_signal,
         "approach": arm,
+        "ego_start_distance_m": setup.ego_start_distance_m,
+        "ped_appear_time_s": ped.appear_time_s,
+        "collision_type": "ego_strikes_pedestrian" if indexes["collision"] else "none",
         "status": "ok",
         "error": "",
     }

@@ -15,6 +15,7 @@ from batch_cli import batch
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.protocol import VALUES_BEFORE
 from pedsafe_sumo.scenarios.specs import get_scenario
 
 #: The newest protocol: the one that runs on this code (older ones lack parameters the code has, and are
@@ -33,10 +34,13 @@ def _leaves(tree, prefix=""):
 def test_the_newest_protocol_names_every_value():
     data = tomllib.loads(PROTOCOL.read_text(encoding="utf-8"))
     # Every parameter of the parameter file and every field of each scenario it runs.
-    assert set(_leaves(data["parameters"])) == set(_leaves(load_params()))
+    # (but the values it was written before, VALUES_BEFORE, which it then names none of).
+    named = set(_leaves(data["parameters"]))
+    assert named | set(VALUES_BEFORE["parameters"]) == set(_leaves(load_params()))
     for name in data["protocol"]["scenarios"]:
         fields = {f for f in get_scenario(name).__dataclass_fields__ if f not in ("name", "description")}
-        assert set(data["scenarios"][name]) == fields
+        assert set(data["scenarios"][name]) | set(VALUES_BEFORE["scenarios"]) == fields
+        assert not set(data["scenarios"][name]) & set(VALUES_BEFORE["scenarios"])
 
 
 @pytest.mark.parametrize("path", sorted((REPO_ROOT / "protocols").glob("*.toml")), ids=lambda p: p.stem)
@@ -87,7 +91,8 @@ def test_run_json_records_the_protocols_values(tmp_path):
         recorded = {k: v for k, v in run["scenarios"][name].items() if k not in ("name", "description")}
         # run.json keeps the spec's numbers as floats (with_overrides parses them so).
         expected = {k: float(v) if type(v) is int else v for k, v in fields.items()}
-        assert recorded == expected
+        # The values it was written before are recorded as the behaviour it ran with.
+        assert recorded == {**expected, **VALUES_BEFORE["scenarios"]}
     assert run["run_seed"] == header["seed"] and run["episodes_per_scenario"] == 1
     assert run["algorithm"] == header["algorithm"] and run["site"] == header["site"]
     table = pd.read_parquet(out / "episodes.parquet")
