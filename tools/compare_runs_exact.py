@@ -50,16 +50,25 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_a", type=Path)
     parser.add_argument("run_b", type=Path)
+    parser.add_argument(
+        "--new-columns",
+        action="store_true",
+        help="RUN_B may have columns RUN_A lacks (a newer contract): compare the columns of RUN_A only, "
+        "and list the new ones",
+    )
     args = parser.parse_args(argv)
     for run in (args.run_a, args.run_b):
         if not (run / "episodes.parquet").is_file():
             print(f"error: {run} holds no episodes.parquet", file=sys.stderr)
             return 2
-    differences = table_differences(
-        "episodes",
-        pd.read_parquet(args.run_a / "episodes.parquet"),
-        pd.read_parquet(args.run_b / "episodes.parquet"),
-    )
+    table_a = pd.read_parquet(args.run_a / "episodes.parquet")
+    table_b = pd.read_parquet(args.run_b / "episodes.parquet")
+    if args.new_columns:
+        new = [c for c in table_b.columns if c not in table_a.columns]
+        if new:
+            print(f"new columns in {args.run_b} (not compared): {', '.join(new)}")
+        table_b = table_b[[c for c in table_b.columns if c in table_a.columns]]
+    differences = table_differences("episodes", table_a, table_b)
     logs_a, logs_b = _read_steplogs(args.run_a), _read_steplogs(args.run_b)
     if (logs_a is None) != (logs_b is None):
         differences.append("steplogs: only one of the runs has them")
