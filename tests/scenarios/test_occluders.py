@@ -14,12 +14,15 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
+from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
+from pedsafe_sumo.params import load_params
 from pedsafe_sumo.sampling.draws import Draws
 from pedsafe_sumo.scenarios.geometry import load_approach
 from pedsafe_sumo.scenarios.placements import placement_of
 from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.scenarios.staging import draw_episode
+from pedsafe_sumo.sim.episode import EpisodeRunner
 
 TRAITS = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
 SEEDS = range(12)
@@ -206,6 +209,53 @@ def test_blending_pedestrian_waits_at_the_kerb_and_crosses_behind_the_vehicle_at
     # Behind it: the crossing line lies upstream of its rear.
     assert lane_pos(start, kerb_lane) < waiting.front_pos_m - waiting.size.length_m
     assert setup.pedestrian.clothing_rgb == waiting.colour_rgb
+
+
+@pytest.mark.slow
+def test_in_sumo_the_blending_pedestrian_steps_off_clear_of_the_waiting_vehicle():
+    """SUMO's own position of the waiting vehicle at the step where the pedestrian steps off: their body
+    is at least the drawn gap from its body. Prints whether the onboard sensors detect them then (SV),
+    under both stagings (`pytest -s -k steps_off_clear`)."""
+    runner = EpisodeRunner(get_site("xueqing"), load_params(), ReferenceStack)
+    seen = {}
+    try:
+        for staging in ("fixed", "approach"):
+            spec = get_scenario("background_blending").with_overrides({"staging": staging})
+            seen[staging] = []
+            for seed in range(3):
+                waiting_steps = []
+
+                def on_step(api, row, waiting_steps=waiting_steps):
+                    if row["ped_state"] == "waiting":
+                        angle_deg = api.vehicle.getAngle("waiting_0")
+                        waiting_steps.append((row, api.vehicle.getPosition("waiting_0"), angle_deg))
+
+                result = runner.run(spec, "sv", seed, on_step=on_step)
+                row, (fx, fy), angle_deg = waiting_steps[-1]  # the step they step off at
+                (waiting,) = result.setup.parked
+                # SUMO's front bumper and heading (degrees clockwise from north), the body its full
+                # length back.
+                ux, uy = math.sin(math.radians(angle_deg)), math.cos(math.radians(angle_deg))
+                rear = (fx - waiting.size.length_m * ux, fy - waiting.size.length_m * uy)
+                lx, ly, half = -uy, ux, waiting.size.width_m / 2
+                body = [
+                    (fx + half * lx, fy + half * ly),
+                    (fx - half * lx, fy - half * ly),
+                    (rear[0] - half * lx, rear[1] - half * ly),
+                    (rear[0] + half * lx, rear[1] + half * ly),
+                ]
+                centre = (row["ped_x_m"], row["ped_y_m"])
+                gap_m = segment_to_polygon_m(centre, centre, body) - PEDESTRIAN_RADIUS_M
+                drawn_m = KERB_GAP_RANGE_M[0] if staging == "approach" else 0.0
+                assert gap_m >= drawn_m - 1e-3, (staging, seed, gap_m)
+                seen[staging].append((row["detected_onboard_lidar"], row["detected_onboard_camera"]))
+    finally:
+        runner.close()
+    for staging, flags in seen.items():
+        print(
+            f"{staging}: at step-off the LiDAR detects {sum(bool(li) for li, _ in flags)} of {len(flags)}, "
+            f"the camera {sum(bool(ca) for _, ca in flags)}"
+        )
 
 
 def test_a_queue_the_kerb_lane_cannot_hold_is_a_staging_problem(approach):
