@@ -10,7 +10,7 @@ Per episode (Xueqing, reference stack, one seed per episode from 0): whether the
 detect the pedestrian at the step they step off (the last step they wait), and, for background blending,
 in how many of the steps they walk behind the waiting vehicle (their centre within its half width of the
 kerb lane's centre line) each sensor detects them; then the totals per staging. `--kerb-gap M` sets approach
-staging's blending gap range to [M, M] (module constants of behind_waiting_vehicle.py) to tell the gap's
+staging's blending gap range to [M, M] (the spec fields kerb_gap_min_m and kerb_gap_max_m) to tell the gap's
 part from the place's.
 
 Used for docs/decisions/2026-11-27-approach-occluders.md.
@@ -25,7 +25,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import pedsafe_sumo.scenarios.placements.behind_waiting_vehicle as behind_waiting  # noqa: E402 (path above)
 from pedsafe_sumo.control.reference import ReferenceStack  # noqa: E402
 from pedsafe_sumo.network.sites import get_site  # noqa: E402
 from pedsafe_sumo.params import load_params  # noqa: E402
@@ -43,14 +42,15 @@ def main() -> None:
     parser.add_argument("--stagings", nargs="+", default=["fixed", "approach"], choices=("fixed", "approach"))
     parser.add_argument("--kerb-gap", type=float, default=None, help="approach staging's blending gap [m]")
     args = parser.parse_args()
-    if args.kerb_gap is not None:
-        behind_waiting.KERB_GAP_MIN_M = behind_waiting.KERB_GAP_MAX_M = args.kerb_gap
     site = get_site("xueqing")
     approach = load_approach(site)
     runner = EpisodeRunner(site, load_params(), ReferenceStack)
     try:
         for staging in args.stagings:
-            spec = get_scenario(args.scenario).with_overrides({"staging": staging})
+            overrides: dict = {"staging": staging}
+            if args.kerb_gap is not None:
+                overrides |= {"kerb_gap_min_m": args.kerb_gap, "kerb_gap_max_m": args.kerb_gap}
+            spec = get_scenario(args.scenario).with_overrides(overrides)
             totals = dict.fromkeys(("lidar", "camera", "behind_steps", "behind_lidar", "behind_camera"), 0)
             for seed in range(args.seeds):
                 result = runner.run(spec, "sv", seed)

@@ -8,7 +8,7 @@ than the LiDAR can separate (`blend_gap_min_m`..`max_m`, 0 by default: the body 
 
 Approach staging (spec.staging "approach"): they wait where people wait, on the sidewalk at the kerb,
 beside the vehicle's rear, and step off at the kerb to cross behind it, keeping a gap a person keeps from
-a vehicle body (KERB_GAP_MIN_M..KERB_GAP_MAX_M between their body circle and the rear bumper's line).
+a vehicle body (`kerb_gap_min_m`..`kerb_gap_max_m` between their body circle and the rear bumper's line).
 On a one-lane approach the vehicle stands parked at the kerb (the ego drives the only lane) and they
 start on the sidewalk behind it, centred on its rear, at the same gap.
 """
@@ -34,13 +34,6 @@ if TYPE_CHECKING:
     # Annotations only: specs.py imports the placement registry to validate a spec's placement.
     from pedsafe_sumo.scenarios.specs import ScenarioSpec
 
-#: Approach staging: the gap between the body circle of a pedestrian who crosses behind a waiting
-#: vehicle and its rear bumper's line (uniform draw) [m]. Assumption: from about the shy distance
-#: pedestrians keep from a fixed object they walk past (0.3 m) to an arm's length (1.0 m): close to the
-#: vehicle, which they use as a shield from the traffic behind it, never touching it.
-KERB_GAP_MIN_M = 0.3
-KERB_GAP_MAX_M = 1.0
-
 
 class BehindWaitingVehicle(StraightPlacement):
     name = "behind_waiting_vehicle"
@@ -49,7 +42,7 @@ class BehindWaitingVehicle(StraightPlacement):
         spec = inputs.spec
         approach_staging = spec.staging == "approach"
         low_m, high_m = (
-            (KERB_GAP_MIN_M, KERB_GAP_MAX_M)
+            (spec.kerb_gap_min_m, spec.kerb_gap_max_m)
             if approach_staging
             else (spec.blend_gap_min_m, spec.blend_gap_max_m)
         )
@@ -96,7 +89,7 @@ class BehindWaitingVehicle(StraightPlacement):
         over each lane's centre; under approach staging from the kerb beside its rear."""
         offsets = road_offsets_m(approach)
         stop_line_m = approach.lane_lengths_m[0]
-        gap_max_m = KERB_GAP_MAX_M if spec.staging == "approach" else spec.blend_gap_max_m
+        gap_max_m = spec.kerb_gap_max_m if spec.staging == "approach" else spec.blend_gap_max_m
         behind_m = 0.5 + VEHICLE_CLASSES["car"].length_m + gap_max_m + PEDESTRIAN_RADIUS_M
         if len(approach.lane_ids) == 1:
             # The car stands parked at the kerb beside the one lane (kerb_parking_offset_m): the
