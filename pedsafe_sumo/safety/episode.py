@@ -9,7 +9,7 @@ from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.collision import detect_collision
 from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
 from pedsafe_sumo.safety.detection import first_detection
-from pedsafe_sumo.safety.injury import episode_injury
+from pedsafe_sumo.safety.injury import SEVERE_INJURY_MODEL, episode_injury
 from pedsafe_sumo.safety.proximity import ProximityModel, default_proximity_model, episode_proximity
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
 
@@ -35,6 +35,8 @@ INDEX_COLUMNS = (
     "close_pass",
     # contact with a standing ego: neither a collision nor an injury
     "contact_stationary",
+    # a second injury index at a stated severity: P(MAIS 3+ or fatal), 0 without a collision
+    "injury_mais3f_probability",
 )
 
 
@@ -44,6 +46,7 @@ def episode_indexes(
     injury_model: str = "saade2020",
     conflict_model: ConflictModel = AMINI_2022,
     proximity_model: ProximityModel | None = None,
+    severe_injury_model: str = SEVERE_INJURY_MODEL,
 ) -> dict[str, Any]:
     """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
 
@@ -57,6 +60,8 @@ def episode_indexes(
     step, detection distance when never perceived); `injury_probability` is 0 without a collision.
     The proximity measures (`min_clearance_m`, `ego_speed_at_min_clearance_mps`, `drac_mps2`,
     `close_pass`) take the conflict measures' window; `proximity_model` None: the defaults file's.
+    `injury_mais3f_probability` is `injury_probability` under `severe_injury_model` (any registered
+    name; by default the MAIS 3+F risk of Monfort & Mueller 2025).
     """
     arrays = steplog.as_arrays(log)
     hit = detect_collision(arrays)
@@ -82,4 +87,7 @@ def episode_indexes(
         "drac_mps2": proximity.drac_mps2,
         "close_pass": proximity.close_pass,
         "contact_stationary": hit.contact_stationary,
+        "injury_mais3f_probability": episode_injury(
+            hit.collided, hit.impact_speed_mps, ped_age_years, severe_injury_model
+        ),
     }

@@ -12,6 +12,10 @@ from scipy import stats
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.geometry import FloatOrArray
 
+#: The second injury index (safety/injury_mais3.py) and its Table I columns (mean, 95% interval); a run
+#: written before the column existed has a Table I without them.
+SEVERE_INJURY_COLUMN = "injury_mais3f_probability"
+SEVERE_INJURY_TABLE_COLUMNS = ("mais3f_mean", "mais3f_low", "mais3f_high")
 TABLE_INPUT_COLUMNS = ("scenario", "condition", "collision", "injury_probability", "conflict", "status")
 ERROR_STATUS = "error"
 TIMEOUT_STATUS = "timeout"
@@ -103,7 +107,9 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error" or
     "timeout", left out), collision_rate with collision_low/high (Wilson), injury_mean with
     injury_low/high (`zero_inflated_mean_interval` of the per-episode P_I), conflict_rate with
-    conflict_low/high (Wilson), where a conflict counts only in an episode without a collision.
+    conflict_low/high (Wilson), where a conflict counts only in an episode without a collision; and
+    when the episodes have the column `injury_mais3f_probability`, mais3f_mean with mais3f_low/high
+    (as the injury).
     """
     missing = [c for c in TABLE_INPUT_COLUMNS if c not in episodes.columns]
     if missing:
@@ -119,6 +125,14 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
         injury_mean, injury_low, injury_high = zero_inflated_mean_interval(
             ok["injury_probability"].to_numpy(dtype=float), confidence
         )
+        # the second injury index, in runs that have its column
+        severe = (
+            dict(zip(SEVERE_INJURY_TABLE_COLUMNS, zero_inflated_mean_interval(
+                ok[SEVERE_INJURY_COLUMN].to_numpy(dtype=float), confidence
+            )))
+            if SEVERE_INJURY_COLUMN in ok.columns
+            else {}
+        )  # fmt: skip
         rows.append(
             {
                 "scenario": scenario,
@@ -134,6 +148,7 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
                 "conflict_rate": n_con / n if n else math.nan,
                 "conflict_low": wilson_interval(n_con, n, confidence)[0],
                 "conflict_high": wilson_interval(n_con, n, confidence)[1],
+                **severe,
             }
         )
     return pd.DataFrame(rows)
