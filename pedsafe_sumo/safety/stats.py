@@ -108,13 +108,16 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     "timeout", left out), collision_rate with collision_low/high (Wilson), injury_mean with
     injury_low/high (`zero_inflated_mean_interval` of the per-episode P_I), conflict_rate with
     conflict_low/high (Wilson), where a conflict counts only in an episode without a collision; and
-    when the episodes have the column `injury_mais3f_probability`, mais3f_mean with mais3f_low/high
-    (as the injury).
+    when the episodes have values of `injury_mais3f_probability`, mais3f_mean with mais3f_low/high
+    (as the injury; NaN in a row whose episodes lack some of them).
     """
     missing = [c for c in TABLE_INPUT_COLUMNS if c not in episodes.columns]
     if missing:
         raise ValueError(f"episodes lack column(s): {', '.join(missing)}")
     rows = []
+    has_severe = SEVERE_INJURY_COLUMN in episodes.columns and bool(
+        episodes[SEVERE_INJURY_COLUMN].notna().any()
+    )
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
         errors = group["status"].isin(FAILED_STATUSES).to_numpy()
         ok = group[~errors]
@@ -125,14 +128,12 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
         injury_mean, injury_low, injury_high = zero_inflated_mean_interval(
             ok["injury_probability"].to_numpy(dtype=float), confidence
         )
-        # the second injury index, in runs that have its column
-        severe = (
-            dict(zip(SEVERE_INJURY_TABLE_COLUMNS, zero_inflated_mean_interval(
-                ok[SEVERE_INJURY_COLUMN].to_numpy(dtype=float), confidence
-            )))
-            if SEVERE_INJURY_COLUMN in ok.columns
-            else {}
-        )  # fmt: skip
+        # the second injury index, in runs that have it (NaN where a row lacks it: rows of older runs)
+        severe = {}
+        if has_severe:
+            values = ok[SEVERE_INJURY_COLUMN].to_numpy(dtype=float)
+            interval = zero_inflated_mean_interval(values, confidence) if not np.isnan(values).any() else None
+            severe = dict(zip(SEVERE_INJURY_TABLE_COLUMNS, interval or (math.nan,) * 3))
         rows.append(
             {
                 "scenario": scenario,
