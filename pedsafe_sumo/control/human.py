@@ -11,16 +11,17 @@ Model card: docs/human_driver.md. In short:
   times of drivers surprised by an unexpected braking signal (Johansson & Rumar 1971, Human Factors
   13(1):23-27: corrected median 0.9 s, 25 % of drivers slower than 1.2 s): ln RT ~ N(ln 0.9, 0.4265^2),
   0.4265 = ln(1.2 / 0.9) / 0.6745 (0.6745: the standard normal's 75th percentile). The draw comes from
-  the episode seed of the setup config (`human_reaction_stream`), so the same episode gives the same
-  driver under SV and V2I.
+  the episode seed of the setup config (its own numpy stream, REACTION_STREAM), so the same episode
+  gives the same driver under SV and V2I.
 - **Braking**: after the reaction time the deceleration rises linearly (jerk-limited) to at most
   0.774 g = 7.59 m/s^2 in 0.6 s, the emergency braking of the competent and careful human driver of UN
   Regulation No. 157 (ALKS), Annex 4, Appendix 3; it asks no more than the deceleration that stops the
   car 2 m short of the pedestrian (like the reference stack) and falls back at once when less is needed.
 - **Resuming**: once no threat has been seen for 0.5 s, back to the cruise speed at 2 m/s^2.
 
-Its parameters are keys of the setup config with the prefix `human_` (the parameter file's [algorithm]
-section gives every stack `reaction_time_s` and `max_decel_mps2`, which are the reference stack's).
+Its parameters are class attributes (a subclass changes them); it reads neither `reaction_time_s` nor
+`max_decel_mps2` of the setup config, which the parameter file's [algorithm] section sets for the
+reference stack.
 """
 
 from __future__ import annotations
@@ -74,14 +75,20 @@ class HumanDriverStack(Agent):
     """An attentive, non-impaired human driver: sees with the onboard camera, reacts after a drawn
     perception-reaction time, brakes with a jerk-limited ramp to 0.774 g."""
 
+    #: The model's parameters (module constants above); a subclass changes them for a sensitivity run,
+    #: e.g. Green (2000)'s about 1.5 s for surprise events: `reaction_median_s = 1.5`.
+    reaction_median_s = REACTION_MEDIAN_S
+    reaction_sigma_ln = REACTION_SIGMA_LN
+    brake_max_decel_mps2 = MAX_DECEL_MPS2
+    brake_ramp_s = BRAKE_RAMP_S
+
     def setup(self, config: dict[str, Any]) -> None:
         self.cruise_speed_mps = float(config["initial_speed_mps"])
-        median = float(config.get("human_reaction_median_s", REACTION_MEDIAN_S))
-        sigma = float(config.get("human_reaction_sigma_ln", REACTION_SIGMA_LN))
-        self.reaction_time_s = draw_reaction_time_s(int(config["seed"]), median, sigma)
-        self.max_decel_mps2 = float(config.get("human_max_decel_mps2", MAX_DECEL_MPS2))
-        ramp_s = float(config.get("human_brake_ramp_s", BRAKE_RAMP_S))
-        self.jerk_mps3 = self.max_decel_mps2 / ramp_s if ramp_s > 0 else math.inf
+        self.reaction_time_s = draw_reaction_time_s(
+            int(config["seed"]), self.reaction_median_s, self.reaction_sigma_ln
+        )
+        self.max_decel_mps2 = float(self.brake_max_decel_mps2)
+        self.jerk_mps3 = self.max_decel_mps2 / self.brake_ramp_s if self.brake_ramp_s > 0 else math.inf
         self.horizon_s = HORIZON_S
         self.lateral_margin_m = LATERAL_MARGIN_M
         self.stop_margin_m = STOP_MARGIN_M

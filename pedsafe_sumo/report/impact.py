@@ -67,8 +67,9 @@ def intercept_note(episodes: pd.DataFrame) -> str:
     if share.n_collisions == 0:
         return line + "; no collision in this run"
     return (
-        f"{line}; over the {share.n_collisions} collisions, eq. 4 at 0 km/h makes {share.share:.0%} of the "
-        f"summed P_I ({share.eq4_at_rest_sum:.2f} of {share.eq4_sum:.2f})"
+        f"{line}; over the {share.n_collisions} collision{'s' if share.n_collisions != 1 else ''} of the "
+        f"run, eq. 4 at 0 km/h makes {share.share:.0%} of the summed P_I "
+        f"({share.eq4_at_rest_sum:.2f} of {share.eq4_sum:.2f})"
     )
 
 
