@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import math
+
+import pandas as pd
 import pytest
 
 from pedsafe_sumo.safety import episode_indexes
 from pedsafe_sumo.safety.injury import SEVERE_INJURY_MODEL, injury_probability
+from pedsafe_sumo.safety.stats import table_one
 
 MODEL = "monfort_mueller2025_mais3f"
 
@@ -66,3 +70,40 @@ def test_the_row_has_both_injury_columns(collision_log):
 
 def test_no_collision_no_risk(near_miss_log):
     assert episode_indexes(near_miss_log, ped_age_years=80.0)["injury_mais3f_probability"] == 0.0
+
+
+def _episodes(mais3f):
+    rows = {
+        "scenario": ["crossing"] * 4 + ["jaywalking"] * 2,
+        "condition": ["sv"] * 6,
+        "collision": [True, True, False, False, False, True],
+        "injury_probability": [0.3, 0.5, 0.0, 0.0, 0.0, 0.2],
+        "conflict": [False] * 6,
+        "status": ["ok"] * 6,
+    }
+    if mais3f is not None:
+        rows["injury_mais3f_probability"] = mais3f
+    return pd.DataFrame(rows)
+
+
+def test_table_one_has_the_mais3f_mean_beside_p_i():
+    # crossing: (0.2 + 0.4 + 0 + 0) / 4 = 0.15; the interval is the two-part one of P_I: the same
+    # function of the same kind of values, so the MAIS 3+F values put into the P_I column give it again
+    table = table_one(_episodes([0.2, 0.4, 0.0, 0.0, 0.0, 0.1]))
+    crossing = table.iloc[0]
+    assert crossing["mais3f_mean"] == pytest.approx(0.15)
+    swapped = table_one(_episodes(None).assign(injury_probability=[0.2, 0.4, 0.0, 0.0, 0.0, 0.1])).iloc[0]
+    assert (crossing["mais3f_low"], crossing["mais3f_high"]) == pytest.approx(
+        (swapped["injury_low"], swapped["injury_high"])
+    )
+    # two positives: the t interval of their mean reaches 0 (t = 12.71 at 1 degree of freedom)
+    assert crossing["mais3f_low"] == 0.0 and 0.15 < crossing["mais3f_high"] < 1.0
+    assert table.iloc[1]["mais3f_mean"] == pytest.approx(0.05)
+
+
+def test_table_one_without_the_column_or_with_gaps():
+    assert "mais3f_mean" not in table_one(_episodes(None)).columns
+    assert "mais3f_mean" not in table_one(_episodes([math.nan] * 6)).columns  # a run written before it
+    # a scenario whose rows lack values gets NaN, not a mean over the rows that have them
+    table = table_one(_episodes([0.2, math.nan, 0.0, 0.0, 0.0, 0.1]))
+    assert math.isnan(table.iloc[0]["mais3f_mean"]) and table.iloc[1]["mais3f_mean"] == pytest.approx(0.05)
