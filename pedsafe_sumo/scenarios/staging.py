@@ -5,6 +5,7 @@ junction's signal program."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -67,13 +68,23 @@ def draw_episode(
         seed=seed,
         ego=scene.ego,
         ego_route=scene.ego_route,
-        pedestrian=pedestrian(pedestrian_traits, scene.clothing_rgb, scene.start_delay_s, scene.path),
+        pedestrian=dataclasses.replace(
+            pedestrian(pedestrian_traits, scene.clothing_rgb, scene.start_delay_s, scene.path),
+            appear_time_s=float(scene.appear_time_s),
+            kerb_index=scene.kerb_index,
+            leaves_scene=scene.leaves_scene,
+        ),
         parked=scene.parked,
         conflict_xy=(float(scene.conflict_xy[0]), float(scene.conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
-        time_limit_s=spec.time_limit_s,
+        # Under approach staging the episode lasts the approach until the pedestrian appears, then the
+        # scene (in the fixed staging they are there from the start: appear_time_s is 0).
+        time_limit_s=float(scene.appear_time_s) + spec.time_limit_s
+        if spec.staging == "approach"
+        else spec.time_limit_s,
         conflict_time_s=float(scene.conflict_time_s),
         ped_crossing_id=scene.ped_crossing_id,
+        ego_start_distance_m=float(scene.ego_start_distance_m),
     )
 
 
@@ -115,11 +126,13 @@ def stage_signals(
             f"({'signalised' if ped_link != NO_LINK else 'no signal'})"
         )
     until_s = setup.conflict_time_s + spec.signal_hold_after_s
-    # The ego from the start (it sees its signal all the way to the stop line), the pedestrian from
-    # stepping off the kerb, both until after the conflict.
-    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
+    # The ego from the start (it sees its signal all the way to the stop line; under approach staging
+    # from the pedestrian's appearance: before it the ego is on its approach and nothing is staged), the
+    # pedestrian from stepping off the kerb, both until after the conflict.
+    ego_from_s = min(setup.pedestrian.appear_time_s, until_s) if spec.staging == "approach" else 0.0
+    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, ego_from_s, until_s)}
     if ped_link != NO_LINK:
-        step_off_s = min(setup.pedestrian.start_delay_s, until_s)
+        step_off_s = min(step_off_time_s(setup.pedestrian), until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
         required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
     # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too.
@@ -148,3 +161,13 @@ def stage_signals(
         ),
     )
     return dataclasses.replace(setup, signals=staging)
+
+
+def step_off_time_s(ped: PedestrianSetup) -> float:
+    """When the pedestrian steps off the kerb [s]: their appearance, the walk-in (the points of their path
+    before `kerb_index`, at their walking speed), then the wait at the kerb."""
+    if ped.kerb_index == 0:
+        return ped.appear_time_s + ped.start_delay_s if ped.appear_time_s else ped.start_delay_s
+    walk_in = ped.path_xy[: ped.kerb_index + 1]
+    walk_in_m = sum(math.dist(p, q) for p, q in zip(walk_in[:-1], walk_in[1:]))
+    return ped.appear_time_s + walk_in_m / ped.walking_speed_mps + ped.start_delay_s
