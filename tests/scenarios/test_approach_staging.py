@@ -299,3 +299,27 @@ def test_hosting_refuses_a_road_too_short_for_any_start(site, approach):
     assert problem is not None and "ego_start_min_m 180" in problem
     held_m = float(problem.split("at most ")[1].split(" m")[0])
     assert held_m == pytest.approx(181.63 - 45.0 - CAR_LENGTH_M, abs=1.0)
+
+
+def test_a_scene_longer_than_the_green_starts_later_on_the_walk_in(site, approach):
+    """Xueqing's southbound through green lasts 16 s of its 90 s cycle. A 10 s walk-in, the 1 s wait, the
+    walk to the median lane (about 5.8 m at 1.0 m/s) and 2 s after the conflict do not fit in it (the ego
+    at 3 m/s starts long enough before for the whole walk-in): the
+    pedestrian appears 16 s before the end of the hold, further along the same walk-in, and steps off
+    when they would have."""
+    spec = approach_spec("crossing", walk_in_min_s=10, walk_in_max_s=10)
+    slow = {**TRAITS, "walking_speed_mps": 1.0}
+    signals = load_junction_signals(site.file("net.xml"), approach.junction_id)
+    setup, _ = draw(spec, approach, 4, speed=3.0, traits=slow)
+    staged = stage_signals(spec, setup, signals, np.random.default_rng(4))
+    until_s = setup.conflict_time_s + spec.signal_hold_after_s
+    assert until_s - setup.pedestrian.appear_time_s > 16.0
+    ped = staged.pedestrian
+    assert ped.appear_time_s == pytest.approx(until_s - 16.0, abs=0.01)
+    assert step_off_time_s(ped) == pytest.approx(step_off_time_s(setup.pedestrian))
+    assert staged.time_limit_s == pytest.approx(ped.appear_time_s + spec.time_limit_s)
+    # Where they appear lies on the walk-in they would have walked.
+    before = setup.pedestrian.path_xy[: setup.pedestrian.kerb_index + 1]
+    gap_m = sumolib.geomhelper.distancePointToPolygon(ped.path_xy[0], list(before))
+    assert gap_m < 1e-6
+    assert ped.path_xy[ped.kerb_index :] == setup.pedestrian.path_xy[setup.pedestrian.kerb_index :]
