@@ -91,6 +91,8 @@ def walk_on(
     walkway other than `exclude`: the sidewalk the pedestrian came from), then along that sidewalk's
     centreline in the direction that leads away from `away_from` (the junction; beyond the sidewalk's end,
     straight on). Straight on all the way where no sidewalk is reached."""
+    if walk_on_m <= 0:
+        return ()
     reach = _first_sidewalk(end_xy, heading, walk_on_m, walkways, exclude)
     if reach is None:
         return ((end_xy[0] + heading[0] * walk_on_m, end_xy[1] + heading[1] * walk_on_m),)

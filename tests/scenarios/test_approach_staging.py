@@ -323,3 +323,10 @@ def test_a_scene_longer_than_the_green_starts_later_on_the_walk_in(site, approac
     gap_m = sumolib.geomhelper.distancePointToPolygon(ped.path_xy[0], list(before))
     assert gap_m < 1e-6
     assert ped.path_xy[ped.kerb_index :] == setup.pedestrian.path_xy[setup.pedestrian.kerb_index :]
+
+
+def test_no_walk_on_ends_at_the_crossing(approach):
+    setup, _ = draw(approach_spec("crossing", walk_on_m=0), approach, 0)
+    ped = setup.pedestrian
+    assert len(ped.path_xy) == ped.kerb_index + 2
+    assert ped.leaves_scene
