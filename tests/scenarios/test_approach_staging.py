@@ -330,3 +330,20 @@ def test_no_walk_on_ends_at_the_crossing(approach):
     ped = setup.pedestrian
     assert len(ped.path_xy) == ped.kerb_index + 2
     assert ped.leaves_scene
+
+
+def test_a_fast_ego_starts_farther_back_to_keep_the_appearance(approach):
+    """Jaywalking at 14 m/s from 100 m: the ego would arrive after about 7.1 s, before the pedestrian
+    (walking 1.4 m/s from the middle of the sidewalk, about 6.3 m to the median lane, 1 s at the kerb)
+    could appear at 3 s even with no walk-in. The walk-in goes (the step-off point is on the sidewalk's
+    centreline: nothing before it), and the ego starts 14 m/s x (3 s + offset + walk + wait) before the
+    conflict, so that the pedestrian appears at exactly 3 s."""
+    spec = approach_spec("jaywalking", ego_start_min_m=100, ego_start_max_m=100)
+    for seed in range(3):
+        setup, inputs = draw(spec, approach, seed, speed=14.0)
+        ped = setup.pedestrian
+        assert ped.kerb_index == 0
+        walk_s = math.dist(ped.path_xy[0], setup.conflict_xy) / 1.4
+        expected_m = 14.0 * (3.0 + inputs["conflict_offset_s"] + walk_s + spec.ped_start_delay_s)
+        assert setup.ego_start_distance_m == pytest.approx(expected_m, abs=1e-6)
+        assert ped.appear_time_s == pytest.approx(3.0, abs=1e-9)

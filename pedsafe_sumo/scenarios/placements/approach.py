@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 from pedsafe_sumo.scenarios.placements.base import StagingInputs
 from pedsafe_sumo.scenarios.walkways import (
+    ON_CENTRELINE_M,
     point_at,
     polyline_length_m,
     shape_between,
@@ -81,6 +82,8 @@ def stage_approach(
     # car): walked whatever the walk-in; the drawn walk-in is the whole walk to the step-off point.
     beside = point_at(sidewalk, sidewalk_offset_m(sidewalk, step_off))
     leg_m = math.dist(beside, step_off)
+    if leg_m < ON_CENTRELINE_M:
+        leg_m = 0.0  # the walk-in goes straight to it (walkways.walk_in)
     along_m = max(walk_in_s * walk_mps - leg_m, 0.0)
     available_m = sidewalk_before_m(sidewalk, step_off)
     if along_m > available_m:
@@ -92,18 +95,29 @@ def stage_approach(
     def appear_s() -> float:
         return start_m / ego_mps - lead_s - (along_m + leg_m) / walk_mps
 
-    if appear_s() < spec.ped_appear_min_s and along_m > 0:
+    def early() -> bool:
+        # Within rounding of the minimum is on it (the fallbacks below set A to it exactly).
+        return appear_s() < spec.ped_appear_min_s - 1e-9
+
+    if early() and along_m > 0:
         along_m = max(along_m - (spec.ped_appear_min_s - appear_s()) * walk_mps, 0.0)
         fallbacks.append("walk_in_shortened")
-    if appear_s() < spec.ped_appear_min_s and start_m < most_m:
+    if early() and start_m < most_m:
         start_m = min(ego_mps * (spec.ped_appear_min_s + lead_s + (along_m + leg_m) / walk_mps), most_m)
         fallbacks.append("start_lengthened")
-    if appear_s() < spec.ped_appear_min_s:
+    if early():
         fallbacks.append("appears_early")
 
     walk = walk_in(sidewalk, step_off, along_m)
-    walk_in_m = polyline_length_m([*walk, step_off])
-    appear = start_m / ego_mps - lead_s - walk_in_m / walk_mps
+    appear = start_m / ego_mps - lead_s - polyline_length_m([*walk, step_off]) / walk_mps
+    if appear < spec.ped_appear_min_s and not early() and walk:
+        # A step-off point within ON_CENTRELINE_M of the centreline is walked to straight from the point
+        # before it, up to that much longer than along_m: the walk-in starts that much further on.
+        before = [*walk, step_off]
+        length_m = polyline_length_m(before)
+        excess_m = min((spec.ped_appear_min_s - appear) * walk_mps, length_m)
+        walk = tuple(shape_between(before, excess_m, length_m)[:-1])
+        appear = start_m / ego_mps - lead_s - polyline_length_m([*walk, step_off]) / walk_mps
     (px, py), (qx, qy) = crossing[-2], crossing[-1]
     norm = math.hypot(qx - px, qy - py)
     onward = walk_on(
