@@ -68,7 +68,7 @@ def walk_in(sidewalk_shape, step_off_xy: Point, along_m: float) -> tuple[Point, 
     to_m = sidewalk_offset_m(sidewalk_shape, step_off_xy)
     points = shape_between(sidewalk_shape, max(to_m - along_m, 0.0), to_m)
     if math.dist(points[-1], step_off_xy) < ON_CENTRELINE_M:
-        # The step-off point is on the centreline (mid-block, from the middle of the sidewalk).
+        # The step-off point is on the centreline: no step aside to it.
         points.pop()
     return tuple(points)
 

@@ -17,6 +17,7 @@ import pandas as pd
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.proximity import ProximityModel
+from pedsafe_sumo.safety.witness import witness_collision
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.scenarios.signals import colour_of_link
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
@@ -145,6 +146,7 @@ def judge_episode(
     sumo_witness = sumo_collision if is_crossing_or_walkingarea(trace.closest_edge) else None
     indexes = episode_indexes(log, ped.age_years, injury_model=injury_model, proximity_model=proximity_model)
     ego_signal, ped_signal = signals_at_conflict(log, trace.signal_states, setup)
+    witness = witness_collision(log)  # a second opinion on `collision`, by other geometry code
     outcome = {
         "scenario": setup.scenario,
         "condition": condition,
@@ -163,6 +165,8 @@ def judge_episode(
         "ego_start_distance_m": setup.ego_start_distance_m,
         "ped_appear_time_s": ped.appear_time_s,
         "collision_type": "ego_strikes_pedestrian" if indexes["collision"] else "none",
+        "witness_collision": witness.collided,
+        "witness_collision_time_s": witness.time_s,
         "status": "ok",
         "error": "",
     }

@@ -81,6 +81,8 @@ def test_without_jaywalking_the_injury_figures_are_skipped(tmp_path, capsys):
     # Table I, the paired tests, and the checks of the indexes this run has columns for (the episodes
     # carry every column of EPISODE_COLUMNS, contact_stationary included)
     index_tables = ("agreement.csv", "contacts.csv", "pet.csv", "proximity.csv", "indexes.md")
+    # and the audit: the collision witness and the staging diagnostics, always written
+    index_tables += ("witness.csv", "witness_disagreements.csv", "staging.csv", "audit.md")
     assert sorted(p.name for p in (run / "tables").iterdir()) == sorted(TABLES + index_tables)
 
 
