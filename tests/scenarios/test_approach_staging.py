@@ -14,6 +14,7 @@ from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.sampling.draws import Draws
 from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
+from pedsafe_sumo.scenarios.hosting import staging_problem
 from pedsafe_sumo.scenarios.placements import placement_of
 from pedsafe_sumo.scenarios.signals import load_junction_signals
 from pedsafe_sumo.scenarios.specs import get_scenario
@@ -293,10 +294,9 @@ def test_hosting_refuses_a_road_too_short_for_any_start(site, approach):
     """Jaywalking crosses up to 45 m before the 181.63 m lane's stop line (a little more where the gap in
     the queue nearest the drawn distance lies beyond it): the ego's lane holds it (4.6 m) at most about
     132 m before the conflict, short of a 180 m minimum start."""
-    placement = placement_of(get_scenario("jaywalking"))
-    assert placement.staging_problem(site, approach_spec("jaywalking"), approach, None, "N") is None
+    assert staging_problem(site, approach_spec("jaywalking"), approach, None, "N") is None
     spec = approach_spec("jaywalking", ego_start_min_m=180, ego_start_max_m=200)
-    problem = placement.staging_problem(site, spec, approach, None, "N")
+    problem = staging_problem(site, spec, approach, None, "N")
     assert problem is not None and "ego_start_min_m 180" in problem
     held_m = float(problem.split("at most ")[1].split(" m")[0])
     # At most the lane's length less the farthest mid-block distance and the car (the placement may

@@ -113,6 +113,13 @@ class Placement:
         """Why `spec` cannot be staged on approach `arm` of `site` (one line), or None."""
         raise NotImplementedError
 
+    def approach_staging_problem(
+        self, spec: ScenarioSpec, approach: Approach, turn: Turn | None
+    ) -> str | None:
+        """Why `spec`, which `staging_problem` lets stage, cannot be staged under approach staging (one
+        line), or None (hosting.staging_problem asks it after `staging_problem`)."""
+        return None
+
 
 def first_crossing(polyline, path) -> tuple[float, float] | None:
     """First intersection of the pedestrian's straight path (two points) with a polyline, or None."""

@@ -189,11 +189,11 @@ class StraightPlacement(Placement):
         problem = straight_staging_problem(approach)
         if not problem and len(approach.lane_ids) == 1:
             problem = self.kerb_staging_problem(spec, approach)
-        if not problem and spec.staging == "approach":
-            problem = self.approach_staging_problem(spec, approach)
         return problem
 
-    def approach_staging_problem(self, spec: ScenarioSpec, approach: Approach) -> str | None:
+    def approach_staging_problem(
+        self, spec: ScenarioSpec, approach: Approach, turn: Turn | None
+    ) -> str | None:
         """Why `spec` cannot be staged under approach staging, or None: the ego's lane must hold a start
         `ego_start_min_m` before the nearest conflict point the placement stages (out of every onboard
         sensor's reach), its whole body on the lane, and a sidewalk must lead to the step-off point."""
