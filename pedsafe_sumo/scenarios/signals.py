@@ -208,24 +208,54 @@ class JunctionSignals:
 
 @lru_cache(maxsize=4)
 def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
-    """Read the junction's traffic light (the one with the junction's id) from the network."""
+    """Read the traffic light that controls the junction's links from the network.
+
+    The light is found from the junction's connections (their `tl` and `linkIndex`), not from its id:
+    netconvert names a light joined from the stop-line signals around a junction `joinedS_...`
+    (`--tls.join`), one guessed over a cluster `joinedG_...`, one built from signals guessed at the
+    stop lines `GS_<junction>`, and a light may control several neighbouring junctions (its link
+    indices then run over all of them). SignalStagingError, in one line, for a traffic-light junction
+    none of whose links a light controls, and for a junction whose links several lights control (the
+    scenarios stage one program); "has no traffic light" only for a junction that is not a
+    traffic-light junction and whose links no light controls."""
     net = read_net(str(net_file), withInternal=True, withPedestrianConnections=True, withPrograms=True)
-    tls = next((t for t in net.getTrafficLights() if t.getID() == junction_id), None)
-    if tls is None:
+    try:
+        node = net.getNode(junction_id)
+    except KeyError:
+        raise SignalStagingError(f"{net_file.name} has no junction {junction_id}") from None
+    links_of = {
+        tls: [c for c in tls.getConnections() if c[0].getEdge().getToNode() is node]
+        for tls in net.getTrafficLights()
+    }
+    controlling = sorted((t for t, links in links_of.items() if links), key=lambda t: t.getID())
+    if not controlling:
+        if node.getType().startswith("traffic_light"):
+            raise SignalStagingError(
+                f"junction {junction_id} of {net_file.name} is a traffic-light junction, but no traffic "
+                "light controls any of its connections (no tl attribute on them)"
+            )
         raise SignalStagingError(f"junction {junction_id} of {net_file.name} has no traffic light")
+    if len(controlling) > 1:
+        counts = ", ".join(f"{t.getID()} {len(links_of[t])} links" for t in controlling)
+        raise SignalStagingError(
+            f"junction {junction_id} of {net_file.name} is controlled by {len(controlling)} traffic lights "
+            f"({counts}): the scenarios stage the signals of one traffic light per junction"
+        )
+    tls = controlling[0]
+    tls_id = tls.getID()
     programs = tls.getPrograms()
     if not programs:
-        raise SignalStagingError(f"traffic light {junction_id} of {net_file.name} has no program")
+        raise SignalStagingError(f"traffic light {tls_id} of {net_file.name} has no program")
     # SUMO starts the last program the network defines for a traffic light.
     program_id, program = list(programs.items())[-1]
     if program.getType() != "static":
         raise SignalStagingError(
-            f"traffic light {junction_id} runs a {program.getType()} program; scenarios stage only "
+            f"traffic light {tls_id} runs a {program.getType()} program; scenarios stage only "
             "fixed-time (static) programs"
         )
     phases = program.getPhases()
     signals = SignalProgram(
-        tls_id=junction_id,
+        tls_id=tls_id,
         program_id=str(program_id),
         durations_s=tuple(float(p.duration) for p in phases),
         states=tuple(p.state for p in phases),
@@ -233,7 +263,7 @@ def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
     vehicle_links: dict[tuple[str, str], int] = {}
     crossing_links: dict[str, int] = {}
     directions: dict[tuple[str, str], str] = {}
-    for connection in tls.getConnections():
+    for connection in links_of[tls]:
         from_lane, to_lane, link_index = connection
         to_edge = to_lane.getEdge()
         if to_edge.getFunction() == "crossing":
