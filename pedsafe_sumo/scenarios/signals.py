@@ -214,7 +214,7 @@ def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
     netconvert names a light joined from the stop-line signals around a junction `joinedS_...`
     (`--tls.join`), one guessed over a cluster `joinedG_...`, one built from signals guessed at the
     stop lines `GS_<junction>`, and a light may control several neighbouring junctions (its link
-    indices then run over all of them). SignalStagingError, in one line, for a traffic-light junction
+    indices then run over all of them, and every link of the light is read). SignalStagingError, in one line, for a traffic-light junction
     none of whose links a light controls, and for a junction whose links several lights control (the
     scenarios stage one program); "has no traffic light" only for a junction that is not a
     traffic-light junction and whose links no light controls."""
@@ -263,7 +263,9 @@ def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
     vehicle_links: dict[tuple[str, str], int] = {}
     crossing_links: dict[str, int] = {}
     directions: dict[tuple[str, str], str] = {}
-    for connection in links_of[tls]:
+    # Every link of the light, the neighbouring junctions' too: a light over a split intersection (a
+    # divided road's two junctions) stages a movement through the other junction in the same program.
+    for connection in tls.getConnections():
         from_lane, to_lane, link_index = connection
         to_edge = to_lane.getEdge()
         if to_edge.getFunction() == "crossing":
