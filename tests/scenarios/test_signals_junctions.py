@@ -35,7 +35,9 @@ def _nodes(types: dict[str, str], extra: dict[str, str] | None = None, two: bool
     points.update({"D": (30, 0), "E": (230, 0), "DN": (30, 200)} if two else {"E": (200, 0)})
     rows = []
     for name, (x, y) in points.items():
-        rows.append(f'<node id="{name}" x="{x}" y="{y}" type="{types.get(name, "priority")}" {extra.get(name, "")}/>')
+        rows.append(
+            f'<node id="{name}" x="{x}" y="{y}" type="{types.get(name, "priority")}" {extra.get(name, "")}/>'
+        )
     return "<nodes>" + "".join(rows) + "</nodes>"
 
 
@@ -68,9 +70,17 @@ def nets(tmp_path_factory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("signal_nets")
     lights = {"C": "traffic_light", "D": "traffic_light"}
     built = {
-        "joinedS": _netconvert(folder, "joined", _nodes(lights), _edges(), "--tls.join", "--tls.join-dist", "40"),
+        "joinedS": _netconvert(
+            folder, "joined", _nodes(lights), _edges(), "--tls.join", "--tls.join-dist", "40"
+        ),
         "joinedG": _netconvert(
-            folder, "guessed", _nodes({}), _edges(), "--tls.guess", "--tls.guess.threshold", "10",
+            folder,
+            "guessed",
+            _nodes({}),
+            _edges(),
+            "--tls.guess",
+            "--tls.guess.threshold",
+            "10",
             "--tls.guess.joining",
         ),
         "shared": _netconvert(
@@ -109,9 +119,8 @@ def nets(tmp_path_factory) -> dict[str, Path]:
         f'tl="B" linkIndex="{width + i}"/>'
         for i, c in enumerate(north)
     )
-    (folder / "two.tll.xml").write_text(
-        f'<tlLogics><tlLogic id="B" type="static" programID="0" offset="0">{phases}</tlLogic>{moved}</tlLogics>'
-    )
+    program = f'<tlLogic id="B" type="static" programID="0" offset="0">{phases}</tlLogic>'
+    (folder / "two.tll.xml").write_text(f"<tlLogics>{program}{moved}</tlLogics>")
     subprocess.run(
         [sumo_binary("netconvert"), "-s", "own.net.xml", "-i", "two.tll.xml", "-o", "two.net.xml"],
         cwd=folder, check=True, capture_output=True,
@@ -130,7 +139,10 @@ def _net_links(net: Path, junction: str) -> dict[tuple[str, str], tuple[str, int
     for c in root.iter("connection"):
         through = ends_at.get(c.get("from")) == junction or c.get("from", "").startswith(f":{junction}_w")
         if through and c.get("tl"):
-            links[(f"{c.get('from')}_{c.get('fromLane')}", c.get("to"))] = (c.get("tl"), int(c.get("linkIndex")))
+            links[(f"{c.get('from')}_{c.get('fromLane')}", c.get("to"))] = (
+                c.get("tl"),
+                int(c.get("linkIndex")),
+            )
     return links
 
 
