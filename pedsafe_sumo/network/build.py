@@ -52,6 +52,7 @@ from pedsafe_sumo.network.site_files import (
     write_sumocfg,
     write_view,
 )
+from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand, osm_drives_left
 from pedsafe_sumo.sumo_net import read_net
 
 __all__ = ["BuildError", "BuildReport", "build_site"]
@@ -106,11 +107,16 @@ def build_site(
     with tempfile.TemporaryDirectory(prefix=f"pedsafe_build_{name}_") as tmp:
         stage = Path(tmp)
         staged_osm = _stage_osm(stage / f"{name}.osm", osm_path, center_lat, center_lon, radius_m, clipping)
+        if osm_drives_left(staged_osm):
+            raise BuildError(f"the OSM data of {name} says driving_side=left: {LEFTHAND_REFUSAL}")
         stage_tool_inputs(stage)
         if net_from is not None:
             _stage_network(net_from, stage / net_file)  # the network as the user left it
         else:
             convert_network(stage, name, staged_osm.name, net_file, patches_dir)
+        if network_is_lefthand(stage / net_file):
+            shown = net_from or net_file
+            raise BuildError(f'{shown} is built for left-hand traffic (lefthand="true"): {LEFTHAND_REFUSAL}')
         dropped_underground = convert_polygons(stage, net_file, staged_osm.name, poly_file)
         net = _read_network(stage / net_file, net_from or net_file)
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
+from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand
 
 OSM_DIR = REPO_ROOT / "osm"
 #: Environment variable naming another folder of site folders (<folder>/<site>/<site>.net.xml, ...) in
@@ -165,7 +166,8 @@ def read_site_file(path: Path, name: str) -> dict:
 
 
 def resolve_site(name_or_path: str | os.PathLike = DEFAULT_SITE, verify: bool = True) -> Site:
-    """The site a --site value names, checked (verify_site) unless verify is False."""
+    """The site a --site value names, checked unless verify is False: a network built for left-hand
+    traffic is refused (network.traffic_side), then verify_site."""
     folder = site_folder(name_or_path)
     site_file = _site_file_in(folder)
     name = site_file.name.removesuffix(".site.json")
@@ -186,6 +188,11 @@ def resolve_site(name_or_path: str | os.PathLike = DEFAULT_SITE, verify: bool = 
     except (KeyError, TypeError, ValueError) as exc:
         raise SiteError(f"site {name}: {site_file} lacks a valid {_one_line(exc)}") from None
     if verify:
+        if network_is_lefthand(site.file("net.xml")):
+            raise SiteError(
+                f"site {name}: {site.file('net.xml').name} is built for left-hand traffic "
+                f'(lefthand="true"): {LEFTHAND_REFUSAL}'
+            )
         verify_site(site, info)
     return site
 

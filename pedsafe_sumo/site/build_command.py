@@ -18,6 +18,7 @@ from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SiteError, resolve_site
+from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, TRAFFIC_SIDE_NOTE
 from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
@@ -107,8 +108,16 @@ def main(argv: list[str] | None = None) -> int:
         help="keep the network of site folder DIR as it is (e.g. edited in netedit) and re-derive its site "
         "file, poles and polygons from it",
     )
+    parser.add_argument(
+        "--lefthand",
+        action="store_true",
+        help="the junction's traffic keeps left (the build cannot tell from OSM data alone): refused, "
+        "left-hand traffic is not supported yet",
+    )
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(with_negative_values(parser, argv, ["--center"]))
+    if args.lefthand:
+        parser.exit(2, f"build_network: error: {LEFTHAND_REFUSAL}\n")
     try:
         if args.refresh is not None:
             report = _refresh(parser, args.refresh)
@@ -117,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     except (BuildError, SiteError) as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
+    print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
     if report.signal_nodes and len(report.signal_nodes) > 1:
         print(
             f"  the intersection has {len(report.signal_nodes)} signal nodes: "
