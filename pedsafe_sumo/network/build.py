@@ -52,6 +52,7 @@ from pedsafe_sumo.network.site_files import (
     write_sumocfg,
     write_view,
 )
+from pedsafe_sumo.network.traffic_lights import junctions_problem
 from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand, osm_drives_left
 from pedsafe_sumo.sumo_net import read_net
 
@@ -122,6 +123,13 @@ def build_site(
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)
         rsu_corner = rsu_corner or KERB_CORNER[rsu_watch_arm]
         approaches = approach_nodes(net, group, rsu_watch_arm, junction)
+        # A junction several lights control cannot be staged (one program per episode): refused before the
+        # poles are placed (their scorer stages the scenarios).
+        several = junctions_problem(
+            stage / net_file, [junction.getID(), *(n.getID() for n in approaches.values())]
+        )
+        if several:
+            raise BuildError(several)
         rsu_units, approach_info = place_approach_poles(
             stage, name, net, approaches, rsu_corner, rsu_watch_arm, poly_file, hosting_scorer
         )

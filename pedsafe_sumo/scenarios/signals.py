@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pedsafe_sumo.network.traffic_lights import junction_lights, several_lights_problem
 from pedsafe_sumo.sumo_net import read_net
 
 SIGNAL_STATES = ("green", "yellow", "red", "none")
@@ -210,38 +211,29 @@ class JunctionSignals:
 def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
     """Read the traffic light that controls the junction's links from the network.
 
-    The light is found from the junction's connections (their `tl` and `linkIndex`), not from its id:
-    netconvert names a light joined from the stop-line signals around a junction `joinedS_...`
-    (`--tls.join`), one guessed over a cluster `joinedG_...`, one built from signals guessed at the
-    stop lines `GS_<junction>`, and a light may control several neighbouring junctions (its link
-    indices then run over all of them, and every link of the light is read). SignalStagingError, in one line, for a traffic-light junction
-    none of whose links a light controls, and for a junction whose links several lights control (the
-    scenarios stage one program); "has no traffic light" only for a junction that is not a
-    traffic-light junction and whose links no light controls."""
+    The light is the one on the junction's connections (network.traffic_lights: their `tl`), whatever
+    its id (netconvert's joinedS_..., joinedG_..., GS_<junction>); a light that controls neighbouring
+    junctions too is read whole (every link of it). SignalStagingError, in one line, for a
+    traffic-light junction none of whose connections a light controls and for a junction several
+    lights control (the scenarios stage one program); "has no traffic light" only for a junction that
+    is not a traffic-light junction and that no light controls."""
+    lights = junction_lights(net_file, junction_id)
     net = read_net(str(net_file), withInternal=True, withPedestrianConnections=True, withPrograms=True)
     try:
         node = net.getNode(junction_id)
     except KeyError:
         raise SignalStagingError(f"{net_file.name} has no junction {junction_id}") from None
-    links_of = {
-        tls: [c for c in tls.getConnections() if c[0].getEdge().getToNode() is node]
-        for tls in net.getTrafficLights()
-    }
-    controlling = sorted((t for t, links in links_of.items() if links), key=lambda t: t.getID())
-    if not controlling:
+    if not lights:
         if node.getType().startswith("traffic_light"):
             raise SignalStagingError(
                 f"junction {junction_id} of {net_file.name} is a traffic-light junction, but no traffic "
                 "light controls any of its connections (no tl attribute on them)"
             )
         raise SignalStagingError(f"junction {junction_id} of {net_file.name} has no traffic light")
-    if len(controlling) > 1:
-        counts = ", ".join(f"{t.getID()} {len(links_of[t])} links" for t in controlling)
-        raise SignalStagingError(
-            f"junction {junction_id} of {net_file.name} is controlled by {len(controlling)} traffic lights "
-            f"({counts}): the scenarios stage the signals of one traffic light per junction"
-        )
-    tls = controlling[0]
+    several = several_lights_problem(net_file, junction_id, lights)
+    if several:
+        raise SignalStagingError(several)
+    tls = net.getTLS(next(iter(lights)))
     tls_id = tls.getID()
     programs = tls.getPrograms()
     if not programs:

@@ -170,9 +170,10 @@ def test_an_episode_on_the_joined_light_has_the_scenarios_signals(built):
 
 
 @pytest.mark.slow
-def test_a_junction_two_lights_control_is_refused_by_the_batch_in_one_line(built, tmp_path):
-    """The junction's crosswalks moved to a pedestrian light of their own (a hand edit of the network),
-    then --refresh: the batch refuses the site in one line, before writing anything."""
+def test_a_junction_two_lights_control_is_refused_in_one_line(built, tmp_path):
+    """The junction's crosswalks moved to a pedestrian light of their own (a hand edit of the network):
+    the batch and episode refuse the site in one line, before writing anything, and so does the build's
+    --refresh (no rebuild makes it stageable)."""
     site = _copy(built[0], tmp_path)
     net = site / "split.net.xml"
     junction = json.loads((site / "split.site.json").read_text())["main_junction"]
@@ -181,6 +182,7 @@ def test_a_junction_two_lights_control_is_refused_by_the_batch_in_one_line(built
     crossings = [
         c for c in root.iter("connection") if c.get("from", "").startswith(f":{junction}_w") and c.get("tl")
     ]
+    vehicles = len(_main_links(net, junction)) - len(crossings)
     for index, connection in enumerate(crossings):
         connection.set("tl", "ped_light")
         connection.set("linkIndex", str(index))
@@ -188,15 +190,25 @@ def test_a_junction_two_lights_control_is_refused_by_the_batch_in_one_line(built
     ET.SubElement(logic, "phase", duration="30", state="G" * len(crossings))
     ET.SubElement(logic, "phase", duration="30", state="r" * len(crossings))
     tree.write(net)
-    refreshed = _run(str(BUILD_TOOL), "--refresh", str(site))
-    assert refreshed.returncode == 0, refreshed.stderr
+    light = next(iter({tl for tl, _ in _main_links(built[0] / "split.net.xml", junction).values()}))
+    expected = (
+        f"junction {junction} of split.net.xml is controlled by 2 traffic lights ({light} {vehicles} "
+        f"links, ped_light {len(crossings)} links): the scenarios stage the signals of one traffic light "
+        "per junction"
+    )
     out = tmp_path / "run"
-    proc = _run("-m", "pedsafe_sumo.batch", "--site", str(site), "--scenario", "crossing", "--episodes", "1",
-                "--workers", "1", "--out", str(out))  # fmt: skip
-    assert proc.returncode == 2
-    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
-    assert "controlled by 2 traffic lights" in proc.stderr and "ped_light" in proc.stderr
-    assert not (out / "episodes.parquet").exists()
+    commands = {
+        "batch": ["-m", "pedsafe_sumo.batch", "--site", str(site), "--scenario", "crossing",
+                  "--episodes", "1", "--workers", "1", "--out", str(out)],
+        "episode": ["-m", "pedsafe_sumo.episode", "--site", str(site), "--scenario", "crossing"],
+        "refresh": [str(BUILD_TOOL), "--refresh", str(site)],
+    }  # fmt: skip
+    for name, args in commands.items():
+        proc = _run(*args)
+        assert proc.returncode == 2, (name, proc.stderr)
+        assert len(proc.stderr.strip().splitlines()) == 1, (name, proc.stderr)
+        assert expected in proc.stderr, (name, proc.stderr)
+    assert not out.exists()
 
 
 # --- left-hand traffic ------------------------------------------------------------------------------
