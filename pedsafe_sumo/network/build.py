@@ -9,7 +9,14 @@ Usage (see tools/build_network.py):
     python tools/build_network.py --site xueqing
     python tools/build_network.py --osm big.osm --center 40.0064,116.3462 --radius 200 --name mysite \
         --out sites/mysite
+    python tools/build_network.py --osm argentina.osm --center -34.6037,-58.3816 --name obelisco \
+        --out sites/obelisco
     python tools/build_network.py --refresh sites/mysite    # after editing sites/mysite/mysite.net.xml
+
+South of the equator and west of Greenwich the centre is negative, in either spelling
+(`--center -34.6,-58.4`, `--center=-34.6,-58.4`). Networks are built for right-hand traffic: a
+network or OSM data that says left-hand traffic, and `--lefthand`, are refused
+(network.traffic_side); the summary says the build cannot tell the traffic side from OSM data alone.
 
 The folder written is a site (pedsafe_sumo.network.sites): every command takes it as --site DIR. Its
 derived files (site file, poles, polygons) carry the digest of the network they were made from, so a
