@@ -148,7 +148,11 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "walk_in_max_s": 10.0,
         "walk_on_m": 15.0,
     },
-    "parameters": {},
+    # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
+    "parameters": {
+        "pedestrians.yield_at_kerb": False,
+        "pedestrians.body_rule_needs_notice": False,
+    },
 }
 
 
