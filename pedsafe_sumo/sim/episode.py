@@ -11,7 +11,9 @@ The loop, at every step of `step_length_s` (default 0.05 s):
   5. actuate the ego the TraCI way (speed mode 0, setSpeed to the stack's command);
   6. move the pedestrian by the behaviour model (person.moveToXY, so jaywalking leaves the crosswalks),
      which sees the vehicle bodies and casts its line of sight to the ego through the same geometry;
+     add them to SUMO when they appear (PedestrianSetup.appear_time_s), remove them when they leave;
   7. log the step, and advance SUMO.
+While the pedestrian is not in the scene no sensor runs (step 3) and the row logs them absent.
 The episode ends on a collision (contact while the ego moves at `STATIONARY_SPEED_MPS` or faster; a
 contact with a standing ego is logged), once both road users have cleared the conflict area (the ego's rear
 past the pedestrian's path, the pedestrian past the ego's far flank), when the ego has left the network, or

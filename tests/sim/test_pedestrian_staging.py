@@ -16,11 +16,13 @@ import pytest
 from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
 from pedsafe_sumo.protocol import VALUES_BEFORE
 from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sim import episode as episode_module
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.staging import PED_ID
+from tests.sim.ad_agents import Recorder
 
 SITE = get_site("xueqing")
 SPEED_MPS = 5.0
@@ -253,3 +255,24 @@ def test_the_same_seed_gives_the_same_rows(runner, crossing):
     for key, value in first.outcome.items():
         other = third.outcome[key]
         assert value == other or (isinstance(value, float) and math.isnan(value) and math.isnan(other)), key
+
+
+def test_raw_lidar_data_before_the_pedestrian_appears(crossing):
+    """A stack that asks for the raw LiDAR points and labels gets them at every step, before the
+    pedestrian appears too: no pedestrian then, no return labelled as one, but the ground and the scene."""
+    Recorder.wants, Recorder.command = ["onboard_lidar_points", "onboard_lidar_labels"], {}
+    runner = EpisodeRunner(SITE, load_params(), Recorder)
+    try:
+        result = runner.run(SPEC, "sv", SEED, setup=_with_pedestrian(crossing[0], appear_time_s=4.0))
+    finally:
+        runner.close()
+    observations = list(Recorder.observations)
+    assert len(observations) == len(result.log)
+    absent = result.log["ped_state"].to_numpy() == "absent"
+    assert absent.sum() == 79
+    for observation, nobody in zip(observations, absent, strict=True):
+        points = observation.sensor_data["onboard_lidar_points"]
+        labels = observation.sensor_data["onboard_lidar_labels"]
+        assert points.ndim == 2 and points.shape[0] > 0 and labels.kind.shape == (points.shape[0],)
+        if nobody:
+            assert observation.pedestrians == () and not (labels.kind == KIND_PEDESTRIAN).any()
