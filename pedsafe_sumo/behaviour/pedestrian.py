@@ -313,7 +313,8 @@ class PedestrianWalker:
             new_s = min(self.length_m, self.s_m + speed * dt_s)
         sidestep_m = 0.0
         if new_s != self.s_m and p.avoids_bodies and bodies is not None and len(bodies.x_m):
-            bodies = self._heeded(bodies, state == "hastening" and speed > p.walking_speed_mps)
+            running = state == "hastening" and speed > p.walking_speed_mps
+            bodies = self._heeded(bodies, running, abs(new_s - self.s_m))
         if new_s != self.s_m and p.avoids_bodies and bodies is not None and len(bodies.x_m):
             if new_s > self.s_m and self._detour_to_m is not None:
                 # A detour under way: sideways until at the offset that passes the bodies, then on.
@@ -430,34 +431,52 @@ class PedestrianWalker:
                         speed, state = 0.0, "yielding"
         return speed, state, target_s
 
-    def _heeded(self, bodies: VehicleBodies, running: bool) -> VehicleBodies:
+    def _heeded(self, bodies: VehicleBodies, running: bool, step_m: float) -> VehicleBodies:
         """The bodies the body rule holds for (`body_rule_needs_notice`, module docstring): every standing
-        one; a moving one once noticed: the ego once reacted to, another unless unaware or `running`."""
+        one; a moving one once noticed: the ego once reacted to, another unless unaware or `running`.
+        A body out of reach of a step of `step_m` (its circumscribed circle farther than the pedestrian's
+        circle, the clearance and the step) is kept whatever: the rule cannot refuse a step for it, and
+        leaving it in spares building new arrays in the common case."""
         p = self.params
         speeds = bodies.speed_mps
         if not p.body_rule_needs_notice or speeds is None:
             return bodies
         ego = bodies.ego_index
+        x, y, _ = self._xy(self.s_m, self.offset_m)
+        reach_add_m = p.radius_m + p.body_clearance_m + step_m
+        half_diagonal = bodies.half_diagonal_m
+        if half_diagonal is None:
+            half_diagonal = 0.5 * np.hypot(bodies.length_m, bodies.width_m)
         if p.risk != "unaware" and not running:
             if self._noticed_ego or ego < 0 or speeds[ego] < p.stopped_speed_mps:
                 return bodies  # every moving vehicle noticed
+            gap_m = math.hypot(float(bodies.x_m[ego]) - x, float(bodies.y_m[ego]) - y)
+            if gap_m > float(half_diagonal[ego]) + reach_add_m:
+                return bodies
             ignored = np.zeros(len(speeds), dtype=bool)
             ignored[ego] = True
-        else:
-            ignored = speeds >= p.stopped_speed_mps
-            if self._noticed_ego and ego >= 0:
-                ignored[ego] = False
-            if not ignored.any():
+        else:  # a few vehicles: plain floats are faster than numpy on arrays this small
+            stopped, noticed_ego = p.stopped_speed_mps, self._noticed_ego
+            near_moving = [
+                k
+                for k, (speed, bx, by, half) in enumerate(
+                    zip(speeds.tolist(), bodies.x_m.tolist(), bodies.y_m.tolist(), half_diagonal.tolist())
+                )
+                if speed >= stopped and not (noticed_ego and k == ego)
+                and math.hypot(bx - x, by - y) <= half + reach_add_m
+            ]  # fmt: skip
+            if not near_moving:
                 return bodies
+            ignored = np.zeros(len(speeds), dtype=bool)
+            ignored[near_moving] = True
         keep = ~ignored
-        half_diagonal = bodies.half_diagonal_m
         return VehicleBodies(
             bodies.x_m[keep],
             bodies.y_m[keep],
             bodies.yaw_rad[keep],
             bodies.length_m[keep],
             bodies.width_m[keep],
-            None if half_diagonal is None else np.asarray(half_diagonal)[keep],
+            np.asarray(half_diagonal)[keep],
             speeds[keep],
         )
 
