@@ -147,6 +147,8 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "walk_in_min_s": 2.0,
         "walk_in_max_s": 10.0,
         "walk_on_m": 15.0,
+        "kerb_gap_min_m": 0.3,
+        "kerb_gap_max_m": 1.0,
     },
     # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
     "parameters": {

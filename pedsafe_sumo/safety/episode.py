@@ -12,7 +12,7 @@ from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.collision import detect_collision
 from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
 from pedsafe_sumo.safety.detection import first_detection
-from pedsafe_sumo.safety.injury import episode_injury
+from pedsafe_sumo.safety.injury import SEVERE_INJURY_MODEL, episode_injury
 from pedsafe_sumo.safety.proximity import ProximityModel, default_proximity_model, episode_proximity
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
 
@@ -38,6 +38,8 @@ INDEX_COLUMNS = (
     "close_pass",
     # contact with a standing ego: neither a collision nor an injury
     "contact_stationary",
+    # a second injury index at a stated severity: P(MAIS 3+ or fatal), 0 without a collision
+    "injury_mais3f_probability",
 )
 
 
@@ -61,6 +63,7 @@ NO_PEDESTRIAN_INDEXES: dict[str, Any] = {
     "drac_mps2": math.nan,
     "close_pass": False,
     "contact_stationary": False,
+    "injury_mais3f_probability": 0.0,
 }
 
 
@@ -88,6 +91,7 @@ def episode_indexes(
     injury_model: str = "saade2020",
     conflict_model: ConflictModel = AMINI_2022,
     proximity_model: ProximityModel | None = None,
+    severe_injury_model: str = SEVERE_INJURY_MODEL,
 ) -> dict[str, Any]:
     """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
 
@@ -101,6 +105,8 @@ def episode_indexes(
     step, detection distance when never perceived); `injury_probability` is 0 without a collision.
     The proximity measures (`min_clearance_m`, `ego_speed_at_min_clearance_mps`, `drac_mps2`,
     `close_pass`) take the conflict measures' window; `proximity_model` None: the defaults file's.
+    `injury_mais3f_probability` is `injury_probability` under `severe_injury_model` (any registered
+    name; by default the MAIS 3+F risk of Monfort & Mueller 2025).
     Only the steps with the pedestrian in the scene count (`steps_with_pedestrian`); without any, the
     indexes are NO_PEDESTRIAN_INDEXES.
     """
@@ -132,4 +138,7 @@ def episode_indexes(
         "drac_mps2": proximity.drac_mps2,
         "close_pass": proximity.close_pass,
         "contact_stationary": hit.contact_stationary,
+        "injury_mais3f_probability": episode_injury(
+            hit.collided, hit.impact_speed_mps, ped_age_years, severe_injury_model
+        ),
     }

@@ -19,6 +19,7 @@ import pandas as pd
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.proximity import ProximityModel
+from pedsafe_sumo.safety.witness import witness_collision
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.scenarios.signals import colour_of_link
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
@@ -193,6 +194,7 @@ def judge_episode(
     sumo_witness = sumo_collision if is_crossing_or_walkingarea(trace.closest_edge) else None
     indexes = episode_indexes(log, ped.age_years, injury_model=injury_model, proximity_model=proximity_model)
     ego_signal, ped_signal = signals_at_conflict(log, trace.signal_states, setup)
+    witness = witness_collision(log)  # a second opinion on `collision`, by other geometry code
     outcome = {
         "scenario": setup.scenario,
         "condition": condition,
@@ -211,6 +213,8 @@ def judge_episode(
         "ego_start_distance_m": setup.ego_start_distance_m,
         "ped_appear_time_s": ped.appear_time_s,
         "collision_type": collision_type(log, first_collision_step(log)) if indexes["collision"] else "none",
+        "witness_collision": witness.collided,
+        "witness_collision_time_s": witness.time_s,
         "status": "ok",
         "error": "",
     }
