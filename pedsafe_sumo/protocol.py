@@ -150,7 +150,11 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "kerb_gap_min_m": 0.3,
         "kerb_gap_max_m": 1.0,
     },
-    "parameters": {},
+    # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
+    "parameters": {
+        "pedestrians.yield_at_kerb": False,
+        "pedestrians.body_rule_needs_notice": False,
+    },
 }
 
 

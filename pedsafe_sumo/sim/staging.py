@@ -174,6 +174,8 @@ def behaviour_params(pedestrian_params: dict[str, Any], ped: PedestrianSetup) ->
         gap_startup_clearance_s=p["gap_startup_clearance_s"],
         detour_wait_s=p["detour_wait_s"],
         detour_max_offset_m=p["detour_max_offset_m"],
+        yield_at_kerb=p["yield_at_kerb"],
+        body_rule_needs_notice=p["body_rule_needs_notice"],
         stopped_speed_mps=STATIONARY_SPEED_MPS,
         radius_m=ped.radius_m,
         avoids_bodies=ped.avoids_vehicle_bodies,
@@ -326,7 +328,8 @@ def populate(api, setup: EpisodeSetup, approach: Approach, refuges: bool, start_
     api.vehicletype.setLength("ped_type", 2 * ped.radius_m)
     api.vehicletype.setHeight("ped_type", ped.height_m)
     api.vehicletype.setColor("ped_type", (*ped.clothing_rgb, 255))
-    add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", refuges, start_s)
+    if ped.appear_time_s <= 0.0:  # else the loop adds them when they appear (SumoStaging.add_pedestrian_now)
+        add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", refuges, start_s)
 
 
 def start_signals(api, staging: SignalStaging | None, program=None) -> None:
@@ -437,6 +440,12 @@ class SumoStaging:
         """Add the episode's road users (module function `populate`); a subclass may add to the scene
         here, before the traffic light is started."""
         populate(api, setup, approach, self.refuges, start_s)
+
+    def add_pedestrian_now(self, api, approach: Approach) -> None:
+        """Add the episode's pedestrian (type "ped_type", made by `populate`) to SUMO now: the loop calls
+        it when they appear, and moves them where the behaviour model puts them before SUMO steps."""
+        sidewalk_edge = approach.sidewalk_lane_id.rsplit("_", 1)[0]
+        add_pedestrian(api, sidewalk_edge, "ped_type", self.refuges, api.simulation.getTime())
 
     def stage(
         self, session: SumoSession, setup: EpisodeSetup, seed: int, approach: Approach, program=None
