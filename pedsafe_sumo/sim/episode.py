@@ -228,7 +228,9 @@ class EpisodeRunner:
             setup = dataclasses.replace(setup, approach=spec.approach)
         setup = stage_signals(spec, setup, self.signals, draws)
         if spec.background_traffic:
-            background = draw_background(spec, self._site_data, self.params["traffic"], traffic_seq)
+            background = draw_background(
+                spec, self._site_data, self.params["traffic"], traffic_seq, setup.time_limit_s
+            )
             setup = dataclasses.replace(setup, background=background)
         return setup, draws
 

@@ -118,13 +118,18 @@ def _junction_signals(site: Site, junction_id: str):
 
 
 def draw_background(
-    spec: ScenarioSpec, data: SiteData, traffic_params: dict[str, Any], seed_seq: np.random.SeedSequence
+    spec: ScenarioSpec,
+    data: SiteData,
+    traffic_params: dict[str, Any],
+    seed_seq: np.random.SeedSequence,
+    duration_s: float,
 ) -> tuple[BackgroundVehicle, ...]:
-    """Demand-model vehicles for [-warm-up, time limit] on `data`'s background lanes; the early ones
-    already down their first edge."""
+    """Demand-model vehicles for [-warm-up, `duration_s`] on `data`'s background lanes (the episode's
+    time limit: under approach staging the approach plus the scene); the early ones already down their
+    first edge."""
     warmup_s = spec.background_warmup_s
     demand_seq, colour_seq = seed_seq.spawn(2)
-    drawn = generate_vehicles(data.background_lanes, traffic_params, warmup_s + spec.time_limit_s, demand_seq)
+    drawn = generate_vehicles(data.background_lanes, traffic_params, warmup_s + duration_s, demand_seq)
     colour_rng = np.random.default_rng(colour_seq)
     vehicles = []
     for vehicle in drawn:
