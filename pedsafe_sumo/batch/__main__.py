@@ -24,7 +24,6 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import NoReturn
 
 from pedsafe_sumo.batch.arguments import DEFAULT_EPISODES
 from pedsafe_sumo.batch.execute import run_batch
@@ -39,6 +38,7 @@ from pedsafe_sumo.batch.sampled import (
     V2I_FACTORS,
 )
 from pedsafe_sumo.batch.stop import stop_on_signals
+from pedsafe_sumo.cli import DEFAULT_MAX_RUNS, OneLineParser, max_runs_help
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S
 from pedsafe_sumo.io.run_store import STATE_COMPLETE
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS, KEEP_LOGS_CHOICES
@@ -61,15 +61,8 @@ from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
 
 
-class _OneLineParser(argparse.ArgumentParser):
-    """argparse whose errors are one line on stderr (exit 2), like every other bad input."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"error: {message} (see --help)\n")
-
-
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--scenario",
         help=f"{', '.join(SCENARIOS)}, a comma-separated list, or all (required unless --resume)",
@@ -109,6 +102,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "at most 25]",
     )
     parser.add_argument("--out", type=Path, help="run directory [results/<scenario>-<time>]")
+    parser.add_argument(
+        "--max-runs",
+        type=int,
+        dest="max_runs",
+        default=DEFAULT_MAX_RUNS,
+        metavar="EPISODES",
+        help=max_runs_help() + "; a resumed run is not bounded again",
+    )
     parser.add_argument(
         "--resume",
         action="store_true",
@@ -257,6 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     except (*INPUT_ERRORS, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    print(f"{plan.count_text} = {plan.total_episodes:,} episodes (--max-runs {args.max_runs:,})")
     if plan.recorded is not None and plan.recorded.get("state") == STATE_COMPLETE:
         print(
             f"{plan.out} is complete ({plan.recorded.get('episodes_total', '?')} episodes): nothing to resume"
