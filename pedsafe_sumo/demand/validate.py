@@ -428,6 +428,7 @@ RATE_TRIES_MAX = 6
 def validate(args) -> list[Run]:
     params = load_params(args.params)
     site = load_site(args.site, NETWORKS_DIR, args.net)
+    _site_config(site)  # its .sumocfg and the files it names, before the first run (one line)
     rate = float(params["traffic"]["headway_rate_per_s"])
     runs = []
     with tempfile.TemporaryDirectory(prefix="pedsafe_validate_") as tmp:
