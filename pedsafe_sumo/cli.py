@@ -20,8 +20,11 @@ from pedsafe_sumo.settings import UsageError
 DEFAULT_MAX_RUNS = 2_000_000
 #: The largest --max-runs accepted: a billion episodes are a year on a 64-core machine.
 MAX_MAX_RUNS = 1_000_000_000
-#: Seeds are stored in run.json and handed to NumPy as 64-bit integers.
+#: Seeds are stored in run.json and compared as 64-bit integers.
 MAX_SEED = 2**63 - 1
+#: Episodes per scenario of a run: a million pairs take about 20 hours on 2 cores (28 episodes/s,
+#: BENCHMARKS.md), and part files number episodes with six digits.
+MAX_EPISODES = 1_000_000
 
 
 class OneLineParser(argparse.ArgumentParser):

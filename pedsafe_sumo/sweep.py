@@ -33,9 +33,10 @@ from pathlib import Path
 import pandas as pd
 
 from pedsafe_sumo.batch.__main__ import main as batch_main
-from pedsafe_sumo.batch.plan import MAX_EPISODES, MAX_WORKERS
+from pedsafe_sumo.batch.plan import MAX_WORKERS
 from pedsafe_sumo.cli import (
     DEFAULT_MAX_RUNS,
+    MAX_EPISODES,
     OneLineParser,
     check_max_runs,
     check_run_count,

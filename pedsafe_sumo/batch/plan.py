@@ -24,7 +24,7 @@ from pedsafe_sumo.batch.resume import check_new_run_directory, check_same_run, r
 from pedsafe_sumo.batch.runner import WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.batch.sampled import FAMILY_JOINT, SAMPLER_IS, SAMPLER_MC, SamplerError, sampler_identity
 from pedsafe_sumo.batch.trust import check_stack_from_file
-from pedsafe_sumo.cli import check_max_runs, check_run_count
+from pedsafe_sumo.cli import MAX_EPISODES, check_max_runs, check_run_count, check_seed
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import check_timeout_s
 from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
@@ -47,13 +47,9 @@ from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, p
 from pedsafe_sumo.sim.episode import CONDITIONS
 
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
-#: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
-#: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
-MAX_EPISODES = 1_000_000
-#: Run seeds are stored in run.json and compared as 64-bit integers.
-MAX_SEED = 2**63 - 1
-#: Local worker processes (one SUMO each, about 150 MB): 256 need about 40 GB, beyond one machine;
-#: more workers belong on a cluster (--cluster).
+#: machine before its first episode (--episodes and --seed: pedsafe_sumo/cli.py). Local worker processes
+#: (one SUMO each, about 150 MB): 256 need about 40 GB, beyond one machine; more workers belong on a
+#: cluster (--cluster).
 MAX_WORKERS = 256
 #: A chunk's rows and case logs are held by its worker and rerun whole after a kill.
 MAX_CHUNK_PAIRS = 10_000
@@ -239,10 +235,7 @@ def _check_run_numbers(arguments: dict[str, Any]) -> None:
         raise UsageError(
             f"--episodes must be at most {MAX_EPISODES:,} per scenario, got {arguments['episodes']}"
         )
-    if arguments["seed"] < 0:
-        raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
-    if arguments["seed"] > MAX_SEED:
-        raise UsageError(f"--seed must be at most 2**63 - 1, got {arguments['seed']}")
+    check_seed(arguments["seed"])
     if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
         raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
     if arguments["chunk_size"] is not None and arguments["chunk_size"] > MAX_CHUNK_PAIRS:

@@ -12,6 +12,7 @@ import argparse
 from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
@@ -66,7 +67,7 @@ def _refresh(parser, folder: Path) -> BuildReport:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="build_network",
         description="Build a SUMO study site folder (net, polygons, roadside units, sumocfg, site file) from "
         "OpenStreetMap; every command takes the folder as --site.",
@@ -78,10 +79,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--osm", type=Path, help="OSM XML file to clip (default: the site's source extract)")
     parser.add_argument(
-        "--center", type=_parse_center, help="LAT,LON of the intersection (default: the site's)"
+        "--center",
+        type=_parse_center,
+        help="LAT,LON of the intersection in degrees, -90..90,-180..180 (default: the site's)",
     )
     parser.add_argument(
-        "--radius", type=float, help=f"clip radius in metres, at most {MAX_RADIUS_M:g} (default: the site's)"
+        "--radius",
+        type=float,
+        help=f"clip radius in metres, above 0 and at most {MAX_RADIUS_M:g} (default: the site's)",
     )
     parser.add_argument("--name", help="name of the built site (default: --site's)")
     parser.add_argument("--description", help="one line saying where the junction is")
