@@ -149,6 +149,7 @@ def module(name: str, *args: str) -> tuple[str, ...]:
 
 
 BUILD_NETWORK = str(REPO_ROOT / "tools" / "build_network.py")
+CLIP_OSM = (str(REPO_ROOT / "tools" / "clip_osm.py"), "in.osm", "out.osm")
 EPISODE = module("episode", "--scenario", "crossing", "--condition", "sv")
 NCAP = ("--tests", "CPNA", "--speeds", "20", "--condition", "sv")
 BATCH = module("batch", "--scenario", "crossing", "--condition", "sv", "--episodes", "1", "--workers", "1")
@@ -531,6 +532,8 @@ ROWS = [
         "--seed",
     ),
     Row("build_network --center nan,0", (BUILD_NETWORK, "--center", "nan,0", "--out", "site"), "--center"),
+    Row("clip_osm --radius nan", (*CLIP_OSM, "--center", "40,116", "--radius", "nan"), "--radius"),
+    Row("clip_osm --center 95,0", (*CLIP_OSM, "--center", "95,0", "--radius", "150"), "--center"),
 ]
 
 

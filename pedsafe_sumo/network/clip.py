@@ -26,6 +26,10 @@ from pyproj import Transformer
 
 from pedsafe_sumo.network.attribution import add_attribution_comment
 
+#: The largest clip: a study site is an intersection, not a town (tools/build_network.py --radius has the
+#: same bound).
+MAX_CLIP_RADIUS_M = 2000.0
+
 #: Keys whose presence marks a closed way as an area rather than a closed line (a roundabout).
 AREA_KEYS = ("building", "landuse", "natural", "leisure", "amenity", "area", "building:part")
 
@@ -312,13 +316,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("source", type=Path, help="OSM XML file")
     parser.add_argument("target", type=Path, help="clipped OSM XML file to write")
-    parser.add_argument("--center", required=True, help="LAT,LON of the centre in degrees")
-    parser.add_argument("--radius", type=float, required=True, help="radius in metres")
+    parser.add_argument("--center", required=True, help="LAT,LON of the centre in degrees, -90..90,-180..180")
+    parser.add_argument(
+        "--radius",
+        type=float,
+        required=True,
+        help=f"radius in metres, above 0 and at most {MAX_CLIP_RADIUS_M:g}",
+    )
     args = parser.parse_args(argv)
     try:
         lat, lon = (float(v) for v in args.center.split(","))
     except ValueError:
         parser.exit(2, f"clip_osm: error: --center must be LAT,LON, got '{args.center}'\n")
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):  # also false for NaN
+        parser.exit(2, f"clip_osm: error: --center {args.center} is not a latitude,longitude pair\n")
+    if not 0 < args.radius <= MAX_CLIP_RADIUS_M:  # also false for NaN
+        parser.exit(
+            2, f"clip_osm: error: --radius must lie in (0, {MAX_CLIP_RADIUS_M:g}] m, got {args.radius}\n"
+        )
     try:
         result = clip_osm(args.source, args.target, lat, lon, args.radius)
     except ClipError as exc:
