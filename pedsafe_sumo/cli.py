@@ -50,13 +50,15 @@ def check_range(
     above_low = number > low if low_open else number >= low
     if not (math.isfinite(number) and above_low and number <= high):
         opening = "(" if low_open else "["
-        raise error(f"{option} must lie in {opening}{low:g}, {high:g}]{unit}, got {value}")
+        raise error(f"{option} must be in {opening}{low:g}, {high:g}]{unit}, got {value}")
 
 
 def check_seed(seed: int, option: str = "--seed", error: type[Exception] = UsageError) -> None:
     """A run seed: a whole number from 0 to 2**63 - 1."""
-    if not 0 <= seed <= MAX_SEED:
-        raise error(f"{option} must lie in 0..2**63 - 1, got {seed}")
+    if seed < 0:
+        raise error(f"{option} must not be negative, got {seed} (seeds lie in 0..2**63 - 1)")
+    if seed > MAX_SEED:
+        raise error(f"{option} must be at most 2**63 - 1, got {seed}")
 
 
 def check_max_runs(max_runs: int) -> None:

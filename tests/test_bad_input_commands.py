@@ -491,7 +491,6 @@ ROWS = [
     Row("replay --delay 1e9", (*REPLAY, "--delay", "1e9"), "--delay"),
     Row("replay --view-width 1e9", (*REPLAY, "--view-width", "1e9"), "--view-width"),
     Row("replay --view-width nan", (*REPLAY, "--view-width", "nan"), "--view-width"),
-    Row("replay --episode -1", module("replay", "run", "--episode", "-1", "--condition", "sv"), "--episode"),
     Row("replay --episode x", module("replay", "run", "--episode", "x", "--condition", "sv"), "--episode"),
     Row(
         "conflicts --radius 1e6",

@@ -69,7 +69,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "run_dir", type=Path, metavar="DIR", help="run directory written by pedsafe_sumo.batch"
     )
     parser.add_argument(
-        "--episode", type=int, required=True, help="episode number (episodes.parquet 'episode'), 0 or more"
+        "--episode",
+        type=int,
+        required=True,
+        help="episode number (episodes.parquet 'episode'), one the run holds",
     )
     parser.add_argument("--condition", required=True, help="sv or v2i")
     parser.add_argument("--scenario", help="scenario of the episode (needed when the run has several)")
@@ -147,8 +150,6 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         raise UsageError(
             f"--export-xosc writes OpenSCENARIO: give a file name ending in .xosc, got {args.export_xosc}"
         )
-    if args.episode < 0:
-        raise UsageError(f"--episode must not be negative, got {args.episode}")
     if args.delay is not None:
         check_range(args.delay, "--delay", 0, MAX_DELAY_MS, unit=" ms per step")
     check_range(args.view_width, "--view-width", 0, MAX_VIEW_WIDTH_M, unit=" m", low_open=True)
