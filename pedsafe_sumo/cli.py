@@ -14,16 +14,17 @@ from typing import NoReturn
 
 from pedsafe_sumo.settings import UsageError
 
-#: Default bound on the episodes one command starts (each condition of a pair counts): two million
-#: episodes take about 20 hours on 2 cores at 28 episodes/s (BENCHMARKS.md). A larger run is one flag
-#: away (--max-runs); the bound catches a grid that multiplied beyond what was meant.
-DEFAULT_MAX_RUNS = 2_000_000
-#: The largest --max-runs accepted: a billion episodes are a year on a 64-core machine.
+#: Default bound on the episodes one command starts (each condition of a pair counts): a million episodes
+#: take about a day on 2 cores at 10-12 episodes/s (BENCHMARKS.md, "A whole protocol"), twelve times the
+#: paper's protocol (80,000 episodes). A larger run is one flag away (--max-runs); the bound catches a
+#: grid that multiplied beyond what was meant (docs/decisions/2026-11-27-max-runs.md).
+DEFAULT_MAX_RUNS = 1_000_000
+#: The largest --max-runs accepted: a billion episodes take about three years on 2 cores, a month on 64.
 MAX_MAX_RUNS = 1_000_000_000
 #: Seeds are stored in run.json and compared as 64-bit integers.
 MAX_SEED = 2**63 - 1
-#: Episodes per scenario of a run: a million pairs take about 20 hours on 2 cores (28 episodes/s,
-#: BENCHMARKS.md), and part files number episodes with six digits.
+#: Episodes per scenario of a run: part files number episodes with six digits, and a million pairs take
+#: about two days on 2 cores (10-12 episodes/s, BENCHMARKS.md).
 MAX_EPISODES = 1_000_000
 
 
@@ -80,5 +81,5 @@ def check_run_count(total: int, max_runs: int, what: str) -> None:
 def max_runs_help(default: int = DEFAULT_MAX_RUNS) -> str:
     return (
         f"refuse to start more than this many episodes in all (each condition counts), 1 to "
-        f"{MAX_MAX_RUNS:,} [{default:,}: about 20 hours on 2 cores]"
+        f"{MAX_MAX_RUNS:,} [{default:,}: about a day on 2 cores]"
     )

@@ -14,7 +14,7 @@ OUT/findings.csv and findings.png say which of the paper's qualitative findings 
 combination (pedsafe_sumo/report/findings.py).
 Every --set / --vary key is validated for every combination before anything runs. Before it starts, the
 sweep says in one line how many episodes it will run (combinations x scenarios x conditions x episodes);
-it refuses more than --max-runs (2,000,000 unless given: about 20 hours on 2 cores) and more than 1,000
+it refuses more than --max-runs (1,000,000 unless given: about a day on 2 cores) and more than 1,000
 combinations.
 
 `--preset NAME` is one of the sensitivity sweeps (PRESETS: the parameters the paper

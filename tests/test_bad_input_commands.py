@@ -594,4 +594,4 @@ def test_batch_says_how_many_episodes_before_the_first(tmp_path: Path) -> None:
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     first = proc.stdout.splitlines()[0]
-    assert first == "1 scenario unit(s) x 1 condition(s) x 2 episodes = 2 episodes (--max-runs 2,000,000)"
+    assert first == "1 scenario unit(s) x 1 condition(s) x 2 episodes = 2 episodes (--max-runs 1,000,000)"
