@@ -28,6 +28,10 @@ from pyproj import Transformer
 from pedsafe_sumo.network.attribution import add_attribution_comment
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
 
+#: The largest clip: a study site is an intersection, not a town (tools/build_network.py --radius has the
+#: same bound).
+MAX_CLIP_RADIUS_M = 2000.0
+
 #: Keys whose presence marks a closed way as an area rather than a closed line (a roundabout).
 AREA_KEYS = ("building", "landuse", "natural", "leisure", "amenity", "area", "building:part")
 
@@ -320,10 +324,19 @@ def main(argv: list[str] | None = None) -> int:
         type=parse_lat_lon,
         help=f"LAT,LON of the centre in degrees; {NEGATIVE_HELP}",
     )
-    parser.add_argument("--radius", type=float, required=True, help="radius in metres")
+    parser.add_argument(
+        "--radius",
+        type=float,
+        required=True,
+        help=f"radius in metres, above 0 and at most {MAX_CLIP_RADIUS_M:g}",
+    )
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(with_negative_values(parser, argv, ["--center"]))
     lat, lon = args.center
+    if not 0 < args.radius <= MAX_CLIP_RADIUS_M:  # also false for NaN
+        parser.exit(
+            2, f"clip_osm: error: --radius must lie in (0, {MAX_CLIP_RADIUS_M:g}] m, got {args.radius}\n"
+        )
     try:
         result = clip_osm(args.source, args.target, lat, lon, args.radius)
     except ClipError as exc:

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
@@ -59,7 +60,7 @@ def _refresh(parser, folder: Path) -> BuildReport:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="build_network",
         description="Build a SUMO study site folder (net, polygons, roadside units, sumocfg, site file) from "
         "OpenStreetMap; every command takes the folder as --site.",
@@ -77,7 +78,9 @@ def main(argv: list[str] | None = None) -> int:
         help=f"LAT,LON of the intersection in degrees (default: the site's); {NEGATIVE_HELP}",
     )
     parser.add_argument(
-        "--radius", type=float, help=f"clip radius in metres, at most {MAX_RADIUS_M:g} (default: the site's)"
+        "--radius",
+        type=float,
+        help=f"clip radius in metres, above 0 and at most {MAX_RADIUS_M:g} (default: the site's)",
     )
     parser.add_argument("--name", help="name of the built site (default: --site's)")
     parser.add_argument("--description", help="one line saying where the junction is")
