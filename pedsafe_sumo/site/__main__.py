@@ -10,8 +10,8 @@ from pedsafe_sumo.network.build import BuildError, build_site
 from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SITE_HELP, SiteError, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
-from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
 from pedsafe_sumo.network.sumo_inputs import check_site_sumo_files
+from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
 from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 

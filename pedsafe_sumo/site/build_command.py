@@ -8,7 +8,6 @@ network build meets the scenarios.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
