@@ -14,7 +14,6 @@ fixed order, so the same input always gives the same file.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ import osmium.io
 from osmium.osm import mutable
 from pyproj import Transformer
 
+from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.network.attribution import add_attribution_comment
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
 
@@ -313,7 +313,7 @@ def _id_order(obj_id: int) -> tuple[int, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="clip_osm", description="Clip an OSM XML file to a circle, cutting ways at the boundary."
     )
     parser.add_argument("source", type=Path, help="OSM XML file")
