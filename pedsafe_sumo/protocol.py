@@ -150,7 +150,13 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "kerb_gap_min_m": 0.3,
         "kerb_gap_max_m": 1.0,
     },
-    "parameters": {},
+    "parameters": {
+        # The proximity measure over every step with the pedestrian (safety/proximity.py SCOPE_EPISODE); the
+        # corridor values are then unused.
+        "safety.proximity_scope": "episode",
+        "safety.interaction_margin_m": 0.5,
+        "safety.interaction_horizon_s": 4.0,
+    },
 }
 
 
