@@ -9,10 +9,11 @@ passes without touching. These measures cover that:
   and `ego_speed_at_min_clearance_mps` the ego's speed at that step (first step on a tie); both NaN
   when no step is in scope.
 - steps in scope (`interaction_steps`), under `proximity_scope = "interaction"`: the pedestrian's body
-  is in the ego's corridor ahead of its front (the ego's width plus `interaction_margin_m` on each side,
-  along its heading), or, walking on at its logged velocity, enters it within `interaction_horizon_s`
-  while still ahead of the ego's front (the ego going on at its speed), or touches the ego. A pedestrian
-  standing beside the lane, or walking away from the corridor, is not in scope. Under "episode" every
+  is in the ego's corridor (the strip of the ego's width plus `interaction_margin_m` on each side, along
+  its heading, from the ego's rear forward: what its body covers and will sweep), or, walking on at its
+  logged velocity, enters it within `interaction_horizon_s` before the ego's rear (the ego going on at
+  its speed) has passed that point, or touches the ego. A pedestrian standing beside the lane, or
+  walking away from the corridor, is not in scope, nor one the ego has passed. Under "episode" every
   step with the pedestrian is.
 - DRAC (m/s^2) per step: deceleration rate to avoid the crash (Cooper & Ferguson 1976, Traffic
   Engineering + Control 17:306; Almqvist, Hyden & Risser 1991), v^2 / (2 d) with v the ego's speed and
@@ -173,9 +174,9 @@ def _interaction(a: dict[str, np.ndarray], clearance: np.ndarray, model: Proximi
     # The body overlaps the corridor while the centre is within its half width plus the radius ...
     half_m = a[steplog.EGO_WIDTH] / 2 + model.interaction_margin_m + radius
     lat_start, lat_end = _window_s(lat, v_lat, -half_m, half_m)
-    # ... and reaches ahead of the ego's front, which goes on at the ego's speed: in the frame moving
-    # with the front, lon - speed t + radius >= length / 2.
-    ahead_m = lon + radius - a[steplog.EGO_LENGTH] / 2
+    # ... and is not behind the ego's rear, which goes on at the ego's speed: in the frame moving with
+    # the ego, lon - speed t + radius >= -length / 2 (beside the body counts: the strip it sweeps).
+    ahead_m = lon + radius + a[steplog.EGO_LENGTH] / 2
     lon_start, lon_end = _window_s(
         ahead_m, v_lon - a[steplog.EGO_SPEED], np.zeros_like(lon), np.full_like(lon, np.inf)
     )
@@ -192,7 +193,7 @@ def _steps_in_scope(a: dict[str, np.ndarray], clearance: np.ndarray, model: Prox
 
 def interaction_steps(log: Any, model: ProximityModel) -> np.ndarray:
     """Per step, whether it is in the model's scope (see the module docstring): under "interaction",
-    whether the pedestrian is in or about to enter the ego's corridor ahead of its front, or touches it;
+    whether the pedestrian is in or about to enter the ego's corridor before its rear passes, or touches it;
     under "episode", whether the pedestrian is there at all (position not NaN)."""
     a = kinematic_arrays(log)
     return _steps_in_scope(a, _clearance(a), model)
