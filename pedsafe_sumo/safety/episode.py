@@ -3,7 +3,10 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
+
+import numpy as np
 
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.collision import detect_collision
@@ -40,6 +43,48 @@ INDEX_COLUMNS = (
 )
 
 
+#: The indexes of an episode in whose log the pedestrian is never in the scene.
+NO_PEDESTRIAN_INDEXES: dict[str, Any] = {
+    "collision": False,
+    "impact_speed_mps": math.nan,
+    "injury_probability": 0.0,
+    "conflict": False,
+    "md_m": math.nan,
+    "tmd_s": math.nan,
+    "cs_mps": math.nan,
+    "conflict_probability": math.nan,
+    "min_ttc_s": math.nan,
+    "pet_s": math.nan,
+    "first_detection_distance_m": math.nan,
+    "first_detection_time_s": math.nan,
+    "detected_by": "",
+    "min_clearance_m": math.nan,
+    "ego_speed_at_min_clearance_mps": math.nan,
+    "drac_mps2": math.nan,
+    "close_pass": False,
+    "contact_stationary": False,
+    "injury_mais3f_probability": 0.0,
+}
+
+
+def steps_with_pedestrian(log: Any) -> Any:
+    """The steps of an engine's log at which the pedestrian is in the scene: the log contract's rows
+    (safety.log). The engine logs the steps before they appear and after they leave with a NaN position
+    (ped_state "absent", "left"); those are dropped. The log itself when it has none (or no position
+    columns: `steplog.as_arrays` then names what it lacks)."""
+    names = log.columns if hasattr(log, "columns") else log.keys() if hasattr(log, "keys") else ()
+    if steplog.PED_X not in names or steplog.PED_Y not in names:
+        return log
+    x = np.asarray(log[steplog.PED_X], dtype=float).reshape(-1)
+    y = np.asarray(log[steplog.PED_Y], dtype=float).reshape(-1)
+    present = np.isfinite(x) & np.isfinite(y)
+    if present.all():
+        return log
+    if hasattr(log, "iloc"):
+        return log[present].reset_index(drop=True)
+    return {name: np.asarray(values).reshape(-1)[present] for name, values in log.items()}
+
+
 def episode_indexes(
     log: Any,
     ped_age_years: float,
@@ -62,7 +107,13 @@ def episode_indexes(
     `close_pass`) take the conflict measures' window; `proximity_model` None: the defaults file's.
     `injury_mais3f_probability` is `injury_probability` under `severe_injury_model` (any registered
     name; by default the MAIS 3+F risk of Monfort & Mueller 2025).
+    Only the steps with the pedestrian in the scene count (`steps_with_pedestrian`); without any, the
+    indexes are NO_PEDESTRIAN_INDEXES.
     """
+    present = steps_with_pedestrian(log)
+    if present is not log and not len(present[steplog.PED_X]):
+        return dict(NO_PEDESTRIAN_INDEXES)
+    log = present
     arrays = steplog.as_arrays(log)
     hit = detect_collision(arrays)
     conflict = episode_conflict(arrays, conflict_model, last_step=hit.step)

@@ -10,6 +10,7 @@ from pedsafe_sumo.network.build import BuildError, build_site
 from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
+from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
 from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 
@@ -53,6 +54,7 @@ def main(argv: list[str] | None = None) -> int:
             f"built {site.directory} from {origin} in {report.seconds:.1f} s "
             f"({len(report.written)} file(s) changed, {len(report.unchanged)} unchanged)"
         )
+        print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
     for line in summarise(site).lines():
         print(line)
     print("  scenarios:")

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from safety_logs import make_log
 
+from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import ParameterError, load_params, with_overrides
-from pedsafe_sumo.protocol import VALUES_BEFORE
+from pedsafe_sumo.protocol import VALUES_BEFORE, load_protocol
 from pedsafe_sumo.safety import episode_indexes, proximity
 from pedsafe_sumo.safety.proximity import ProximityModel, episode_proximity, interaction_steps
 
@@ -201,3 +202,13 @@ def test_a_protocol_that_names_no_scope_takes_every_step():
     assert VALUES_BEFORE["parameters"]["safety.proximity_scope"] == "episode"
     section = {k: v for k, v in load_params()["safety"].items() if k != "proximity_scope"}
     assert ProximityModel.from_params({"safety": section}).scope == "episode"
+
+
+def test_protocols_written_before_the_scope_keep_every_step():
+    # paper-v7 names none of the values of VALUES_BEFORE; approach-v1 names the [pedestrians] ones (its own
+    # values, kept) and none of [safety]'s: both measure every step, as when they were written.
+    v7 = load_protocol(REPO_ROOT / "protocols" / "paper-v7.toml").params()
+    assert ProximityModel.from_params(v7).scope == "episode" and v7["pedestrians"]["yield_at_kerb"] is False
+    approach = load_protocol(REPO_ROOT / "protocols" / "approach-v1.toml").params()
+    assert ProximityModel.from_params(approach).scope == "episode"
+    assert approach["pedestrians"]["yield_at_kerb"] is True
