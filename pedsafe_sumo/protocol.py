@@ -79,7 +79,7 @@ class Protocol:
     def params(self) -> dict[str, Any]:
         params = load_params(None)
         named = _flatten(self.parameters)
-        named = with_values_before(named, VALUES_BEFORE["parameters"])
+        named = with_parameters_before(named)
         missing = sorted(set(_flatten(params)) - set(named))
         if missing:
             raise ProtocolError(
@@ -136,7 +136,9 @@ def spec_fields(spec: ScenarioSpec) -> dict[str, Any]:
 
 #: Values a protocol written before they existed does not name, with the value that gives the behaviour
 #: it was run with: scenario fields (by field) and parameters (dotted). A protocol that names none of a
-#: group gets these; one that names some must name all.
+#: group gets these; one that names some must name all. The scenario fields are one group; the parameters
+#: form one group per table (values added to a table together), so a protocol written after one table's
+#: values and before another's still runs.
 VALUES_BEFORE: dict[str, dict[str, Any]] = {
     # The approach staging (ScenarioSpec.staging): the fixed staging never reads the other fields.
     "scenarios": {
@@ -150,10 +152,15 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "kerb_gap_min_m": 0.3,
         "kerb_gap_max_m": 1.0,
     },
-    # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
     "parameters": {
+        # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
         "pedestrians.yield_at_kerb": False,
         "pedestrians.body_rule_needs_notice": False,
+        # The proximity measure over every step with the pedestrian (safety/proximity.py SCOPE_EPISODE); the
+        # corridor values are then unused.
+        "safety.proximity_scope": "episode",
+        "safety.interaction_margin_m": 0.5,
+        "safety.interaction_horizon_s": 4.0,
     },
 }
 
@@ -163,6 +170,16 @@ def with_values_before(given: dict[str, Any], before: dict[str, Any]) -> dict[st
     if before and not set(before) & set(given):
         return {**given, **before}
     return given
+
+
+def with_parameters_before(named: dict[str, Any]) -> dict[str, Any]:
+    """Dotted parameters completed, table by table, with the VALUES_BEFORE of each table they name none of."""
+    tables: dict[str, dict[str, Any]] = {}
+    for dotted, value in VALUES_BEFORE["parameters"].items():
+        tables.setdefault(dotted.rsplit(".", 1)[0], {})[dotted] = value
+    for before in tables.values():
+        named = with_values_before(named, before)
+    return named
 
 
 def load_protocol(path: Path) -> Protocol:

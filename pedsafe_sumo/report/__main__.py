@@ -146,8 +146,9 @@ PET_TITLE = (
 
 def _proximity_title(model) -> str:
     return (
-        f"Proximity, over the episodes without a collision: close pass = clearance between the bodies below "
-        f"{model.close_pass_clearance_m:g} m\nat an ego speed above {model.close_pass_min_speed_mps:g} m/s; "
+        f"Proximity ({model.scope} steps): close passes over the episodes with an interaction and no "
+        f"collision; close pass = clearance between the bodies below {model.close_pass_clearance_m:g} m\n"
+        f"at an ego speed above {model.close_pass_min_speed_mps:g} m/s; "
         f"DRAC over {model.drac_threshold_mps2:g} m/s2 = harder than a comfortable stop "
         "(params [safety], docs/safety_indexes.md)"
     )

@@ -194,6 +194,7 @@ PROXIMITY_SUMMARY_COLUMNS = (
     "scenario",
     "condition",
     "n",
+    "n_interaction",
     "close_pass",
     "close_pass_rate",
     "close_pass_low",
@@ -208,13 +209,14 @@ PROXIMITY_SUMMARY_COLUMNS = (
 
 
 def proximity_summary(episodes: pd.DataFrame, drac_threshold_mps2: float) -> pd.DataFrame | None:
-    """Per scenario and condition, over the episodes without a collision (as Table I's conflicts):
-
-    close_pass (count), its rate with a Wilson 95 % interval, close_pass_not_conflict (close passes the
-    Amini conflict flag misses), the medians of min_clearance_m and ego_speed_at_min_clearance_mps,
-    drac_defined (episodes where the pedestrian was ever in or entering the ego's path), drac_over_threshold
-    (of those, DRAC above `drac_threshold_mps2`) and the median DRAC where defined. n counts every ok
-    episode; the rates are over n. None when the run has no proximity columns.
+    """Per scenario and condition: n (every ok episode), n_interaction (the ok episodes without a
+    collision that have an interaction: min_clearance_m defined, i.e. some step in the run's
+    proximity_scope), and over those n_interaction episodes: close_pass (count), close_pass_rate =
+    close_pass / n_interaction with a Wilson 95 % interval, close_pass_not_conflict (close passes the Amini
+    conflict flag misses), the medians of min_clearance_m and ego_speed_at_min_clearance_mps. Over the
+    episodes without a collision: drac_defined (episodes where the pedestrian was ever on a collision
+    course), drac_over_threshold (of those, DRAC above `drac_threshold_mps2`) and the median DRAC where
+    defined. None when the run has no proximity columns.
     """
     if any(c not in episodes.columns for c in PROXIMITY_COLUMNS):
         return None
@@ -222,20 +224,24 @@ def proximity_summary(episodes: pd.DataFrame, drac_threshold_mps2: float) -> pd.
     for scenario, condition, group in _groups(_ok(episodes)):
         n = len(group)
         free = ~_flags(group["collision"])
-        passes = _flags(group["close_pass"]) & free
+        # an episode without an interaction step has no clearance and cannot have a close pass
+        counted = free & np.isfinite(group["min_clearance_m"].to_numpy(dtype=float))
+        n_counted = int(counted.sum())
+        passes = _flags(group["close_pass"]) & counted
         missed = passes & ~_flags(group["conflict"])
-        clearance = group["min_clearance_m"].to_numpy(dtype=float)[free]
-        speed = group["ego_speed_at_min_clearance_mps"].to_numpy(dtype=float)[free]
+        clearance = group["min_clearance_m"].to_numpy(dtype=float)[counted]
+        speed = group["ego_speed_at_min_clearance_mps"].to_numpy(dtype=float)[counted]
         drac = group["drac_mps2"].to_numpy(dtype=float)[free]
         drac = drac[np.isfinite(drac)]
-        low, high = wilson_interval(int(passes.sum()), n)
+        low, high = wilson_interval(int(passes.sum()), n_counted)
         rows.append(
             {
                 "scenario": scenario,
                 "condition": condition,
                 "n": n,
+                "n_interaction": n_counted,
                 "close_pass": int(passes.sum()),
-                "close_pass_rate": passes.sum() / n if n else math.nan,
+                "close_pass_rate": passes.sum() / n_counted if n_counted else math.nan,
                 "close_pass_low": low,
                 "close_pass_high": high,
                 "close_pass_not_conflict": int(missed.sum()),
@@ -380,6 +386,7 @@ def proximity_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
         "scenario",
         "condition",
         "n",
+        "with interaction, no collision",
         "close passes [95% CI]",
         "not Amini conflicts",
         "median min clearance m",
@@ -398,6 +405,7 @@ def proximity_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
                 r.scenario,
                 _label(r.condition),
                 str(r.n),
+                str(r.n_interaction),
                 f"{r.close_pass} ({_num(r.close_pass_rate, 4)}){interval}",
                 str(r.close_pass_not_conflict),
                 _num(r.min_clearance_median_m),

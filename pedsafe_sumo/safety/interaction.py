@@ -13,14 +13,19 @@ PET is 0 for an interaction with a contact. So an episode's log gives back its r
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from pedsafe_sumo.safety.collision import detect_collision
 from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
-from pedsafe_sumo.safety.proximity import default_proximity_model, episode_proximity, kinematic_arrays
+from pedsafe_sumo.safety.proximity import (
+    SCOPE_EPISODE,
+    default_proximity_model,
+    episode_proximity,
+    kinematic_arrays,
+)
 from pedsafe_sumo.safety.surrogates import pet_s, ttc_steps_s
 
 
@@ -51,7 +56,8 @@ def interaction_measures(log: Any, conflict_model: ConflictModel = AMINI_2022) -
     """All measures of one interaction's per-step log (see the module docstring for the rules)."""
     arrays = kinematic_arrays(log)
     hit = detect_collision(arrays)
-    proximity = episode_proximity(arrays, default_proximity_model(), hit.step)
+    # the closest approach of the pair over the whole interaction window, whatever the pedestrian does
+    proximity = episode_proximity(arrays, replace(default_proximity_model(), scope=SCOPE_EPISODE), hit.step)
     ttc = ttc_steps_s(arrays)
     if hit.step is not None:
         ttc = ttc[: hit.step + 1]

@@ -144,7 +144,8 @@ def test_proximity_summary_counts_close_passes_without_collision():
     table = idx.proximity_summary(_table(rows), drac_threshold_mps2=3.4)
     r = table.iloc[0]
     assert (r["n"], r["close_pass"], r["close_pass_not_conflict"]) == (4, 2, 1)
-    assert r["close_pass_rate"] == 0.5
+    # over the 3 episodes with an interaction (clearance defined) and no collision
+    assert r["n_interaction"] == 3 and r["close_pass_rate"] == 2 / 3
     # medians over the 3 episodes without a collision: clearances 0.3, 0.9, 4.0 -> 0.9; speeds all 6
     assert (
         r["min_clearance_median_m"] == pytest.approx(0.9)
@@ -152,6 +153,11 @@ def test_proximity_summary_counts_close_passes_without_collision():
     )
     # DRAC defined in episodes 2 and 3 (the collision's is left out), one over 3.4; median (5 + 2) / 2
     assert (r["drac_defined"], r["drac_over_threshold"], r["drac_median_mps2"]) == (2, 1, 3.5)
+    # an episode without an interaction step (NaN clearance) is left out of the close-pass rate
+    rows[3] = rows[3] | {"min_clearance_m": math.nan, "ego_speed_at_min_clearance_mps": math.nan}
+    r = idx.proximity_summary(_table(rows), drac_threshold_mps2=3.4).iloc[0]
+    assert (r["n"], r["n_interaction"], r["close_pass"], r["close_pass_rate"]) == (4, 2, 2, 1.0)
+    assert r["min_clearance_median_m"] == pytest.approx(0.6)  # (0.3 + 0.9) / 2
     assert idx.proximity_summary(_table([episode_row("crossing", "sv", 0)]).drop(columns=[]), 3.4) is None
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,7 +21,16 @@ from pedsafe_sumo.safety.proximity import (
     min_clearance_m,
 )
 
-DEFAULTS = ProximityModel(close_pass_clearance_m=1.5, close_pass_min_speed_mps=1.0, drac_threshold_mps2=3.4)
+#: Every step counts (scope "episode"): these tests are about the clearance itself; which steps count is
+#: tested in test_proximity_scope.py.
+DEFAULTS = ProximityModel(
+    close_pass_clearance_m=1.5,
+    close_pass_min_speed_mps=1.0,
+    drac_threshold_mps2=3.4,
+    interaction_margin_m=0.5,
+    interaction_horizon_s=4.0,
+    scope="episode",
+)
 
 
 def standing_pass_log(ped_y_m: float = 1.6, speed_mps: float = 8.0):
@@ -115,7 +125,7 @@ def test_a_log_without_detection_flags_is_enough():
 
 def test_thresholds_come_from_the_parameter_file():
     params = load_params()
-    assert ProximityModel.from_params(params) == DEFAULTS
+    assert ProximityModel.from_params(params) == replace(DEFAULTS, scope="interaction")
     stricter = ProximityModel.from_params(with_overrides(params, {"safety.close_pass_clearance_m": 0.25}))
     assert not episode_proximity(standing_pass_log(), stricter).close_pass  # 0.3 m is not below 0.25 m
     with pytest.raises(ParameterError, match="close_pass_min_speed_mps"):
