@@ -25,6 +25,7 @@ from pedsafe_sumo.batch.runner import WorkerConfig, site_file_digests, worker_ve
 from pedsafe_sumo.batch.sampled import FAMILY_JOINT, SAMPLER_IS, SAMPLER_MC, SamplerError, sampler_identity
 from pedsafe_sumo.batch.trust import check_stack_from_file
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
+from pedsafe_sumo.control.stack_names import resolve_stack_name
 from pedsafe_sumo.control.timeout import check_timeout_s
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site, site_reference
@@ -126,7 +127,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         specs, params = protocol.specs(), protocol.params()
     else:
         specs, params = configure(scenarios, params_file, arguments["set"])
-    stack = stack_spec(arguments["algorithm"], arguments.get("perception"))
+    stack = resolve_stack_name(stack_spec(arguments["algorithm"], arguments.get("perception")))
     # A stack named by run.json or a protocol file alone is imported only from outside the cwd.
     check_stack_from_file(args, stack, arguments, recorded is not None)
     load_agent_class(stack)
