@@ -253,10 +253,7 @@ class SignalPolicy:
             self._yellow[light.tls_id] = decided
         if decided == "go":
             return SignalDemand(math.inf, "yellow_go" if state in YELLOW_STATES else "committed")
-        # Stop `stop_short_m` before the line where the comfortable deceleration allows, else at it.
-        room_m = light.distance_m - self.stop_short_m
-        if room_m * 2 * self.comfortable_decel_mps2 < speed_mps * speed_mps:
-            room_m = light.distance_m
-        room_m = max(room_m, 0.0)
+        # Stop `stop_short_m` before the line: the comfortable profile sqrt(2 a room) down to it.
+        room_m = max(light.distance_m - self.stop_short_m, 0.0)
         cap = math.sqrt(2 * self.comfortable_decel_mps2 * room_m)
         return SignalDemand(cap, "red" if state in RED_STATES else "yellow_stop", room_m)
