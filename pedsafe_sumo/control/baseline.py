@@ -212,8 +212,14 @@ class BaselineStack(Agent):
             info["signal"] = signal.reason
         if target > signal.speed_cap_mps:
             if speed > signal.speed_cap_mps:
-                # Above the stopping profile (a yellow decided late): the deceleration that stops in time.
-                decel = min(self.max_decel_mps2, speed * speed / (2 * max(signal.room_m, 0.1)))
+                # Above the stopping profile (a yellow decided late, or the last decimetre): the
+                # deceleration that stops in the room left, the hardest once it is nearly gone.
+                room_m = signal.room_m
+                decel = (
+                    min(self.max_decel_mps2, speed * speed / (2 * room_m))
+                    if room_m > 0.1
+                    else self.max_decel_mps2
+                )
                 target = min(target, max(0.0, speed - decel * dt))
             else:
                 target = signal.speed_cap_mps

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -64,7 +65,7 @@ class PathArrays:
     def end_m(self) -> float:
         return float(self.start_m[-1] + self.length_m[-1])
 
-    def project(self, px: np.ndarray, py: np.ndarray, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    def project(self, px: Any, py: Any, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Distance along the path and signed lateral offset (positive left) of points, against the
         segments from `first` on: the nearest one, the first extended backwards without end and the
         last forwards."""

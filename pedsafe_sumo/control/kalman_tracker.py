@@ -32,10 +32,11 @@ V2I_POSITION_SIGMA_M = 0.2
 #: Age of a V2I position when it arrives [s]: [perception.v2i] latency_s (SPaT and detections alike).
 V2I_LATENCY_S = 0.1
 #: Standard deviation of an onboard camera or LiDAR position [m]. The simulator's onboard detectors
-#: report the pedestrian's true centre (docs/perception.md: no position noise); 0.05 m is an assumed
-#: floor (a tenth of a body width) that keeps the filter from trusting one step's difference as
-#: exactly the velocity.
-ONBOARD_POSITION_SIGMA_M = 0.05
+#: report the pedestrian's true centre (perception/pipeline.py: no position noise); 0.01 m is a floor
+#: that keeps the filter's covariance well conditioned. With it two detections 0.05 s apart give the
+#: velocity to 0.3 m/s, as the exact difference would: a new track is told moving from its second
+#: detection.
+ONBOARD_POSITION_SIGMA_M = 0.01
 #: Acceleration power spectral density q of the motion model [m2/s3]. Bar-Shalom et al. (2001, section
 #: 6.2.2): over an interval tau the velocity changes by about sqrt(q tau). Assumption: q = 0.01 lets a
 #: steady walker's velocity wander by about 0.1 m/s over 1 s, a few per cent of 1.4 m/s, the order of
@@ -130,13 +131,13 @@ class KalmanTracker:
     def update(self, pedestrians: Iterable[PerceivedPedestrian], time_s: float) -> list[Track]:
         """Predict every track to `time_s`, fold in this step's positions, drop tracks unseen for longer
         than the memory; the tracks, in order of first sighting."""
-        for track in self._tracks.values():
-            dt = time_s - track[2]
+        for kept in self._tracks.values():
+            dt = time_s - kept[2]
             if dt > 0:
                 f, q = _transition(dt)
-                track[0] = f @ track[0]
-                track[1] = f @ track[1] @ f.T + self.accel_psd * q
-                track[2] = time_s
+                kept[0] = f @ kept[0]
+                kept[1] = f @ kept[1] @ f.T + self.accel_psd * q
+                kept[2] = time_s
         for ped in pedestrians:
             z = np.array([ped.x_m, ped.y_m])
             h, sigma = self._measurement(ped.source)
