@@ -193,8 +193,12 @@ class BaselineStack(Agent):
             self._last_threat_s = None
             self._last_gap_m = math.inf
         info: dict[str, Any] = {}
+        # Brakes only while a threat is there now (a lost pedestrian stays one for the tracker's memory);
+        # `clear_hold_s` keeps the reaction time from starting over when a threat flickers, not the brakes.
         braking = (
-            self._threat_since_s is not None and time_s - self._threat_since_s >= self.reaction_time_s - 1e-9
+            bool(threats)
+            and self._threat_since_s is not None
+            and time_s - self._threat_since_s >= self.reaction_time_s - 1e-9
         )
         if braking:
             room_m = self._last_gap_m - self.stop_margin_m
@@ -202,7 +206,7 @@ class BaselineStack(Agent):
             decel = min(self.max_decel_mps2, max(needed, 0.0))
             target = max(0.0, speed - decel * dt)
             info.update(brake_for="pedestrian", decel_mps2=float(decel), threat_gap_m=float(self._last_gap_m))
-        elif self._threat_since_s is not None:  # perceived, reaction time still running: hold speed
+        elif self._threat_since_s is not None:  # reaction time running, or a threat just gone: hold speed
             target = speed
             info["reacting"] = True
         else:
