@@ -9,6 +9,7 @@ the ego's half width plus a margin on each side. Docs: docs/baseline_stack.md.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +23,8 @@ from pedsafe_sumo.control.reference import PlannedPath, Segment
 _PATH_SAMPLE_M = 0.25
 #: Half length of the straight path assumed when the observation has no route feed [m].
 _STRAIGHT_REACH_M = 1000.0
+#: Steps of the ego's own speed kept to look back to when a delivered signal state was measured (1 s).
+_SPEED_HISTORY_STEPS = 20
 #: SUMO's signal characters, by what they ask of an approaching vehicle.
 RED_STATES = "rRu"  # red, and red-yellow (SUMO's 'u', shown before green): do not enter
 YELLOW_STATES = "yY"
@@ -232,8 +235,12 @@ class SignalPolicy:
         self.max_decel_mps2 = max_decel_mps2
         self.stop_short_m = stop_short_m
         self._yellow: dict[str, str] = {}  # tls id -> "stop" / "go", decided at the yellow's onset
+        #: (time, speed) of the last steps: where the ego was, and how fast, when a delivered state was
+        #: measured (a V2I state is `latency_s` old).
+        self._speeds: deque[tuple[float, float]] = deque(maxlen=_SPEED_HISTORY_STEPS)
 
     def demand(self, light: TrafficLightState | None, speed_mps: float, time_s: float) -> SignalDemand:
+        self._speeds.append((time_s, speed_mps))
         if light is None or not math.isfinite(light.distance_m) or light.distance_m < 0:
             return SignalDemand(math.inf, "")
         state = light.state
@@ -242,10 +249,16 @@ class SignalPolicy:
             self._yellow.pop(light.tls_id, None)
             return SignalDemand(math.inf, "")
         if decided is None:
-            # Where the ego was when the state it reads was measured (V2I: latency earlier).
-            age_s = max(time_s - light.measured_at_s, 0.0)
-            distance_then_m = light.distance_m + speed_mps * age_s
-            stopping_m = speed_mps * speed_mps / (2 * self.comfortable_decel_mps2)
+            # Where the ego was, and its speed, when the state it reads was measured (V2I: latency
+            # earlier): the speed of each step since then is the speed it drove that step at.
+            speed_then, distance_then_m = speed_mps, light.distance_m
+            history = list(self._speeds)
+            for k, (t_k, v_k) in enumerate(history):
+                if t_k > light.measured_at_s + 1e-9 and k > 0:
+                    distance_then_m += v_k * (t_k - history[k - 1][0])
+                elif t_k <= light.measured_at_s + 1e-9:
+                    speed_then = v_k
+            stopping_m = speed_then * speed_then / (2 * self.comfortable_decel_mps2)
             if state in YELLOW_STATES:
                 decided = "stop" if stopping_m <= distance_then_m + 1e-9 else "go"
             else:  # red at first sight: stop if the hardest braking can

@@ -170,10 +170,16 @@ def test_yellow_onset_stops_when_the_comfortable_stop_fits(speed, distance, deci
         assert demand.speed_cap_mps == math.inf
 
 
-def test_yellow_decision_uses_the_distance_when_the_state_was_sent():
-    # V2I: the state is 0.1 s old; at 10 m/s the ego was 1 m further back, 16.2 + 1 = 17.2 m >= 16.67.
-    demand = SignalPolicy(3.0, 6.0, 1.0).demand(light("y", 16.2, at_s=0.9), 10.0, 1.0)
-    assert demand.reason == "yellow_stop"
+def test_yellow_decision_uses_where_and_how_fast_the_ego_was_when_the_state_was_sent():
+    # V2I: the state arriving at t = 1.0 was measured at 0.9. The ego sped up 9 -> 9.5 -> 10 m/s and is
+    # 14.5 m from the line now; at 0.9 it was 9.5 x 0.05 + 10 x 0.05 = 0.975 m further back (15.475 m)
+    # at 9 m/s: 81 / 6 = 13.5 m <= 15.475 m: stop. Its current speed at its current distance would
+    # have said go (100 / 6 = 16.67 m > 14.5 m).
+    policy = SignalPolicy(3.0, 6.0, 1.0)
+    policy.demand(light("G", 15.475, at_s=0.8), 9.0, 0.9)
+    policy.demand(light("G", 15.0, at_s=0.85), 9.5, 0.95)
+    assert policy.demand(light("y", 14.5, at_s=0.9), 10.0, 1.0).reason == "yellow_stop"
+    assert SignalPolicy(3.0, 6.0, 1.0).demand(light("y", 14.5, at_s=1.0), 10.0, 1.0).reason == "yellow_go"
 
 
 def test_the_stack_stops_before_the_line_at_red_and_goes_on_green():
