@@ -31,6 +31,10 @@ EPISODE_COLUMNS = (
     # Staging (docs/columns.md): the ego's start along its path to the conflict point, when the
     # pedestrian entered the scene, and who struck whom (COLLISION_TYPES).
     "ego_start_distance_m", "ped_appear_time_s", "collision_type",
+    # The independent collision witness (safety/witness.py): its verdict and its first contact's time.
+    "witness_collision", "witness_collision_time_s",
+    # A second injury index at a stated severity (docs/safety_indexes.md): P(MAIS 3+ or fatal).
+    "injury_mais3f_probability",
     # Compliance (safety/compliance.py): braking for a pedestrian standing outside the path, the ego's
     # signal at the stop line, whether it could have stopped at the yellow's onset.
     "false_brake", "stopline_signal", "could_stop_at_yellow",
@@ -42,6 +46,9 @@ COLLISION_TYPES = ("none", "ego_strikes_pedestrian", "pedestrian_strikes_side")
 #: Flags every row states (True or False; an errored episode's writer states False): the Table I rates
 #: count them, so a row without one is refused, never filled with a guess.
 BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
+#: Flags every row that ran states (True or False): an errored row (status not "ok") that leaves one out
+#: states False, as nothing ran to be witnessed; a row that ran without one is refused.
+RAN_BOOL_COLUMNS = ("witness_collision",)
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
 #: check vehicle-person contact (a pedestrian off crossings and walking areas at the closest approach).
 #: false_brake and could_stop_at_yellow: NA in an errored episode's row, could_stop_at_yellow also where
@@ -54,9 +61,11 @@ STRING_COLUMNS = (
 INT_COLUMNS = ("episode", "seed", "sampler_stage")
 #: Values of the sampling columns in rows written before they existed (plain Monte Carlo).
 SAMPLER_DEFAULTS = {"weight": 1.0, "sampler_stage": 0}
-_NOT_FLOAT = (*BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
+_NOT_FLOAT = (*BOOL_COLUMNS, *RAN_BOOL_COLUMNS, *NULLABLE_BOOL_COLUMNS, *STRING_COLUMNS, *INT_COLUMNS)
 FLOAT_COLUMNS = tuple(c for c in EPISODE_COLUMNS if c not in _NOT_FLOAT)
 CONDITION_ORDER = {"sv": 0, "v2i": 1}
+#: The status of an episode that ran to its end (the others: "error", "timeout").
+OK_STATUS = "ok"
 
 
 class EpisodeRowError(ValueError):
@@ -71,12 +80,16 @@ def to_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """Rows in a fixed order (scenario, episode, condition) and fixed dtypes, whatever order they came in.
 
     EpisodeRowError when a row lacks one of BOOL_COLUMNS or holds something else than a boolean there
-    (pandas would turn a NaN or the text "False" into True); sumo_collision may be missing (unknown).
+    (pandas would turn a NaN or the text "False" into True), or, having run (status "ok"), one of
+    RAN_BOOL_COLUMNS; sumo_collision may be missing (unknown).
     """
     table = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
     for column, value in SAMPLER_DEFAULTS.items():
         table[column] = table[column].fillna(value)
-    for column in BOOL_COLUMNS:
+    for column in RAN_BOOL_COLUMNS:
+        unstated = table[column].isna() & (table["status"] != OK_STATUS)
+        table[column] = table[column].astype(object).where(~unstated, False)
+    for column in (*BOOL_COLUMNS, *RAN_BOOL_COLUMNS):
         values = table[column].astype(object)
         bad = ~values.map(_is_flag).astype(bool)
         if bad.any():

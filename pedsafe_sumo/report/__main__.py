@@ -3,7 +3,8 @@
     python -m pedsafe_sumo.report DIR
     python -m pedsafe_sumo.report DIR --partial     # a batch that has not finished yet
 
-Prints the tables and writes DIR/tables/{table1,paired}.{csv,md} and DIR/figures/*.png (see
+Prints the tables and writes DIR/tables/{table1,paired}.{csv,md}, the checks of the indexes, the collision
+witness and the staging diagnostics (DIR/tables/*.csv, indexes.md, audit.md) and DIR/figures/*.png (see
 docs/report.md). Bad input (no DIR, no episodes.parquet, missing columns) ends in one line on stderr
 and exit code 2; so does a batch that has not finished, unless --partial: then the report covers the
 chunks finished so far, says INCOMPLETE RUN in its first and last lines and in its Markdown tables,
@@ -22,10 +23,12 @@ from typing import Any
 
 from pedsafe_sumo.confine import ConfinementError, check_tree
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
-from pedsafe_sumo.report import figures
+from pedsafe_sumo.report import figures, impact
 from pedsafe_sumo.report import indexes as idx
+from pedsafe_sumo.report.audit import audit
 from pedsafe_sumo.report.html import HTML_FILE, write_html_report
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, run_header
+from pedsafe_sumo.report.staging_checks import collision_type_columns
 from pedsafe_sumo.report.summaries import (
     CASE_SCENARIO,
     choose_case_pair,
@@ -76,6 +79,9 @@ def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
                 jaywalking, CASE_SCENARIO, out_dir / figures.FIGURE_FILES["injury_vs_speed"]
             )
         )
+
+    say(impact.intercept_note(ok))
+    written.append(impact.impact_speed_histogram(ok, out_dir / impact.FIGURE_FILE))
 
     summaries = detection_summaries(run.episodes)
     if summaries:
@@ -212,6 +218,7 @@ def report(run: RunDirectory, say=print) -> list[Path]:
             run.episodes, proposals=(run.run_info or {}).get("sampler_proposals"), first_stage=first_stage
         )
         paired = paired_of_run(run.episodes, first_stage)
+        table = collision_type_columns(table, run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
     if run.incomplete:
@@ -228,6 +235,8 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     note = v2i_only_note(run.run_info)
     if note:
         say(note)
+    if "collision_type" not in run.episodes.columns:
+        say(idx.missing_note(run.episodes, ("collision_type",), "Table I's collisions by type"))
     say("")
     say(paired_title(paired))
     say(text_table(*paired_rows(paired)))
@@ -248,8 +257,12 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     check_output_file(out_dir / HTML_FILE, "report into", ReportError, make_parents=True)
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
     written += index_checks(run, out_dir / TABLES_DIR, say)
+    audited, sections = audit(run, out_dir / TABLES_DIR, say)
+    written += audited
     written += write_figures(run, out_dir / FIGURES_DIR, say)
-    written.append(write_html_report(run, table, paired, out_dir / FIGURES_DIR, out_dir / HTML_FILE))
+    written.append(
+        write_html_report(run, table, paired, out_dir / FIGURES_DIR, out_dir / HTML_FILE, sections)
+    )
     say("wrote " + ", ".join(str(p.relative_to(run.path)) for p in written) + f" in {run.path}")
     if run.incomplete:
         say(run.incomplete)

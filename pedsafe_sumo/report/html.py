@@ -1,6 +1,7 @@
 """DIR/report.html: the run's report as one self-contained page (every image embedded as base64).
 
-Sections: the run line, Table I and the paired SV-vs-V2I tests (the same rows as the text report),
+Sections: the run line, Table I and the paired SV-vs-V2I tests (the same rows as the text report), the
+collision witness and the staging diagnostics (report/audit.py),
 every figure under the report's figures/ folder, a gallery of the logged cases (a picture of each,
 its outcome, and the commands that replay and export it) and the run's configuration (run.json).
 
@@ -16,6 +17,7 @@ import html
 import io
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from pedsafe_sumo.report.audit import Section  # noqa: E402
 from pedsafe_sumo.report.rundir import RunDirectory, run_header  # noqa: E402
 from pedsafe_sumo.report.tables import (  # noqa: E402
     TABLE_ONE_TITLE,
@@ -173,9 +176,15 @@ def gallery_rows(run: RunDirectory) -> tuple[pd.DataFrame, int]:
 
 
 def write_html_report(
-    run: RunDirectory, table: pd.DataFrame, paired: pd.DataFrame, figures_dir: Path, out_path: Path
+    run: RunDirectory,
+    table: pd.DataFrame,
+    paired: pd.DataFrame,
+    figures_dir: Path,
+    out_path: Path,
+    sections: Sequence[Section] = (),
 ) -> Path:
-    """Write the page to `out_path` (through a temporary file) and return its path."""
+    """Write the page to `out_path` (through a temporary file) and return its path. `sections` (the
+    collision witness and the staging diagnostics, report/audit.py) follow the paired tests."""
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -190,6 +199,12 @@ def write_html_report(
     parts.append(_table_html(*table_one_rows(table), "table-one"))
     parts.append(f"<h2>{html.escape(paired_title(paired))}</h2>")
     parts.append(_table_html(*paired_rows(paired), "paired-tests"))
+    for section in sections:
+        heading, _, note = section.title.partition("\n")
+        parts.append(f"<h2>{html.escape(heading)}</h2>")
+        if note:
+            parts.append(f"<p>{html.escape(note)}</p>")
+        parts.append(_table_html(section.header, section.rows, section.table_id))
     parts.append('<h2>Figures</h2><div class="figures">')
     pictures = sorted(figures_dir.glob("*.png")) if figures_dir.is_dir() else []
     for picture in pictures:

@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 from scipy import special
 
+from pedsafe_sumo.report.staging_checks import collision_type_cells
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.stats import FAILED_STATUSES, paired_mcnemar, table_one
 from pedsafe_sumo.sampling.control_variate import ESTIMATOR_CV, ESTIMATOR_IS, condition_control, stage_control
@@ -332,6 +333,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
         ]
         for r in table.itertuples(index=False)
     ]
+    if "mais3f_mean" in table.columns:  # the second injury index (safety/injury_mais3.py)
+        header.insert(6, "MAIS3+F risk mean [95% CI]")
+        for cells, r in zip(rows, table.itertuples(index=False)):
+            cells.insert(6, _with_interval(r.mais3f_mean, r.mais3f_low, r.mais3f_high))
     if "ess" in table.columns:  # importance sampling: the effective sample size and the episodes run
         header += ["ESS", "episodes run (pilots included)"]
         for cells, r in zip(rows, table.itertuples(index=False)):
@@ -348,6 +353,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
             header += ["stages"]
             for cells, r in zip(rows, table.itertuples(index=False)):
                 cells += [str(r.stages)]
+    types_header, types_cells = collision_type_cells(table)  # the collisions by type, where counted
+    header += types_header
+    for cells, extra in zip(rows, types_cells):
+        cells += extra
     return header, rows
 
 

@@ -72,6 +72,7 @@ SPEC_UPPER_BOUNDS: dict[str, tuple[float, str]] = {
     "ped_appear_min_s": (120.0, "the episode would be minutes of an empty approach"),
     "walk_in_max_s": (120.0, "two minutes of walking is another street"),
     "walk_on_m": (100.0, "beyond the scene the episode watches"),
+    "kerb_gap_max_m": (5.0, "a pedestrian this far behind the vehicle no longer crosses behind it"),
 }
 
 
@@ -195,6 +196,13 @@ class ScenarioSpec:
     walk_in_max_s: float = 10.0
     #: Approach staging: after crossing, the pedestrian walks on this far and leaves the scene [m].
     walk_on_m: float = 15.0
+    #: Approach staging, background_blending: the gap between the body circle of the pedestrian who
+    #: crosses behind the waiting vehicle and its rear bumper's line (uniform draw) [m]. Assumption: from
+    #: about the shy distance pedestrians keep from a fixed object they walk past (0.3 m) to an arm's
+    #: length (1.0 m): close to the vehicle, which shields them from the traffic behind it, never touching
+    #: it. (The fixed staging draws blend_gap_min_m..max_m instead.)
+    kerb_gap_min_m: float = 0.3
+    kerb_gap_max_m: float = 1.0
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -219,6 +227,7 @@ class ScenarioSpec:
             (self.ped_appear_min_s >= 0, "ped_appear_min_s >= 0"),
             (0 <= self.walk_in_min_s <= self.walk_in_max_s, "0 <= walk_in_min_s <= walk_in_max_s"),
             (self.walk_on_m >= 0, "walk_on_m >= 0"),
+            (0 <= self.kerb_gap_min_m <= self.kerb_gap_max_m, "0 <= kerb_gap_min_m <= kerb_gap_max_m"),
             (self.occluder_class in VEHICLE_CLASSES, f"occluder_class in {sorted(VEHICLE_CLASSES)}"),
             (
                 self.conflict_offset_min_s <= self.conflict_offset_max_s,

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pedsafe_sumo.io.episodes import BOOL_COLUMNS, EpisodeRowError, to_table
+from pedsafe_sumo.io.episodes import BOOL_COLUMNS, RAN_BOOL_COLUMNS, EpisodeRowError, to_table
 
 
 def row(episode: int, condition: str = "sv", **values):
@@ -22,6 +22,7 @@ def row(episode: int, condition: str = "sv", **values):
         "conflict": False,
         "close_pass": False,
         "contact_stationary": False,
+        "witness_collision": False,
         "sumo_collision": None,
         "status": "ok",
     }
@@ -66,3 +67,15 @@ def test_unknown_sumo_verdict_stays_unknown_but_text_is_refused():
     assert table["sumo_collision"].isna().all()
     with pytest.raises(EpisodeRowError, match="sumo_collision is 'yes'"):
         to_table([row(0, sumo_collision="yes")])
+
+
+@pytest.mark.parametrize("column", RAN_BOOL_COLUMNS)
+def test_a_flag_of_a_row_that_ran_may_be_left_out_of_an_errored_row_only(column):
+    errored = row(2, status="error")
+    del errored[column]
+    table = to_table([row(1, **{column: True}), errored])
+    assert str(table[column].dtype) == "bool" and table[column].tolist() == [True, False]
+    ran = row(3)
+    del ran[column]
+    with pytest.raises(EpisodeRowError, match=f"crossing/3/sv: {column} is"):
+        to_table([ran])

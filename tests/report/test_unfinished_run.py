@@ -23,7 +23,7 @@ def unfinished_run(directory, damaged_part: bool = False):
     for first, last in ((0, 4), (5, 9)):
         rows = crossing[(crossing["episode"] >= first) & (crossing["episode"] <= last)]
         # Parts are written by the batch, whose rows state every flag (to_table refuses a missing one).
-        rows = rows.assign(close_pass=False, contact_stationary=False)
+        rows = rows.assign(close_pass=False, contact_stationary=False, witness_collision=rows["collision"])
         data = parquet_bytes(to_table(rows.to_dict("records")))
         name = f"crossing-{first:06d}-{last:06d}.parquet"
         write_bytes_atomic(directory / "parts" / name, data)

@@ -1,7 +1,17 @@
-"""behind_waiting_vehicle (the background_blending scenario): the pedestrian stands just behind the rear
-bumper of a vehicle waiting at the stop line in the kerb lane (a right-turner yielding, as in crossing),
-closer to it than the LiDAR can separate and dressed in its colour, so that seen from the ego the vehicle
-is right behind them, then crosses towards the median beside the crosswalk while it shows red."""
+"""behind_waiting_vehicle (the background_blending scenario): a vehicle waits at the stop line in the kerb
+lane (a right-turner yielding to the pedestrians on the crosswalk of the road it turns into, as in
+crossing), the pedestrian, dressed in its colour, crosses behind it towards the median beside the
+crosswalk while it shows red, so that seen from the ego the vehicle is right behind them.
+
+Fixed staging: they stand in the kerb lane right behind its rear bumper, centred on it, closer to it
+than the LiDAR can separate (`blend_gap_min_m`..`max_m`, 0 by default: the body circle touches it).
+
+Approach staging (spec.staging "approach"): they wait where people wait, on the sidewalk at the kerb,
+beside the vehicle's rear, and step off at the kerb to cross behind it, keeping a gap a person keeps from
+a vehicle body (`kerb_gap_min_m`..`kerb_gap_max_m` between their body circle and the rear bumper's line).
+On a one-lane approach the vehicle stands parked at the kerb (the ego drives the only lane) and they
+start on the sidewalk behind it, centred on its rear, at the same gap.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +19,9 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from pedsafe_sumo.scenarios.episode_setup import VehicleSetup
-from pedsafe_sumo.scenarios.geometry import Approach, Turn
+from pedsafe_sumo.scenarios.geometry import Approach, Turn, lane_pos_to_offset_m, offset_to_lane_pos_m
 from pedsafe_sumo.scenarios.placements.base import StagingInputs, StagingPoint
+from pedsafe_sumo.scenarios.placements.midblock import kerb_wait_offset_m
 from pedsafe_sumo.scenarios.placements.straight import (
     KerbRow,
     StraightPlacement,
@@ -29,17 +40,34 @@ class BehindWaitingVehicle(StraightPlacement):
 
     def stage_row(self, inputs: StagingInputs, row: KerbRow) -> tuple[tuple, list[VehicleSetup], tuple]:
         spec = inputs.spec
-        gap_m = inputs.draws.uniform("blend_gap_m", spec.blend_gap_min_m, spec.blend_gap_max_m)
+        approach_staging = spec.staging == "approach"
+        low_m, high_m = (
+            (spec.kerb_gap_min_m, spec.kerb_gap_max_m)
+            if approach_staging
+            else (spec.blend_gap_min_m, spec.blend_gap_max_m)
+        )
+        gap_m = inputs.draws.uniform("blend_gap_m", low_m, high_m)
         waiting = row.random_vehicle("waiting_0", row.stop_line_pos_m - 0.5)
         if spec.waiting_vehicle_class:
             waiting = dataclasses.replace(waiting, size=VEHICLE_CLASSES[spec.waiting_vehicle_class])
         cross_pos = waiting.front_pos_m - waiting.size.length_m - gap_m - PEDESTRIAN_RADIUS_M
-        # They already stand right behind the vehicle, centred on its rear: seen from the ego behind
-        # them, the vehicle's rear surrounds them on both sides from the first frame. (On its kerb-side
-        # half the LiDAR finds the vehicle's returns on one side only and separates them at the start
-        # in 3 of 30 episodes even at gap 0; from the sidewalk both onboard sensors see them before
-        # they blend.)
+        if approach_staging:
+            # The gap as drawn on the road (the sensors' and the body rule's metres, the vehicle's body
+            # its full length back from where SUMO draws its front), not in lane-length metres: on a lane
+            # drawn shorter than its length it would come out up to a few centimetres short.
+            shape, length_m = inputs.approach.lane_shapes[row.lane], inputs.approach.lane_lengths_m[row.lane]
+            front_offset_m = lane_pos_to_offset_m(shape, length_m, waiting.front_pos_m)
+            behind_m = waiting.size.length_m + gap_m + PEDESTRIAN_RADIUS_M
+            cross_pos = offset_to_lane_pos_m(shape, length_m, front_offset_m - behind_m)
+        # Fixed staging: they already stand right behind the vehicle, centred on its rear: seen from the
+        # ego behind them, the vehicle's rear surrounds them on both sides from the first frame. (On its
+        # kerb-side half the LiDAR finds the vehicle's returns on one side only and separates them at
+        # the start in 3 of 30 episodes even at gap 0; from the sidewalk both onboard sensors see them
+        # before they blend.)
         start_offset_m = 0.0
+        if approach_staging:
+            # On the sidewalk at the kerb, beside the vehicle's rear.
+            start_offset_m = kerb_wait_offset_m(inputs.approach)
         if row.one_lane:
             # Behind the car parked at the kerb, centred on its rear as in the kerb lane.
             start_offset_m = -kerb_parking_offset_m(inputs.approach, waiting.size)
@@ -58,14 +86,17 @@ class BehindWaitingVehicle(StraightPlacement):
 
     def staging_points(self, spec: ScenarioSpec, approach: Approach, turn: Turn | None) -> list[StagingPoint]:
         """Behind a car waiting at the stop line (a car's length, the gap and the body before it), then
-        over each lane's centre."""
+        over each lane's centre; under approach staging from the kerb beside its rear."""
         offsets = road_offsets_m(approach)
         stop_line_m = approach.lane_lengths_m[0]
-        behind_m = 0.5 + VEHICLE_CLASSES["car"].length_m + spec.blend_gap_max_m + PEDESTRIAN_RADIUS_M
+        gap_max_m = spec.kerb_gap_max_m if spec.staging == "approach" else spec.blend_gap_max_m
+        behind_m = 0.5 + VEHICLE_CLASSES["car"].length_m + gap_max_m + PEDESTRIAN_RADIUS_M
         if len(approach.lane_ids) == 1:
             # The car stands parked at the kerb beside the one lane (kerb_parking_offset_m): the
             # pedestrian starts behind it, then crosses the lane.
             offsets = [0.0, -kerb_parking_offset_m(approach, VEHICLE_CLASSES["car"]), 0.0]
+        elif spec.staging == "approach":
+            offsets = [0.0, kerb_wait_offset_m(approach), *offsets[1:]]
         return [
             StagingPoint(
                 f"{behind_m:.1f} m before the stop line, {offset_m:+.1f} m",
