@@ -39,6 +39,7 @@ from pedsafe_sumo.batch.sampled import (
 )
 from pedsafe_sumo.batch.stop import stop_on_signals
 from pedsafe_sumo.cli import DEFAULT_MAX_RUNS, MAX_EPISODES, OneLineParser, max_runs_help
+from pedsafe_sumo.control.stack_names import stack_names_help
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S
 from pedsafe_sumo.io.run_store import STATE_COMPLETE
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS, KEEP_LOGS_CHOICES
@@ -128,7 +129,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scenario or parameter value"
     )
-    parser.add_argument("--algorithm", help=f"AD stack as package.module:Class [{DEFAULT_ALGORITHM}]")
+    parser.add_argument(
+        "--algorithm",
+        help=f"AD stack as package.module:Class, or a shipped one by name: {stack_names_help()} "
+        f"[{DEFAULT_ALGORITHM}]",
+    )
     parser.add_argument(
         "--perception", help="replace the stack's detector by package.module:Class (docs/ad_interface.md)"
     )

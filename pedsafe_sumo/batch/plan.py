@@ -26,6 +26,7 @@ from pedsafe_sumo.batch.sampled import FAMILY_JOINT, SAMPLER_IS, SAMPLER_MC, Sam
 from pedsafe_sumo.batch.trust import check_stack_from_file
 from pedsafe_sumo.cli import MAX_EPISODES, check_max_runs, check_run_count, check_seed
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
+from pedsafe_sumo.control.stack_names import resolve_stack_name
 from pedsafe_sumo.control.timeout import check_timeout_s
 from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS
@@ -128,7 +129,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         specs, params = protocol.specs(), protocol.params()
     else:
         specs, params = configure(scenarios, params_file, arguments["set"])
-    stack = stack_spec(arguments["algorithm"], arguments.get("perception"))
+    stack = resolve_stack_name(stack_spec(arguments["algorithm"], arguments.get("perception")))
     # A stack named by run.json or a protocol file alone is imported only from outside the cwd.
     check_stack_from_file(args, stack, arguments, recorded is not None)
     load_agent_class(stack)

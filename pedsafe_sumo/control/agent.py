@@ -27,6 +27,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from pedsafe_sumo.control.stack_names import resolve_stack_name
+
 #: Sensor names an agent may ask for in sensors(); "v2i" adds the roadside detections delivered over
 #: the V2I link (the V2I condition grants it, the SV condition does not).
 KNOWN_SENSORS = ("onboard_camera", "onboard_lidar", "v2i")
@@ -221,7 +223,9 @@ def stack_spec(algorithm: str, perception: str | None) -> str:
 
 def load_agent_class(spec: str) -> type[Agent]:
     """Resolve 'package.module:ClassName' to an Agent subclass (or a class with the same methods); a spec
-    'algorithm+perception' (stack_spec) loads the algorithm with its detector replaced."""
+    'algorithm+perception' (stack_spec) loads the algorithm with its detector replaced. A shipped
+    stack's short name (control/stack_names.py: reference, paper-v7) stands for its spec."""
+    spec = resolve_stack_name(spec)
     if PERCEPTION_JOIN in spec:
         algorithm, _, perception = spec.partition(PERCEPTION_JOIN)
         return with_perception(load_agent_class(algorithm), load_perception_class(perception))

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from pedsafe_sumo.confine import is_inside
 from pedsafe_sumo.control.agent import PERCEPTION_JOIN, AlgorithmLoadError
+from pedsafe_sumo.control.stack_names import resolve_stack_name
 
 #: The package's own modules: the program that is running, trusted as it is.
 SHIPPED_PACKAGE = "pedsafe_sumo"
@@ -56,9 +57,11 @@ def _origin(top: str, path: list[str]) -> Path | None:
 
 
 def is_shipped(spec: str) -> bool:
-    """Whether every module of the stack `spec` is pedsafe_sumo's own (the reference stack)."""
+    """Whether every module of the stack `spec` is pedsafe_sumo's own (a shipped stack, by its spec or
+    its short name)."""
     return all(
-        part.partition(":")[0].split(".")[0] == SHIPPED_PACKAGE for part in spec.split(PERCEPTION_JOIN)
+        part.partition(":")[0].split(".")[0] == SHIPPED_PACKAGE
+        for part in resolve_stack_name(spec).split(PERCEPTION_JOIN)
     )
 
 
@@ -69,7 +72,7 @@ def recorded_stack_origin(spec: str, run_dir: Path | None, named_by: str = "run.
     cwd = Path.cwd().resolve()
     cwd_implicit = not _named_on_pythonpath(cwd)
     found = []
-    for part in spec.split(PERCEPTION_JOIN):
+    for part in resolve_stack_name(spec).split(PERCEPTION_JOIN):
         module = part.partition(":")[0]
         top = module.split(".")[0]
         if top == SHIPPED_PACKAGE:

@@ -35,6 +35,9 @@ EPISODE_COLUMNS = (
     "witness_collision", "witness_collision_time_s",
     # A second injury index at a stated severity (docs/safety_indexes.md): P(MAIS 3+ or fatal).
     "injury_mais3f_probability",
+    # Compliance (safety/compliance.py): braking for a pedestrian standing outside the path, the ego's
+    # signal at the stop line, whether it could have stopped at the yellow's onset.
+    "false_brake", "stopline_signal", "could_stop_at_yellow",
 )  # fmt: skip
 #: collision_type: no collision; the moving ego's front or corner strikes the pedestrian; the pedestrian
 #: walks or runs into the side of the moving ego. A contact with a standing ego is no collision
@@ -48,10 +51,12 @@ BOOL_COLUMNS = ("collision", "conflict", "close_pass", "contact_stationary")
 RAN_BOOL_COLUMNS = ("witness_collision",)
 #: Booleans that may be unknown (pandas "boolean", null = NA): sumo_collision is null where SUMO does not
 #: check vehicle-person contact (a pedestrian off crossings and walking areas at the closest approach).
-NULLABLE_BOOL_COLUMNS = ("sumo_collision",)
+#: false_brake and could_stop_at_yellow: NA in an errored episode's row, could_stop_at_yellow also where
+#: no yellow began before the ego crossed the stop line.
+NULLABLE_BOOL_COLUMNS = ("sumo_collision", "false_brake", "could_stop_at_yellow")
 STRING_COLUMNS = (
     "scenario", "condition", "ped_gender", "ped_risk", "detected_by", "status", "error", "end_reason",
-    "ego_signal", "ped_signal", "approach", "sampler_inputs", "collision_type",
+    "ego_signal", "ped_signal", "approach", "sampler_inputs", "collision_type", "stopline_signal",
 )  # fmt: skip
 INT_COLUMNS = ("episode", "seed", "sampler_stage")
 #: Values of the sampling columns in rows written before they existed (plain Monte Carlo).

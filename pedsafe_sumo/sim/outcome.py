@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
+from pedsafe_sumo.safety.compliance import episode_compliance, stop_line_of
 from pedsafe_sumo.safety.episode import episode_indexes
 from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.safety.witness import witness_collision
@@ -128,6 +129,20 @@ def signals_at_conflict(log: pd.DataFrame, states: Sequence[str], setup: Episode
     return colour_of_link(state, staging.ego_link_index), colour_of_link(state, staging.ped_link_index)
 
 
+def compliance_of(
+    log: pd.DataFrame, states: Sequence[str], setup: EpisodeSetup, ego_lane_shape_xy_m: Sequence
+) -> dict[str, Any]:
+    """The compliance columns (safety.compliance) from each road user's signal colour at every step."""
+    staging = setup.signals
+    if staging is None or len(states) != len(log):
+        ego_colours = ped_colours = ["none"] * len(log)
+    else:
+        ego_colours = [colour_of_link(s, staging.ego_link_index) if s else "none" for s in states]
+        ped_colours = [colour_of_link(s, staging.ped_link_index) if s else "none" for s in states]
+    line = stop_line_of(ego_lane_shape_xy_m) if staging is not None and len(ego_lane_shape_xy_m) > 1 else None
+    return episode_compliance(log, ego_colours, ped_colours, line)
+
+
 def first_collision_step(log: pd.DataFrame) -> int | None:
     """Row of the first contact with the moving ego (the collision of safety.collision), or None."""
     if not len(log):
@@ -182,9 +197,11 @@ def judge_episode(
     arm: str,
     injury_model: str = "saade2020",
     proximity_model: ProximityModel | None = None,
+    ego_lane_shape_xy_m: Sequence[tuple[float, float]] = (),
 ) -> EpisodeResult:
     """The episode's result: its outcome row (the drawn pedestrian and ego, the indexes of the log,
-    SUMO's verdict, the signals at the conflict, the approach `arm`) beside what the loop recorded."""
+    SUMO's verdict, the signals at the conflict, the approach `arm`, the compliance columns, whose stop
+    line is the end of `ego_lane_shape_xy_m`) beside what the loop recorded."""
     log, ped = trace.log, setup.pedestrian
     # SUMO checks vehicle-person contact only on crossings and walking areas: its verdict counts where
     # it looks, a pedestrian on a crossing or walking area at the closest approach. Elsewhere
@@ -215,6 +232,7 @@ def judge_episode(
         "collision_type": collision_type(log, first_collision_step(log)) if indexes["collision"] else "none",
         "witness_collision": witness.collided,
         "witness_collision_time_s": witness.time_s,
+        **compliance_of(log, trace.signal_states, setup, ego_lane_shape_xy_m),
         "status": "ok",
         "error": "",
     }

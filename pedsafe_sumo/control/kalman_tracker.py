@@ -1,0 +1,166 @@
+"""The baseline stack's tracker: one constant-velocity Kalman filter per pedestrian, with memory.
+
+State per track: world position and velocity (x, y, vx, vy) [m, m/s] and its 4 x 4 covariance. Motion
+model: the continuous white-noise acceleration model (Bar-Shalom, Li and Kirubarajan, "Estimation with
+Applications to Tracking and Navigation", Wiley 2001, section 6.2.2), per axis
+
+    F = [[1, T], [0, 1]],   Q = q [[T^3/3, T^2/2], [T^2/2, T]],
+
+q being the acceleration's power spectral density. Measurements: positions, one per pedestrian a step
+(the observation reports each pedestrian once, by its first reporter: onboard camera, onboard LiDAR,
+V2I), with the noise of the source that reported it. A V2I position is the roadside position sent
+`latency_s` earlier; under the constant-velocity model it measures x - latency * v, and the filter uses
+that measurement matrix rather than taking the stale position for the current one.
+
+A track not measured this step is predicted on (its covariance grows) for `track_memory_s`, then
+dropped. Docs: docs/baseline_stack.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from pedsafe_sumo.control.agent import PerceivedPedestrian
+
+#: Standard deviation of a V2I position per world axis [m]: the link's stated noise,
+#: [perception.v2i] position_noise_sigma_m of the parameter file.
+V2I_POSITION_SIGMA_M = 0.2
+#: Age of a V2I position when it arrives [s]: [perception.v2i] latency_s (SPaT and detections alike).
+V2I_LATENCY_S = 0.1
+#: Standard deviation of an onboard camera or LiDAR position [m]. The simulator's onboard detectors
+#: report the pedestrian's true centre (perception/pipeline.py: no position noise); 0.01 m is a floor
+#: that keeps the filter's covariance well conditioned. With it two detections 0.05 s apart give the
+#: velocity to 0.3 m/s, as the exact difference would: a new track is told moving from its second
+#: detection.
+ONBOARD_POSITION_SIGMA_M = 0.01
+#: Acceleration power spectral density q of the motion model [m2/s3]. Bar-Shalom et al. (2001, section
+#: 6.2.2): over an interval tau the velocity changes by about sqrt(q tau). Assumption: q = 0.01 lets a
+#: steady walker's velocity wander by about 0.1 m/s over 1 s, a few per cent of 1.4 m/s, the order of
+#: healthy adults' stride-to-stride variability (Hausdorff 2005, J. NeuroEng. Rehabil. 2:19). Under the
+#: 0.2 m V2I noise at 20 Hz it leaves a standing person's speed estimate at about 0.1 m/s per axis (steady
+#: state), four times q gives 0.15. A start or a stop is a manoeuvre the model does not describe: the gain
+#: takes it up within about a second on V2I positions alone, half that on onboard ones
+#: (docs/baseline_stack.md).
+ACCEL_PSD_M2PS3 = 0.01
+#: Prior standard deviation of a new track's velocity per axis [m/s]: covers a brisk walk (1.4 m/s) at
+#: one standard deviation and a run (2.5 m/s) within two.
+INITIAL_SPEED_SIGMA_MPS = 1.5
+#: How long a track no longer measured is predicted on before it is dropped [s]. 2 s: about the longest
+#: the roadside camera loses a jaywalker behind a queue on the study junctions (median 0.9 s, 90 % 1.7 s;
+#: examples/tracking_stack.py), the hold that removed V2I's jaywalking collisions there.
+TRACK_MEMORY_S = 2.0
+#: Chi-square quantile, 2 degrees of freedom, 99.9 %: a velocity whose Mahalanobis distance from zero
+#: is below it is not told apart from standing. The test is repeated every step, 20 times a second: at
+#: 95 % a person standing at the kerb, seen over V2I alone, was told moving in the first second of their
+#: track often enough to start the brakes (paper-v7's scenarios, 50 pairs: docs/baseline_stack.md). A
+#: walker's second exact onboard position passes it (1.4 m/s against a standard deviation of about 0.3).
+MOVING_CHI2 = 13.816
+
+_V2I_SOURCE = "v2i"
+
+
+@dataclass(frozen=True)
+class Track:
+    """One pedestrian's estimate at the current step."""
+
+    ped_id: str
+    x_m: float
+    y_m: float
+    vx_mps: float
+    vy_mps: float
+    #: Covariance of (x, y, vx, vy) [m2, m2/s, m2/s2].
+    covariance: np.ndarray
+    #: Seconds since its last measurement (0 when measured this step).
+    unseen_s: float
+
+    @property
+    def moving(self) -> bool:
+        """Whether the velocity differs from zero at 99.9 % (Mahalanobis distance under its covariance)."""
+        v = np.array([self.vx_mps, self.vy_mps])
+        cov = self.covariance[2:, 2:]
+        try:
+            return float(v @ np.linalg.solve(cov, v)) > MOVING_CHI2
+        except np.linalg.LinAlgError:
+            return bool(np.any(v != 0.0))
+
+    def position_sigma_m(self, direction: tuple[float, float], after_s: float) -> float:
+        """Standard deviation of the position predicted `after_s` ahead, along the unit `direction`."""
+        ux, uy = direction
+        h = np.array([ux, uy, ux * after_s, uy * after_s])
+        return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
+
+
+def _transition(dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    f = np.eye(4)
+    f[0, 2] = f[1, 3] = dt_s
+    q = np.zeros((4, 4))
+    a, b, c = dt_s**3 / 3, dt_s**2 / 2, dt_s
+    for i in (0, 1):
+        q[i, i], q[i, i + 2], q[i + 2, i], q[i + 2, i + 2] = a, b, b, c
+    return f, q
+
+
+class KalmanTracker:
+    """Constant-velocity Kalman filters by pedestrian id, kept `memory_s` after their last measurement."""
+
+    def __init__(
+        self,
+        memory_s: float = TRACK_MEMORY_S,
+        accel_psd_m2ps3: float = ACCEL_PSD_M2PS3,
+        v2i_sigma_m: float = V2I_POSITION_SIGMA_M,
+        onboard_sigma_m: float = ONBOARD_POSITION_SIGMA_M,
+        v2i_latency_s: float = V2I_LATENCY_S,
+    ) -> None:
+        self.memory_s = memory_s
+        self.accel_psd = accel_psd_m2ps3
+        self.v2i_sigma_m = v2i_sigma_m
+        self.onboard_sigma_m = onboard_sigma_m
+        self.v2i_latency_s = v2i_latency_s
+        # ped id -> [state (4,), covariance (4, 4), time of the state, time of the last measurement]
+        self._tracks: dict[str, list] = {}
+
+    def _measurement(self, source: str) -> tuple[np.ndarray, float]:
+        h = np.zeros((2, 4))
+        h[0, 0] = h[1, 1] = 1.0
+        if source == _V2I_SOURCE:
+            h[0, 2] = h[1, 3] = -self.v2i_latency_s
+            return h, self.v2i_sigma_m
+        return h, self.onboard_sigma_m
+
+    def update(self, pedestrians: Iterable[PerceivedPedestrian], time_s: float) -> list[Track]:
+        """Predict every track to `time_s`, fold in this step's positions, drop tracks unseen for longer
+        than the memory; the tracks, in order of first sighting."""
+        for kept in self._tracks.values():
+            dt = time_s - kept[2]
+            if dt > 0:
+                f, q = _transition(dt)
+                kept[0] = f @ kept[0]
+                kept[1] = f @ kept[1] @ f.T + self.accel_psd * q
+                kept[2] = time_s
+        for ped in pedestrians:
+            z = np.array([ped.x_m, ped.y_m])
+            h, sigma = self._measurement(ped.source)
+            r = sigma * sigma * np.eye(2)
+            track = self._tracks.get(ped.ped_id)
+            if track is None:
+                state = np.array([ped.x_m, ped.y_m, 0.0, 0.0])
+                cov = np.diag([sigma**2, sigma**2, INITIAL_SPEED_SIGMA_MPS**2, INITIAL_SPEED_SIGMA_MPS**2])
+                self._tracks[ped.ped_id] = [state, cov, time_s, time_s]
+                continue
+            x, p = track[0], track[1]
+            s = h @ p @ h.T + r
+            gain = p @ h.T @ np.linalg.inv(s)
+            x = x + gain @ (z - h @ x)
+            i_kh = np.eye(4) - gain @ h
+            p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form: stays symmetric and positive
+            track[0], track[1], track[3] = x, p, time_s
+        for ped_id in [k for k, t in self._tracks.items() if time_s - t[3] > self.memory_s + 1e-9]:
+            del self._tracks[ped_id]
+        return [
+            Track(ped_id, float(t[0][0]), float(t[0][1]), float(t[0][2]), float(t[0][3]), t[1], time_s - t[3])
+            for ped_id, t in self._tracks.items()
+        ]

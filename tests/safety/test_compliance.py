@@ -1,0 +1,140 @@
+"""Compliance columns on hand-built step logs whose answers are worked out by hand."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from pedsafe_sumo.safety.compliance import episode_compliance, false_brake, stop_line_of
+
+STEP_S = 0.05
+# A 4 m x 1.8 m ego driving east along y = 0 at 10 m/s from x = 0 (0.5 m a step); its front is 2 m
+# ahead of its centre. The stop line: the end of a lane drawn from (-100, 0) to (50, 0).
+LINE = stop_line_of([(-100.0, 0.0), (50.0, 0.0)])
+
+
+def drive(n=150, speed=10.0, ped=(30.0, 5.0), ped_v=(0.0, 0.0), braking=False, command=None):
+    rows = []
+    for k in range(n):
+        rows.append(
+            {
+                "time_s": k * STEP_S,
+                "ego_x_m": speed * k * STEP_S,
+                "ego_y_m": 0.0,
+                "ego_yaw_rad": 0.0,
+                "ego_speed_mps": speed,
+                "ego_length_m": 4.0,
+                "ego_width_m": 1.8,
+                "ped_x_m": ped[0],
+                "ped_y_m": ped[1],
+                "ped_vx_mps": ped_v[0],
+                "ped_vy_mps": ped_v[1],
+                "ped_radius_m": 0.3,
+                "perceived": True,
+                "command_speed_mps": speed if command is None else command,
+                "braking": braking,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def colours(n, yellow_from=None, red_from=None):
+    out = []
+    for k in range(n):
+        if red_from is not None and k >= red_from:
+            out.append("red")
+        elif yellow_from is not None and k >= yellow_from:
+            out.append("yellow")
+        else:
+            out.append("green")
+    return out
+
+
+def test_stop_line_is_the_lane_end_and_its_direction():
+    assert LINE == ((50.0, 0.0), (1.0, 0.0))
+
+
+def test_signal_when_the_front_crosses_the_line():
+    # The front (x + 2) reaches 50 m at x = 48: step 96. Yellow from step 90 (front at 47 m).
+    log = drive()
+    n = len(log)
+    assert episode_compliance(log, colours(n, 90), ["red"] * n, LINE)["stopline_signal"] == "yellow"
+    assert episode_compliance(log, colours(n, 97), ["red"] * n, LINE)["stopline_signal"] == "green"
+    assert episode_compliance(log, colours(n, 40, 96), ["red"] * n, LINE)["stopline_signal"] == "red"
+    # Never crossed (30 steps: the front at 16.5 m at most), or no stop line: none.
+    short = drive(n=30)
+    assert episode_compliance(short, colours(30), ["red"] * 30, LINE)["stopline_signal"] == "none"
+    assert episode_compliance(log, colours(n), ["red"] * n, None)["stopline_signal"] == "none"
+
+
+@pytest.mark.parametrize(
+    ("yellow_from", "could"),
+    [
+        # 10 m/s: 100 / (2 x 3) = 16.67 m to stop. Step 90: front at 47 m, 3 m from the line: no.
+        (90, False),
+        # Step 60: front at 32 m, 18 m from the line: yes. Step 64: front at 34 m, 16 m: no.
+        (60, True),
+        (64, False),
+        # Step 20: front at 12 m, 38 m: yes.
+        (20, True),
+    ],
+)
+def test_could_stop_at_the_yellow_onset(yellow_from, could):
+    log = drive()
+    n = len(log)
+    result = episode_compliance(log, colours(n, yellow_from), ["red"] * n, LINE)
+    assert result["could_stop_at_yellow"] is could
+
+
+def test_no_yellow_before_crossing_is_unknown():
+    log = drive()
+    n = len(log)
+    assert episode_compliance(log, colours(n), ["red"] * n, LINE)["could_stop_at_yellow"] is None
+    # Yellow only after the front crossed (step 96): unknown too.
+    assert episode_compliance(log, colours(n, 100), ["red"] * n, LINE)["could_stop_at_yellow"] is None
+
+
+def fb(log, ego_colours=None, ped_colours=None):
+    n = len(log)
+    return episode_compliance(log, ego_colours or ["green"] * n, ped_colours or ["red"] * n, None)[
+        "false_brake"
+    ]
+
+
+def test_braking_for_someone_standing_beside_the_path_is_a_false_brake():
+    # Standing 5 m left of the heading line: beyond 0.9 + 0.3 + 0.5 = 1.7 m.
+    assert fb(drive(n=20, ped=(30.0, 5.0), braking=True)) is True
+    # 1.6 m to the left: inside the corridor, braking is right.
+    assert fb(drive(n=20, ped=(30.0, 1.6), braking=True)) is False
+    # Walking (1.4 m/s): not standing.
+    assert fb(drive(n=20, ped=(30.0, 5.0), ped_v=(0.0, -1.4), braking=True)) is False
+    # Not braking.
+    assert fb(drive(n=20, ped=(30.0, 5.0))) is False
+    # Standing in its lane 10 m behind the ego's start (behind its rear at every step): outside its path.
+    assert fb(drive(n=20, ped=(-10.0, 0.0), braking=True)) is True
+
+
+def test_a_command_below_the_speed_is_braking_even_unflagged():
+    # 1 m/s2 x 0.05 s = 0.05 m/s below the speed is braking; 0.04 is not.
+    assert fb(drive(n=20, ped=(30.0, 5.0), command=10.0 - 0.06)) is True
+    assert fb(drive(n=20, ped=(30.0, 5.0), command=10.0 - 0.04)) is False
+
+
+def test_braking_for_a_signal_or_for_someone_on_walk_is_not_false():
+    n = 20
+    log = drive(n=n, ped=(30.0, 5.0), braking=True)
+    # Yellow ahead (front before the line the whole time: no line given, so every step is before it).
+    assert fb(log, ego_colours=["yellow"] * n) is False
+    assert fb(log, ego_colours=["red"] * n) is False
+    # The pedestrian has walk: yielding to someone about to cross.
+    assert fb(log, ped_colours=["green"] * n) is False
+    # Not perceived: the stack cannot have braked for them.
+    unseen = log.assign(perceived=False)
+    assert fb(unseen) is False
+
+
+def test_an_empty_log_has_no_false_brake_and_no_crossing():
+    empty = drive(n=1).iloc[:0]
+    assert false_brake(empty, [], [], empty["time_s"].to_numpy() > 0) is False
+    result = episode_compliance(empty, [], [], LINE)
+    assert result == {"false_brake": False, "stopline_signal": "none", "could_stop_at_yellow": None}
