@@ -29,6 +29,7 @@ import sumolib
 from tqdm import tqdm
 
 from pedsafe_sumo import __version__
+from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
@@ -109,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class) -> int:
     out: Path = args.out
+    prepare_compiled_kernels()
     try:
         runner = NcapRunner(site, params, agent_class)
     except (OSError, ValueError) as exc:
