@@ -39,7 +39,6 @@ from pedsafe_sumo.batch.sampled import (
     V2I_FACTORS,
 )
 from pedsafe_sumo.batch.stop import stop_on_signals
-from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S
 from pedsafe_sumo.io.run_store import STATE_COMPLETE
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS, KEEP_LOGS_CHOICES
@@ -266,7 +265,6 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     restore_signals = stop_on_signals()  # SIGINT, SIGTERM: workers stopped, run kept for --resume
     try:
-        prepare_compiled_kernels()  # here, once: the workers then load them from numba's cache
         backend.start()
         return run_batch(plan, backend, argv)
     except INPUT_ERRORS as exc:  # an unreachable cluster, a run directory another batch holds

@@ -22,6 +22,7 @@ from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, worker_versions
 from pedsafe_sumo.batch.sampled import plan_sampled_chunks, run_sampled
 from pedsafe_sumo.batch.summary import print_table
+from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.timeout import TIMEOUT_STATUS
 from pedsafe_sumo.io.run_store import STATE_COMPLETE, STATE_RUNNING, STEPLOGS_DIR
 from pedsafe_sumo.io.step_logs import KEEP_ALL
@@ -136,6 +137,7 @@ def run_batch(plan: Plan, backend: Backend, argv: list[str]) -> int:
         f"{what} in {len(chunks)} chunk(s) of up to {plan.identity['chunk_size_pairs']} pair(s){resumed}; "
         f"{len(todo)} chunk(s) to run on {backend.description} -> {plan.out}"
     )
+    prepare_compiled_kernels()  # here, once: the workers then load them from numba's cache
     started = time.perf_counter()
     with tqdm(
         total=total, initial=done_rows, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr

@@ -110,7 +110,6 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class) -> int:
     out: Path = args.out
-    prepare_compiled_kernels()
     try:
         runner = NcapRunner(site, params, agent_class)
     except (OSError, ValueError) as exc:
@@ -126,6 +125,7 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     except NcapError as exc:
         runner.close()
         return error(f"site {site.name}: {exc}")
+    prepare_compiled_kernels()
     out.mkdir(parents=True, exist_ok=True)
     episodes: list[dict[str, Any]] = []
     print(
