@@ -20,6 +20,7 @@ class BuildWithShippedData(build_py):
         if getattr(self, "editable_mode", False):  # an editable install reads the checkout's folders
             return
         target = Path(self.build_lib) / "pedsafe_sumo" / "_shipped"
+        shutil.rmtree(target, ignore_errors=True)  # a file deleted from the checkout leaves the wheel too
         for folder in SHIPPED:
             if (ROOT / folder).is_dir():  # an sdist holds them too (MANIFEST.in)
                 shutil.copytree(ROOT / folder, target / folder, dirs_exist_ok=True)
