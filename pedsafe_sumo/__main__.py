@@ -1,8 +1,8 @@
-"""`python -m pedsafe_sumo`: the command `pedsafe-sumo` (pedsafe_sumo.cli)."""
+"""`python -m pedsafe_sumo`: the command `pedsafe-sumo` (pedsafe_sumo.command)."""
 
 import sys
 
-from pedsafe_sumo.cli import main
+from pedsafe_sumo.command import main
 
 if __name__ == "__main__":
     sys.exit(main())

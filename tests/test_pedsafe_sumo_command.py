@@ -1,4 +1,4 @@
-"""The command pedsafe-sumo (pedsafe_sumo.cli) in the checkout: its subcommands are the modules' commands,
+"""The command pedsafe-sumo (pedsafe_sumo.command) in the checkout: its subcommands are the modules' commands,
 its version names the checkout's commit; the search path of site names; shipped protocols by name."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT, __version__
-from pedsafe_sumo.cli import COMMANDS, SITE_BUILD_MODULE
+from pedsafe_sumo.command import COMMANDS, SITE_BUILD_MODULE
 from pedsafe_sumo.network.sites import NETWORKS_DIR_ENV, SiteError, resolve_site
 from pedsafe_sumo.protocol import ProtocolError, load_protocol
 
