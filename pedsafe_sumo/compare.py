@@ -30,7 +30,6 @@ comparison passes, 1 when any fails, 2 on bad input.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from collections.abc import Mapping, Sequence
@@ -41,6 +40,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special
 
+from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir
 from pedsafe_sumo.report.html import replay_commands
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, load_run_per_approach
@@ -287,7 +287,7 @@ def runs_by_approach(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m pedsafe_sumo.compare",
         description="Paired build-against-build comparison of two batch runs of the same draws: the "
         "difference B - A per scenario, condition and index with its interval, and a non-inferiority "
@@ -300,10 +300,12 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="INDEX=VALUE",
-        help="non-inferiority margin of an index, an absolute difference of the rate or mean "
-        + ", ".join(f"[{k}={v:g}]" for k, v in DEFAULT_MARGINS.items()),
+        help="non-inferiority margin of an index, an absolute difference of the rate or mean, above 0 and "
+        "at most 1 " + ", ".join(f"[{k}={v:g}]" for k, v in DEFAULT_MARGINS.items()),
     )
-    parser.add_argument("--confidence", type=float, default=0.95, help="two-sided level [0.95]")
+    parser.add_argument(
+        "--confidence", type=float, default=0.95, help="two-sided level, at least 0.5 and below 1 [0.95]"
+    )
     parser.add_argument("--out", type=Path, help="also write compare.csv and worse_episodes.csv here")
     parser.add_argument(
         "--approach",

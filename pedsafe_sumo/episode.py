@@ -12,11 +12,11 @@ on stderr and exit code 2.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
 
+from pedsafe_sumo.cli import OneLineParser, check_seed
 from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.stack_calls import StackError
@@ -127,12 +127,10 @@ def describe_signals(result: EpisodeResult) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m pedsafe_sumo.episode", description=__doc__.splitlines()[0]
-    )
+    parser = OneLineParser(prog="python -m pedsafe_sumo.episode", description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", required=True, help=f"one of: {', '.join(SCENARIOS)}")
     parser.add_argument("--condition", default="both", help="sv, v2i or both (default: both, same seed)")
-    parser.add_argument("--seed", type=int, default=1, help="episode seed (default 1)")
+    parser.add_argument("--seed", type=int, default=1, help="episode seed, 0 to 2**63 - 1 (default 1)")
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument(
         "--approach", choices=list("NESW"), help="the arm the ego comes in on [the site's own approach]"
@@ -153,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         default=DEFAULT_AGENT_TIMEOUT_S,
         metavar="SECONDS",
-        help=f"time limit of each run_step call of the AD stack (default {DEFAULT_AGENT_TIMEOUT_S:g})",
+        help="time limit of each run_step call of the AD stack, above 0 and at most 3600 "
+        f"(default {DEFAULT_AGENT_TIMEOUT_S:g})",
     )
     args = parser.parse_args(argv)
 
@@ -176,8 +175,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")
         args.algorithm = stack_spec(args.algorithm, args.perception)
         agent_class = load_agent_class(args.algorithm)
-        if args.seed < 0:
-            raise UsageError(f"--seed must not be negative, got {args.seed}")
+        check_seed(args.seed)
         agent_timeout_s = check_timeout_s(args.agent_timeout)
         if args.log is not None:
             check_output_file(args.log, "--log", UsageError)

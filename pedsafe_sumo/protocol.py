@@ -17,7 +17,6 @@ new dated file, never an edit; run.json records the file and its SHA-256.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import datetime
 import hashlib
@@ -31,6 +30,7 @@ from typing import Any
 import tomllib
 
 from pedsafe_sumo import PROTOCOLS_DIR
+from pedsafe_sumo.cli import MAX_EPISODES, OneLineParser, check_seed
 from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, overlay, validate
 from pedsafe_sumo.scenarios import specs
 from pedsafe_sumo.scenarios.errors import ScenarioError
@@ -152,7 +152,11 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "kerb_gap_min_m": 0.3,
         "kerb_gap_max_m": 1.0,
     },
-    "parameters": {},
+    # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
+    "parameters": {
+        "pedestrians.yield_at_kerb": False,
+        "pedestrians.body_rule_needs_notice": False,
+    },
 }
 
 
@@ -386,9 +390,7 @@ def protocol_text(header: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m pedsafe_sumo.protocol", description=__doc__.splitlines()[0]
-    )
+    parser = OneLineParser(prog="python -m pedsafe_sumo.protocol", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     write = sub.add_parser("write", help="write a new protocol from today's scenarios and parameters")
     write.add_argument("name")
@@ -397,13 +399,22 @@ def main(argv: list[str] | None = None) -> int:
     write.add_argument("--description", default="")
     write.add_argument("--scenarios", default=",".join(SCENARIOS))
     write.add_argument("--conditions", default="both")
-    write.add_argument("--episodes", type=int, default=10000)
-    write.add_argument("--seed", type=int, default=1)
+    write.add_argument(
+        "--episodes", type=int, default=10000, help=f"episodes per scenario, 1 to {MAX_EPISODES:,} [10000]"
+    )
+    write.add_argument("--seed", type=int, default=1, help="run seed, 0 to 2**63 - 1 [1]")
     write.add_argument("--site", default="xueqing")
     write.add_argument("--algorithm", default="pedsafe_sumo.control.reference:ReferenceStack")
     args = parser.parse_args(argv)
     if args.out.exists():
         print(f"error: {args.out} exists: a protocol is never rewritten, choose a new name", file=sys.stderr)
+        return 2
+    try:
+        if not 1 <= args.episodes <= MAX_EPISODES:
+            raise UsageError(f"--episodes must lie in 1..{MAX_EPISODES:,}, got {args.episodes}")
+        check_seed(args.seed)
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return 2
     header = {
         "name": args.name,

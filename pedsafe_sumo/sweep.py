@@ -12,7 +12,10 @@ OUT/sweep.csv and OUT/sweep.md hold Table I of every combination with its settin
 OUT/sweep.png plots collision and conflict rates (95% Wilson intervals) against the first --vary key;
 OUT/findings.csv and findings.png say which of the paper's qualitative findings hold in each
 combination (pedsafe_sumo/report/findings.py).
-Every --set / --vary key is validated for every combination before anything runs.
+Every --set / --vary key is validated for every combination before anything runs. Before it starts, the
+sweep says in one line how many episodes it will run (combinations x scenarios x conditions x episodes);
+it refuses more than --max-runs (1,000,000 unless given: about a day on 2 cores) and more than 1,000
+combinations.
 
 `--preset NAME` is one of the sensitivity sweeps (PRESETS: the parameters the paper
 does not report that move the indexes most, each over a range around its default), in place of --vary.
@@ -22,16 +25,26 @@ OUT/findings_across_sweeps.csv and .png (one panel per sweep).
 
 from __future__ import annotations
 
-import argparse
 import itertools
+import math
 import sys
 from pathlib import Path
 
 import pandas as pd
 
 from pedsafe_sumo.batch.__main__ import main as batch_main
+from pedsafe_sumo.batch.plan import MAX_WORKERS
+from pedsafe_sumo.cli import (
+    DEFAULT_MAX_RUNS,
+    MAX_EPISODES,
+    OneLineParser,
+    check_max_runs,
+    check_run_count,
+    check_seed,
+    max_runs_help,
+)
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
-from pedsafe_sumo.io.outputs import check_output_dir
+from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.report.findings import (
@@ -46,6 +59,9 @@ from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
 
+#: Combinations of one sweep: each is a run directory and a batch of its own, and every one is validated
+#: before the first runs; a thousand is three values of six keys.
+MAX_COMBINATIONS = 1000
 #: The sensitivity sweeps, one key each, over a range that holds its default (the
 #: values of defaults.toml and the scenario registry: reaction 0.4 s, deceleration 6 m/s2, blend gap 0,
 #: occluder SUV, queue of 3, V2I latency 0.1 s, gap acceptance t_s 3 s). Ranges are assumptions: a
@@ -74,6 +90,12 @@ def combinations(varied: list[tuple[str, list[str]]]) -> list[dict[str, str]]:
     keys = [key for key, _ in varied]
     if len(set(keys)) != len(keys):
         raise UsageError("each --vary key may appear once")
+    count = math.prod(len(values) for _, values in varied)  # before the product is expanded
+    if count > MAX_COMBINATIONS:
+        raise UsageError(
+            f"--vary gives {count:,} combinations, more than {MAX_COMBINATIONS:,} (each is a run directory "
+            "and a batch of its own): vary fewer values"
+        )
     return [dict(zip(keys, values)) for values in itertools.product(*(values for _, values in varied))]
 
 
@@ -82,16 +104,27 @@ def label(combination: dict[str, str]) -> str:
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog="python -m pedsafe_sumo.sweep", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m pedsafe_sumo.sweep", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--scenario", help=f"{', '.join(SCENARIOS)}, a comma-separated list of them, or all (required)"
     )
     parser.add_argument("--condition", default="both", help="sv, v2i or both [both]")
     parser.add_argument(
-        "--episodes", type=int, default=200, help="episodes per scenario and combination [200]"
+        "--episodes",
+        type=int,
+        default=200,
+        help=f"episodes per scenario and combination, 1 to {MAX_EPISODES:,} [200]",
     )
-    parser.add_argument("--seed", type=int, default=1, help="run seed, the same for every combination [1]")
-    parser.add_argument("--workers", type=int, default=2, help="worker processes per batch [2]")
+    parser.add_argument(
+        "--seed", type=int, default=1, help="run seed, the same for every combination, 0 to 2**63 - 1 [1]"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=2, help=f"worker processes per batch, 1 to {MAX_WORKERS} [2]"
+    )
+    parser.add_argument(
+        "--max-runs", type=int, dest="max_runs", default=DEFAULT_MAX_RUNS, metavar="EPISODES",
+        help=max_runs_help() + f"; at most {MAX_COMBINATIONS:,} combinations",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, required=True, help="sweep directory")
     parser.add_argument(
         "--vary", action="append", default=[], metavar="KEY=V1,V2", help="a setting and its values"
@@ -125,10 +158,23 @@ def validate(args) -> list[dict[str, str]]:
     unknown = [name for name in scenarios if name not in SCENARIOS]
     if unknown:
         raise UsageError(f"unknown scenario '{unknown[0]}' (known: {', '.join(SCENARIOS)}, all)")
-    if args.episodes < 1:
-        raise UsageError(f"--episodes must be at least 1, got {args.episodes}")
-    site = resolve_site(args.site)
+    if args.condition not in ("sv", "v2i", "both"):
+        raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
+    if not 1 <= args.episodes <= MAX_EPISODES:
+        raise UsageError(f"--episodes must lie in 1..{MAX_EPISODES:,}, got {args.episodes}")
+    check_seed(args.seed)
+    if not 1 <= args.workers <= MAX_WORKERS:
+        raise UsageError(f"--workers must lie in 1..{MAX_WORKERS}, got {args.workers}")
+    check_max_runs(args.max_runs)
     combos = combinations([parse_vary(text) for text in args.vary])
+    n_conditions = 2 if args.condition == "both" else 1
+    args.count_text = (
+        f"{len(combos)} combination(s) x {len(scenarios)} scenario(s) x {n_conditions} condition(s) x "
+        f"{args.episodes:,} episodes"
+    )
+    args.total_episodes = len(combos) * len(scenarios) * n_conditions * args.episodes
+    check_run_count(args.total_episodes, args.max_runs, args.count_text)
+    site = resolve_site(args.site)
     for combo in combos:
         specs, _ = configure(scenarios, None, [*args.set, *(f"{k}={v}" for k, v in combo.items())])
         check_roadside_units(specs, site)
@@ -140,7 +186,7 @@ def batch_argv(args, combo: dict[str, str], run_dir: Path) -> list[str]:
     argv = [
         "--scenario", args.scenario, "--condition", args.condition, "--episodes", str(args.episodes),
         "--seed", str(args.seed), "--workers", str(args.workers), "--out", str(run_dir),
-        "--algorithm", args.algorithm, "--site", args.site,
+        "--algorithm", args.algorithm, "--site", args.site, "--max-runs", str(args.max_runs),
     ]  # fmt: skip
     for pair in [*args.set, *(f"{k}={v}" for k, v in combo.items())]:
         argv += ["--set", pair]
@@ -231,9 +277,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         combos = validate(args)
         check_output_dir(args.out, "--out", UsageError)
+        probe_output_dir(args.out, "--out", UsageError)
     except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    total = f"at most {args.total_episodes:,} episodes (--max-runs {args.max_runs:,})"
+    print(f"sweep: {args.count_text} = {total}")
     args.out.mkdir(parents=True, exist_ok=True)
     for number, combo in enumerate(combos, 1):
         run_dir = args.out / label(combo)

@@ -1,4 +1,5 @@
 """Bad input to a command ends in one line on stderr and exit code 2, before any simulation; no file changes.
+A command that multiplies a grid says how many episodes it will run, and refuses more than --max-runs.
 
 One row per case: the files the row sets up in a temporary folder (the command's working folder), the
 command line, and a word the error line must hold. Each row runs the command as a subprocess and checks the
@@ -22,7 +23,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
+from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT, sweep
+from pedsafe_sumo.batch.plan import episode_count
+from pedsafe_sumo.settings import UsageError
 
 BILLION_LAUGHS = (
     '<?xml version="1.0"?>\n<!DOCTYPE net [\n <!ENTITY a "aaaaaaaaaa">\n'
@@ -35,6 +38,15 @@ EXTERNAL_ENTITY = (
 )
 MALFORMED = '<net><location netOffset="0,0"></net>\n'
 EMPTY_FCD = '<?xml version="1.0"?>\n<fcd-export>\n</fcd-export>\n'
+#: A site configuration whose additional file is not in the site folder.
+CONFIG_NAMING_A_MISSING_FILE = (
+    '<configuration><input><net-file value="xueqing.net.xml"/>'
+    '<additional-files value="xueqing.poly.xml,gone.add.xml"/></input></configuration>\n'
+)
+#: Root may create folders in one of mode 555; nobody may in /proc/sys (access(2) says so) or in /proc.
+AS_ROOT = os.geteuid() == 0
+LOCKED_OUT = "/proc/sys/pedsafe-run" if AS_ROOT else "locked/run"
+NO_FOLDER_OUT = "/proc/pedsafe-run"
 
 
 def a_file(name: str, text: str = "x\n") -> Callable[[Path], None]:
@@ -47,6 +59,27 @@ def a_file(name: str, text: str = "x\n") -> Callable[[Path], None]:
 
 def a_folder(name: str) -> Callable[[Path], None]:
     return lambda folder: (folder / name).mkdir(parents=True)
+
+
+def a_locked_folder(name: str) -> Callable[[Path], None]:
+    """A folder of mode 555 (read and enter, no writing); none for root, whose rows use /proc/sys."""
+
+    def make(folder: Path) -> None:
+        if not AS_ROOT:
+            (folder / name).mkdir()
+            (folder / name).chmod(0o555)
+
+    return make
+
+
+def a_site_without(file_suffix: str) -> Callable[[Path], None]:
+    """A copy of the xueqing site folder as ./site without its `file_suffix` file."""
+
+    def make(folder: Path) -> None:
+        shutil.copytree(NETWORKS_DIR / "xueqing", folder / "site")
+        (folder / "site" / f"xueqing.{file_suffix}").unlink()
+
+    return make
 
 
 def a_site(file_suffix: str, text: str) -> Callable[[Path], None]:
@@ -116,8 +149,13 @@ def module(name: str, *args: str) -> tuple[str, ...]:
 
 
 BUILD_NETWORK = str(REPO_ROOT / "tools" / "build_network.py")
+CLIP_OSM = (str(REPO_ROOT / "tools" / "clip_osm.py"), "in.osm", "out.osm")
 EPISODE = module("episode", "--scenario", "crossing", "--condition", "sv")
 NCAP = ("--tests", "CPNA", "--speeds", "20", "--condition", "sv")
+BATCH = module("batch", "--scenario", "crossing", "--condition", "sv", "--episodes", "1", "--workers", "1")
+SWEEP = module("sweep", "--scenario", "crossing", "--condition", "sv", "--episodes", "1", "--workers", "1")
+VARY = ("--vary", "algorithm.reaction_time_s=0.4,1.0")
+REPLAY = module("replay", "run", "--episode", "0", "--condition", "sv")
 
 ROWS = [
     # 1. Unwritable or occupied outputs.
@@ -310,6 +348,191 @@ ROWS = [
             a_file("run/manifest.json", '{"format": 1, "chunks": {"k": [1]}}'),
         ),
     ),
+    # 6. Requests that multiply beyond --max-runs (each condition of a pair counts).
+    Row(
+        "batch: 5 scenarios x 2 conditions x 1,000,000 episodes",
+        module("batch", "--scenario", "all", "--episodes", "1000000", "--out", "run"),
+        "--max-runs",
+    ),
+    Row(
+        "batch: every approach x every scenario x 200,000 episodes",
+        module("batch", "--scenario", "all", "--approach", "all", "--episodes", "200000", "--out", "run"),
+        "--max-runs",
+    ),
+    Row("batch --max-runs 0", (*BATCH, "--max-runs", "0", "--out", "run"), "--max-runs"),
+    Row("batch --max-runs nan", (*BATCH, "--max-runs", "nan", "--out", "run"), "--max-runs"),
+    Row(
+        "batch over a lowered --max-runs",
+        (*BATCH, "--episodes", "11", "--max-runs", "10", "--out", "run"),
+        "--max-runs",
+    ),
+    Row(
+        "sweep: 3 combinations x 5 scenarios x 2 conditions x 100,000 episodes",
+        module(
+            "sweep",
+            "--scenario",
+            "all",
+            "--episodes",
+            "100000",
+            "--out",
+            "s",
+            "--vary",
+            "algorithm.reaction_time_s=0.4,1.0,1.5",
+        ),
+        "--max-runs",
+    ),  # fmt: skip
+    Row(
+        "sweep: 1,600 combinations",
+        (
+            *SWEEP,
+            "--vary",
+            "a=" + ",".join(map(str, range(40))),
+            "--vary",
+            "b=" + ",".join(map(str, range(40))),
+            "--out",
+            "s",
+        ),
+        "combinations",
+    ),  # fmt: skip
+    Row("sweep --max-runs 1", (*SWEEP, *VARY, "--max-runs", "1", "--out", "s"), "--max-runs"),
+    # 7. Output folders that are taken or cannot be written.
+    Row(
+        "ncap --out a non-empty folder of something else",
+        module("ncap", "--out", "mine", *NCAP),
+        "not empty",
+        (a_file("mine/notes.txt"),),
+    ),
+    Row(
+        "batch --out in a folder nobody may write into",
+        (*BATCH, "--out", LOCKED_OUT),
+        "--out",
+        (a_locked_folder("locked"),),
+    ),
+    Row("batch --out where no folder can be made", (*BATCH, "--out", NO_FOLDER_OUT), "--out"),
+    Row(
+        "sweep --out in a folder nobody may write into",
+        (*SWEEP, *VARY, "--out", LOCKED_OUT),
+        "--out",
+        (a_locked_folder("locked"),),
+    ),
+    Row("sweep --out where no folder can be made", (*SWEEP, *VARY, "--out", NO_FOLDER_OUT), "--out"),
+    Row("ncap --out where no folder can be made", module("ncap", "--out", NO_FOLDER_OUT, *NCAP), "--out"),
+    Row(
+        "demand.validate --work under a file",
+        module("demand.validate", "--docs", "d", "--work", "taken/w"),
+        "--work",
+        (a_file("taken"),),
+    ),
+    # 8. A site's SUMO configuration and view settings, where a command reads them.
+    *(
+        Row(f"{name}: {what}", argv, says, (make,))
+        for name, argv in (
+            ("site --no-build", module("site", "--no-build", "--site", "./site")),
+            (
+                "demand.validate",
+                module(
+                    "demand.validate",
+                    "--site",
+                    "./site",
+                    "--docs",
+                    "d",
+                    "--work",
+                    "w",
+                    "--duration",
+                    "60",
+                    "--warmup",
+                    "10",
+                ),
+            ),
+        )
+        for what, says, make in (
+            ("malformed .sumocfg", "xueqing.sumocfg", a_site("sumocfg", MALFORMED)),
+            ("external entity in .sumocfg", "xueqing.sumocfg", a_site("sumocfg", EXTERNAL_ENTITY)),
+            (
+                ".sumocfg naming a missing file",
+                "gone.add.xml",
+                a_site("sumocfg", CONFIG_NAMING_A_MISSING_FILE),
+            ),
+        )
+    ),  # fmt: skip
+    Row(
+        "site --no-build: malformed view.xml",
+        module("site", "--no-build", "--site", "./site"),
+        "xueqing.view.xml",
+        (a_site("view.xml", MALFORMED),),
+    ),
+    Row(
+        "site --no-build: no view.xml",
+        module("site", "--no-build", "--site", "./site"),
+        "xueqing.view.xml",
+        (a_site_without("view.xml"),),
+    ),
+    Row(
+        "site --no-build: no .sumocfg",
+        module("site", "--no-build", "--site", "./site"),
+        "xueqing.sumocfg",
+        (a_site_without("sumocfg"),),
+    ),
+    Row(
+        "episode --gui: malformed view.xml",
+        (*EPISODE, "--gui", "--site", "./site"),
+        "xueqing.view.xml",
+        (a_site("view.xml", MALFORMED),),
+    ),
+    # 9. Every numeric option within its stated range, NaN and words included.
+    Row("sweep --seed -1", (*SWEEP, *VARY, "--seed", "-1", "--out", "s"), "--seed"),
+    Row("sweep --workers 0", (*SWEEP, *VARY, "--workers", "0", "--out", "s"), "--workers"),
+    Row("sweep --workers 1000", (*SWEEP, *VARY, "--workers", "1000", "--out", "s"), "--workers"),
+    Row("sweep --episodes 2000000", (*SWEEP, *VARY, "--episodes", "2000000", "--out", "s"), "--episodes"),
+    Row("sweep --episodes x", (*SWEEP, *VARY, "--episodes", "x", "--out", "s"), "--episodes"),
+    Row("sweep --condition car", (*SWEEP, *VARY, "--condition", "car", "--out", "s"), "car"),
+    Row("ncap --seed 2**64", module("ncap", "--out", "n", *NCAP, "--seed", str(2**64)), "--seed"),
+    Row("replay --delay nan", (*REPLAY, "--delay", "nan"), "--delay"),
+    Row("replay --delay 1e9", (*REPLAY, "--delay", "1e9"), "--delay"),
+    Row("replay --view-width 1e9", (*REPLAY, "--view-width", "1e9"), "--view-width"),
+    Row("replay --view-width nan", (*REPLAY, "--view-width", "nan"), "--view-width"),
+    Row("replay --episode x", module("replay", "run", "--episode", "x", "--condition", "sv"), "--episode"),
+    Row(
+        "conflicts --radius 1e6",
+        module("conflicts", "f.xml", "--out", "c.csv", "--radius", "1e6"),
+        "--radius",
+        (a_file("f.xml", EMPTY_FCD),),
+    ),
+    Row(
+        "conflicts --radius nan",
+        module("conflicts", "f.xml", "--out", "c.csv", "--radius", "nan"),
+        "--radius",
+        (a_file("f.xml", EMPTY_FCD),),
+    ),
+    Row("compare --confidence x", module("compare", "a", "b", "--confidence", "x"), "--confidence"),
+    Row("compare --confidence nan", module("compare", "a", "b", "--confidence", "nan"), "--confidence"),
+    Row(
+        "compare --margin collision=nan", module("compare", "a", "b", "--margin", "collision=nan"), "--margin"
+    ),
+    Row("episode --seed 2**64", (*EPISODE, "--seed", str(2**64)), "--seed"),
+    Row("episode --agent-timeout nan", (*EPISODE, "--agent-timeout", "nan"), "--agent-timeout"),
+    Row("batch --agent-timeout nan", (*BATCH, "--agent-timeout", "nan", "--out", "run"), "--agent-timeout"),
+    Row("batch --seed 2**63", (*BATCH, "--seed", str(2**63), "--out", "run"), "--seed"),
+    Row("demand --seed -1", module("demand", "--site", "xueqing", "--seed", "-1", "--out", "r"), "--seed"),
+    Row(
+        "demand --duration x",
+        module("demand", "--site", "xueqing", "--duration", "x", "--out", "r"),
+        "--duration",
+    ),
+    Row("demand.validate --seed -1", module("demand.validate", "--docs", "d", "--seed", "-1"), "--seed"),
+    Row(
+        "protocol write --episodes 0",
+        module("protocol", "write", "p", "--out", "p.toml", "--episodes", "0"),
+        "--episodes",
+    ),
+    Row(
+        "protocol write --seed -1",
+        module("protocol", "write", "p", "--out", "p.toml", "--seed", "-1"),
+        "--seed",
+    ),
+    Row("build_network --center nan,0", (BUILD_NETWORK, "--center", "nan,0", "--out", "site"), "--center"),
+    Row("clip_osm --radius nan", (*CLIP_OSM, "--center", "40,116", "--radius", "nan"), "--radius"),
+    Row("clip_osm --center 95,0", (*CLIP_OSM, "--center", "95,0", "--radius", "150"), "--center"),
 ]
 
 
@@ -341,3 +564,34 @@ def test_bad_input_is_one_line_exit_2_and_changes_nothing(row: Row, tmp_path: Pa
     assert snapshot(work) == before
     assert not list(tmp_path.rglob("*.tmp"))
     assert snapshot(REPO_ROOT / "docs") == docs_before
+
+
+def test_batch_counts_units_conditions_and_the_samplers_stages() -> None:
+    # 3 units x 2 conditions x 7 episodes; with 2 pilot stages of 50 pairs: 3 x 2 x (2 x 50 + 7).
+    arguments = {"episodes": 7}
+    assert episode_count(["a", "b", "c"], ["sv", "v2i"], arguments, None)[0] == 42
+    sampler = {"pilot_stages": 2, "pilot_episodes": 50}
+    assert episode_count(["a", "b", "c"], ["sv", "v2i"], arguments, sampler)[0] == 642
+
+
+def test_sweep_counts_combinations_scenarios_conditions_and_episodes(tmp_path: Path) -> None:
+    args = sweep.parse_args(
+        ["--scenario", "crossing,jaywalking", "--episodes", "3", "--out", str(tmp_path / "s"),
+         "--vary", "algorithm.reaction_time_s=0.4,1.0,1.5"]
+    )  # fmt: skip
+    assert len(sweep.validate(args)) == 3
+    assert args.total_episodes == 3 * 2 * 2 * 3  # combinations x scenarios x conditions x episodes
+    args.max_runs = 35
+    with pytest.raises(UsageError, match="= 36 episodes, more than --max-runs 35"):
+        sweep.validate(args)
+
+
+def test_batch_says_how_many_episodes_before_the_first(tmp_path: Path) -> None:
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
+    proc = subprocess.run(
+        [sys.executable, *BATCH, "--episodes", "2", "--out", str(tmp_path / "run")],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    first = proc.stdout.splitlines()[0]
+    assert first == "1 scenario unit(s) x 1 condition(s) x 2 episodes = 2 episodes (--max-runs 1,000,000)"

@@ -24,12 +24,11 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import NoReturn
 
 from pedsafe_sumo.batch.arguments import DEFAULT_EPISODES
 from pedsafe_sumo.batch.execute import run_batch
-from pedsafe_sumo.batch.executors import DEFAULT_RECYCLE_CHUNKS, BatchError, make_backend
-from pedsafe_sumo.batch.plan import INPUT_ERRORS, prepare
+from pedsafe_sumo.batch.executors import DEFAULT_RECYCLE_CHUNKS, MAX_RECYCLE_CHUNKS, BatchError, make_backend
+from pedsafe_sumo.batch.plan import INPUT_ERRORS, MAX_CHUNK_PAIRS, MAX_WORKERS, prepare
 from pedsafe_sumo.batch.sampled import (
     FAMILIES,
     FAMILY_JOINT,
@@ -39,6 +38,7 @@ from pedsafe_sumo.batch.sampled import (
     V2I_FACTORS,
 )
 from pedsafe_sumo.batch.stop import stop_on_signals
+from pedsafe_sumo.cli import DEFAULT_MAX_RUNS, MAX_EPISODES, OneLineParser, max_runs_help
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S
 from pedsafe_sumo.io.run_store import STATE_COMPLETE
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS, KEEP_LOGS_CHOICES
@@ -61,15 +61,8 @@ from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
 
 
-class _OneLineParser(argparse.ArgumentParser):
-    """argparse whose errors are one line on stderr (exit 2), like every other bad input."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"error: {message} (see --help)\n")
-
-
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = _OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--scenario",
         help=f"{', '.join(SCENARIOS)}, a comma-separated list, or all (required unless --resume)",
@@ -78,21 +71,23 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--episodes",
         type=int,
-        help=f"episodes per scenario (each run under every condition) [{DEFAULT_EPISODES}]",
+        help=f"episodes per scenario (each run under every condition), 1 to {MAX_EPISODES:,} "
+        f"[{DEFAULT_EPISODES}]",
     )
-    parser.add_argument("--seed", type=int, help="run seed; episode seeds derive from it [1]")
+    parser.add_argument("--seed", type=int, help="run seed, 0 to 2**63 - 1; episode seeds derive from it [1]")
     parser.add_argument(
         "--workers",
         type=int,
-        help="local worker processes, one SUMO each [min(2, cores)]; not with --cluster",
+        help=f"local worker processes, one SUMO each, 1 to {MAX_WORKERS} [min(2, cores)]; not with --cluster",
     )
     parser.add_argument(
         "--recycle-chunks",
         type=int,
         dest="recycle_chunks",
         metavar="CHUNKS",
-        help="replace the pool's worker processes after every CHUNKS chunks per worker, 0 = never (libsumo "
-        f"keeps ~1 KiB per episode; the rows do not change) [{DEFAULT_RECYCLE_CHUNKS}]; not with --cluster",
+        help="replace the pool's worker processes after every CHUNKS chunks per worker, 0 (never) to "
+        f"{MAX_RECYCLE_CHUNKS:,} (libsumo keeps ~1 KiB per episode; the rows do not change) "
+        f"[{DEFAULT_RECYCLE_CHUNKS}]; not with --cluster",
     )
     parser.add_argument(
         "--cluster",
@@ -105,10 +100,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=int,
         dest="chunk_size",
         metavar="PAIRS",
-        help="episode pairs per chunk (the unit written, retried and resumed) [about 8 chunks per worker, "
-        "at most 25]",
+        help=f"episode pairs per chunk (the unit written, retried and resumed), 1 to {MAX_CHUNK_PAIRS:,} "
+        "[about 8 chunks per worker, at most 25]",
     )
     parser.add_argument("--out", type=Path, help="run directory [results/<scenario>-<time>]")
+    parser.add_argument(
+        "--max-runs",
+        type=int,
+        dest="max_runs",
+        default=DEFAULT_MAX_RUNS,
+        metavar="EPISODES",
+        help=max_runs_help() + "; a resumed run is not bounded again",
+    )
     parser.add_argument(
         "--resume",
         action="store_true",
@@ -134,8 +137,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=float,
         dest="agent_timeout",
         metavar="SECONDS",
-        help="time limit of each run_step call of the AD stack: an episode whose stack exceeds it ends "
-        f"with status timeout, and the batch goes on [{DEFAULT_AGENT_TIMEOUT_S:g}]",
+        help="time limit of each run_step call of the AD stack, above 0 and at most 3600: an episode whose "
+        f"stack exceeds it ends with status timeout, and the batch goes on [{DEFAULT_AGENT_TIMEOUT_S:g}]",
     )
     parser.add_argument(
         "--keep-logs",
@@ -258,6 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     except (*INPUT_ERRORS, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    print(f"{plan.count_text} = {plan.total_episodes:,} episodes (--max-runs {args.max_runs:,})")
     if plan.recorded is not None and plan.recorded.get("state") == STATE_COMPLETE:
         print(
             f"{plan.out} is complete ({plan.recorded.get('episodes_total', '?')} episodes): nothing to resume"

@@ -24,8 +24,10 @@ from pedsafe_sumo.batch.resume import check_new_run_directory, check_same_run, r
 from pedsafe_sumo.batch.runner import WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.batch.sampled import FAMILY_JOINT, SAMPLER_IS, SAMPLER_MC, SamplerError, sampler_identity
 from pedsafe_sumo.batch.trust import check_stack_from_file
+from pedsafe_sumo.cli import MAX_EPISODES, check_max_runs, check_run_count, check_seed
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.timeout import check_timeout_s
+from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
@@ -35,6 +37,7 @@ from pedsafe_sumo.sampling.stages import (
     MAX_PILOT_STAGES,
     MIN_PILOT_EPISODES,
     MIN_SPREAD_FLAG,
+    stage_layout,
 )
 from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import ARMS, default_arm, site_approaches
@@ -44,13 +47,9 @@ from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, p
 from pedsafe_sumo.sim.episode import CONDITIONS
 
 #: Upper bounds of the batch's numbers, so that no value can make a batch run for ever or exhaust the
-#: machine before its first episode. Episodes per scenario: a million pairs take about 20 hours on 2
-#: cores (28 episodes/s, BENCHMARKS.md), and part files number episodes with six digits.
-MAX_EPISODES = 1_000_000
-#: Run seeds are stored in run.json and compared as 64-bit integers.
-MAX_SEED = 2**63 - 1
-#: Local worker processes (one SUMO each, about 150 MB): 256 need about 40 GB, beyond one machine;
-#: more workers belong on a cluster (--cluster).
+#: machine before its first episode (--episodes and --seed: pedsafe_sumo/cli.py). Local worker processes
+#: (one SUMO each, about 150 MB): 256 need about 40 GB, beyond one machine; more workers belong on a
+#: cluster (--cluster).
 MAX_WORKERS = 256
 #: A chunk's rows and case logs are held by its worker and rerun whole after a kill.
 MAX_CHUNK_PAIRS = 10_000
@@ -76,6 +75,9 @@ class Plan:
     config: WorkerConfig
     out: Path
     recorded: dict[str, Any] | None  # run.json of the run being resumed
+    #: Episodes the run makes in all (every unit, condition and sampler stage), and how they multiply up.
+    total_episodes: int = 0
+    count_text: str = ""
 
 
 def prepare(args: argparse.Namespace) -> Plan:
@@ -175,10 +177,31 @@ def prepare(args: argparse.Namespace) -> Plan:
     )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or WRITE_ROOT / "results" / f"{scenario}-{stamp}"
-    plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded)
+    total, count_text = episode_count(scenarios, conditions, arguments, identity["sampler"])
+    plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded, total, count_text)
     if recorded is not None:
         check_same_run(out, identity, versions, recorded)
+    else:
+        # A run accepted when it started is resumed whatever its size; a new one is bounded.
+        check_run_count(total, args.max_runs, count_text)
+        check_output_dir(out, "--out", UsageError)
+        probe_output_dir(out, "--out", UsageError)
     return plan
+
+
+def episode_count(
+    units: list[str], conditions: list[str], arguments: dict[str, Any], sampler: dict[str, Any] | None
+) -> tuple[int, str]:
+    """The episodes a run makes in all, and a phrase saying how they multiply up (units x conditions x
+    episodes per unit, the importance sampler's pilot stages included)."""
+    per_unit = arguments["episodes"]
+    pilots = ""
+    if sampler is not None:
+        layout = stage_layout(sampler["pilot_stages"], sampler["pilot_episodes"], arguments["episodes"])
+        per_unit = sum(stage.n_episodes for stage in layout)
+        pilots = " (pilot stages included)"
+    text = f"{len(units)} scenario unit(s) x {len(conditions)} condition(s) x {per_unit:,} episodes{pilots}"
+    return len(units) * len(conditions) * per_unit, text
 
 
 def _check_execution_flags(args: argparse.Namespace) -> None:
@@ -201,6 +224,7 @@ def _check_execution_flags(args: argparse.Namespace) -> None:
         )
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} is a file, not a run directory")
+    check_max_runs(args.max_runs)
 
 
 def _check_run_numbers(arguments: dict[str, Any]) -> None:
@@ -211,10 +235,7 @@ def _check_run_numbers(arguments: dict[str, Any]) -> None:
         raise UsageError(
             f"--episodes must be at most {MAX_EPISODES:,} per scenario, got {arguments['episodes']}"
         )
-    if arguments["seed"] < 0:
-        raise UsageError(f"--seed must not be negative, got {arguments['seed']}")
-    if arguments["seed"] > MAX_SEED:
-        raise UsageError(f"--seed must be at most 2**63 - 1, got {arguments['seed']}")
+    check_seed(arguments["seed"])
     if arguments["chunk_size"] is not None and arguments["chunk_size"] < 1:
         raise UsageError(f"--chunk-size must be at least 1, got {arguments['chunk_size']}")
     if arguments["chunk_size"] is not None and arguments["chunk_size"] > MAX_CHUNK_PAIRS:

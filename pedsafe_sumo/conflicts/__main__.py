@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+from pedsafe_sumo.cli import OneLineParser, check_range
 from pedsafe_sumo.conflicts.fcd import FcdError, read_fcd
 from pedsafe_sumo.conflicts.interactions import InteractionTracker
 from pedsafe_sumo.conflicts.output import TABLE_SUFFIXES, SsmWriter, TableWriter
@@ -28,11 +29,13 @@ from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params
 from pedsafe_sumo.settings import UsageError
 
+#: Every vehicle-pedestrian pair within the radius is followed step by step: a kilometre is beyond any
+#: sight line at a junction, and a larger radius only makes every pair of the file an interaction.
+MAX_RADIUS_M = 1000.0
+
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog="python -m pedsafe_sumo.conflicts", description=__doc__.splitlines()[0]
-    )
+    parser = OneLineParser(prog="python -m pedsafe_sumo.conflicts", description=__doc__.splitlines()[0])
     parser.add_argument("fcd", type=Path, metavar="FCD.xml", help="SUMO FCD output (.xml or .xml.gz)")
     parser.add_argument(
         "--out", type=Path, required=True, metavar="FILE", help="output table: .csv or .parquet"
@@ -54,7 +57,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="SUMO route/additional file whose vTypes give the road users' sizes (repeatable)",
     )
     parser.add_argument("--ssm", type=Path, metavar="FILE.xml", help="also write an SSM-device-like XML")
-    parser.add_argument("--radius", type=float, metavar="M", help="interaction radius, m [parameter file]")
+    parser.add_argument(
+        "--radius",
+        type=float,
+        metavar="M",
+        help=f"interaction radius, m, above 0 and at most {MAX_RADIUS_M:g} [parameter file: 50]",
+    )
     parser.add_argument(
         "--params", type=Path, metavar="FILE.toml", help="parameter file laid over the defaults"
     )
@@ -95,8 +103,8 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         ):
             raise UsageError(f"parameter conflicts.{key} must be a positive number, got {value!r}")
     radius_m = section["interaction_radius_m"] if args.radius is None else args.radius
-    if not math.isfinite(radius_m) or radius_m <= 0:
-        raise UsageError(f"--radius must be a positive number of metres, got {radius_m:g}")
+    where = "--radius" if args.radius is not None else "parameter conflicts.interaction_radius_m"
+    check_range(radius_m, where, 0, MAX_RADIUS_M, unit=" m", low_open=True)
     sizes = SizeBook.from_params(section, args.types)
     place = None
     if args.net is not None:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 from pedsafe_sumo import WRITE_ROOT
+from pedsafe_sumo.cli import OneLineParser, check_seed
 from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.site import SiteError
 from pedsafe_sumo.io.outputs import check_output_dir
@@ -16,7 +16,7 @@ from pedsafe_sumo.params import ParameterError
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m pedsafe_sumo.demand",
         description="Write the site's background vehicle and pedestrian demand as SUMO route files.",
     )
@@ -25,9 +25,9 @@ def main(argv: list[str] | None = None) -> int:
         "--duration",
         type=float,
         default=3600.0,
-        help=f"demand horizon in s, at most {MAX_DURATION_S:g} (default 3600)",
+        help=f"demand horizon in s, above 0 and at most {MAX_DURATION_S:g} (default 3600)",
     )
-    parser.add_argument("--seed", type=int, default=1, help="run seed (default 1)")
+    parser.add_argument("--seed", type=int, default=1, help="run seed, 0 to 2**63 - 1 (default 1)")
     parser.add_argument(
         "--out", type=Path, default=WRITE_ROOT / "routes", help="output folder (default routes/)"
     )
@@ -40,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(
                 f"--duration must be > 0 and at most {MAX_DURATION_S:g} s, got {args.duration:g}"
             )
+        check_seed(args.seed, error=ValueError)
         check_output_dir(args.out, "--out", ValueError)
         if args.net is None:  # with --net, --site only names the output files
             site = resolve_site(args.site)

@@ -30,7 +30,6 @@ speed's KS distance exceeds MIDBLOCK_SPEED_KS_MAX in a run the site carries; 2 o
 
 from __future__ import annotations
 
-import argparse
 import math
 import subprocess
 import sys
@@ -45,6 +44,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo.cli import OneLineParser, check_seed
 from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.routes_xml import attrs
 from pedsafe_sumo.demand.sampling import traffic_distributions
@@ -428,6 +428,7 @@ RATE_TRIES_MAX = 6
 def validate(args) -> list[Run]:
     params = load_params(args.params)
     site = load_site(args.site, NETWORKS_DIR, args.net)
+    _site_config(site)  # its .sumocfg and the files it names, before the first run (one line)
     rate = float(params["traffic"]["headway_rate_per_s"])
     runs = []
     with tempfile.TemporaryDirectory(prefix="pedsafe_validate_") as tmp:
@@ -452,20 +453,18 @@ def validate(args) -> list[Run]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0]
-    )
+    parser = OneLineParser(prog="python -m pedsafe_sumo.demand.validate", description=__doc__.split("\n")[0])
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument(
         "--duration",
         type=float,
         default=3600.0,
-        help=f"simulated time in s, at most {MAX_DURATION_S:g} (default 3600)",
+        help=f"simulated time in s, above 0 and at most {MAX_DURATION_S:g} (default 3600)",
     )
     parser.add_argument(
         "--warmup", type=float, default=300.0, help="s of records ignored at the start, less than --duration"
     )
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=1, help="run seed, 0 to 2**63 - 1 (default 1)")
     parser.add_argument("--params", type=Path, help="parameter TOML laid over the defaults")
     parser.add_argument("--net", type=Path, help="use this .net.xml instead of the site's network")
     parser.add_argument(
@@ -488,6 +487,9 @@ def main(argv: list[str] | None = None) -> int:
             )
         if not 0 <= args.warmup < args.duration:
             raise ValueError(f"--warmup must be >= 0 s and less than --duration, got {args.warmup:g}")
+        check_seed(args.seed, error=ValueError)
+        if args.work is not None:
+            check_output_dir(args.work, "--work", ValueError)
         if args.net is None:  # with --net, --site only names the output files
             site = resolve_site(args.site)
             args.site, args.net = site.name, site.file("net.xml")

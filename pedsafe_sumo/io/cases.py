@@ -102,6 +102,10 @@ def setup_from_dict(data: dict[str, Any]) -> EpisodeSetup:
         ped_crossing_id=data.get("ped_crossing_id", ""),
         signals=SignalStaging(**data["signals"]) if data.get("signals") else None,
         approach=data.get("approach", ""),
+        # NaN is written as null.
+        ego_start_distance_m=(
+            math.nan if data.get("ego_start_distance_m") is None else float(data["ego_start_distance_m"])
+        ),
     )
 
 

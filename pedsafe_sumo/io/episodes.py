@@ -33,6 +33,8 @@ EPISODE_COLUMNS = (
     "ego_start_distance_m", "ped_appear_time_s", "collision_type",
     # The independent collision witness (safety/witness.py): its verdict and its first contact's time.
     "witness_collision", "witness_collision_time_s",
+    # A second injury index at a stated severity (docs/safety_indexes.md): P(MAIS 3+ or fatal).
+    "injury_mais3f_probability",
 )  # fmt: skip
 #: collision_type: no collision; the moving ego's front or corner strikes the pedestrian; the pedestrian
 #: walks or runs into the side of the moving ego. A contact with a standing ego is no collision

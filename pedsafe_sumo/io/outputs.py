@@ -48,6 +48,27 @@ def check_output_file(
     _check_creatable(path, option, error)
 
 
+def probe_output_dir(path: Path, option: str, error: type[Exception] = OutputPathError) -> None:
+    """Raise `error` unless the folder `path` exists or can be made, found by making it and removing again
+    what was made. Permission bits do not tell for every user (root may write into a folder of mode 555,
+    nobody into /proc or a read-only mount): the attempt does."""
+    path = Path(path).absolute()
+    missing = []
+    candidate = path
+    while not candidate.exists() and candidate != candidate.parent:
+        missing.append(candidate)
+        candidate = candidate.parent
+    try:
+        for folder in reversed(missing):
+            folder.mkdir()
+    except OSError as exc:
+        raise error(f"{option} {path}: cannot create this folder ({exc.strerror or exc})") from None
+    finally:
+        for folder in missing:
+            if folder.is_dir():
+                folder.rmdir()
+
+
 def check_output_dir(path: Path, option: str, error: type[Exception] = OutputPathError) -> None:
     """Raise `error` unless `path` is a writable folder or one that can be made."""
     path = Path(path)

@@ -10,7 +10,9 @@ and V2I, and writes:
   DIR/cases/, DIR/episodes.parquet, DIR/run.json   every cell's per-step log, laid out as a run directory,
                         so `python -m pedsafe_sumo.replay DIR --scenario CELL_ID --episode 0 --condition sv
                         [--export-fcd F]` replays any cell (CELL_ID as in ncap.csv's cell_id).
-Bad input ends in one line on stderr and exit status 2; a DIR that already holds results is refused.
+Before it starts it says in one line how many runs it makes (cells x conditions); the grid is the
+protocol's, at most 1,064 cells (152 without --robustness) under two conditions. Bad input ends in one
+line on stderr and exit status 2; a DIR that is not new or empty is refused, and nothing in it is touched.
 """
 
 from __future__ import annotations
@@ -22,18 +24,19 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 import pandas as pd
 import sumolib
 from tqdm import tqdm
 
 from pedsafe_sumo import __version__
+from pedsafe_sumo.cli import OneLineParser, check_seed
 from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
-from pedsafe_sumo.io.outputs import check_output_dir
+from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
 from pedsafe_sumo.ncap.figure import grid_figure
 from pedsafe_sumo.ncap.protocol import NcapError, load_protocol, parse_speeds, select_cells
 from pedsafe_sumo.ncap.staging import spec_for, stage_cell
@@ -47,21 +50,22 @@ DEFAULT_SITE = "xueqing"
 RESULT_FILES = ("ncap.csv", "ncap_scores.csv", "run.json", "episodes.parquet")
 
 
-class _OneLineParser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:  # argparse's usage dump is not one line
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
-
-
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = _OneLineParser(prog="python -m pedsafe_sumo.ncap", description=__doc__.splitlines()[0])
-    parser.add_argument("--out", required=True, type=Path, help="new directory for the results")
+    parser = OneLineParser(prog="python -m pedsafe_sumo.ncap", description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="new or empty directory for the results (one that is not is refused)",
+    )
     parser.add_argument("--tests", help="tests or columns, e.g. CPNA,CPFA-50 [all: CPNA,CPFA,CPNCO,CPLA]")
-    parser.add_argument("--speeds", help="ego test speeds in km/h, e.g. 10,20 [each test's grid]")
+    parser.add_argument(
+        "--speeds", help="ego test speeds in km/h, e.g. 10,20, each one of the test's grid [each test's grid]"
+    )
     parser.add_argument("--site", default=DEFAULT_SITE, help=f"site name or folder [{DEFAULT_SITE}]")
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, help="AD stack as package.module:Class")
     parser.add_argument("--condition", default="both", help="sv, v2i or both [both]")
-    parser.add_argument("--seed", default="0", help="seed of the perception noise [0]")
+    parser.add_argument("--seed", default="0", help="seed of the perception noise, 0 to 2**63 - 1 [0]")
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
         "--robustness", action="store_true", help="add the robustness variations of the dummy per cell"
@@ -91,8 +95,7 @@ def main(argv: list[str] | None = None) -> int:
             seed = int(args.seed)
         except ValueError:
             raise NcapError(f"--seed must be a whole number, got '{args.seed}'") from None
-        if seed < 0:
-            raise NcapError(f"--seed must be >= 0, got {seed}")
+        check_seed(seed, error=NcapError)
         site = resolve_site(args.site)
         params = load_params(args.params)
         agent_class = load_agent_class(args.algorithm)
@@ -103,8 +106,19 @@ def main(argv: list[str] | None = None) -> int:
         taken = [name for name in RESULT_FILES if (out / name).exists()]
         if taken:
             raise NcapError(f"--out {out} already holds results ({', '.join(taken)}): choose a new directory")
+        if out.is_dir() and any(out.iterdir()):
+            raise NcapError(
+                f"--out {out} is a directory that is not empty and holds no Euro NCAP results: choose a new "
+                "or empty directory (nothing in it is touched)"
+            )
+        probe_output_dir(out, "--out", NcapError)
     except (NcapError, UnknownSiteError, ParameterError, AlgorithmLoadError, OSError) as exc:
         return error(str(exc).strip("'\""))
+    # The grid is the protocol's (select_cells refuses a cell it does not hold).
+    print(
+        f"ncap: {len(cells)} cell(s) x {len(conditions)} condition(s) = {len(cells) * len(conditions)} runs "
+        f"on site {site.name} with {args.algorithm} -> {out}"
+    )
     return run(args, argv, protocol, cells, conditions, seed, site, params, agent_class)
 
 
@@ -128,9 +142,6 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     prepare_compiled_kernels()
     out.mkdir(parents=True, exist_ok=True)
     episodes: list[dict[str, Any]] = []
-    print(
-        f"{len(cells)} cell(s) x {', '.join(conditions)} on site {site.name} with {args.algorithm} -> {out}"
-    )
     started = time.perf_counter()
     with tqdm(total=len(cells) * len(conditions), unit="run", mininterval=1.0, file=sys.stderr) as bar:
 

@@ -9,7 +9,14 @@ Usage (see tools/build_network.py):
     python tools/build_network.py --site xueqing
     python tools/build_network.py --osm big.osm --center 40.0064,116.3462 --radius 200 --name mysite \
         --out sites/mysite
+    python tools/build_network.py --osm argentina.osm --center -34.6037,-58.3816 --name obelisco \
+        --out sites/obelisco
     python tools/build_network.py --refresh sites/mysite    # after editing sites/mysite/mysite.net.xml
+
+South of the equator and west of Greenwich the centre is negative, in either spelling
+(`--center -34.6,-58.4`, `--center=-34.6,-58.4`). Networks are built for right-hand traffic: a
+network or OSM data that says left-hand traffic, and `--lefthand`, are refused
+(network.traffic_side); the summary says the build cannot tell the traffic side from OSM data alone.
 
 The folder written is a site (pedsafe_sumo.network.sites): every command takes it as --site DIR. Its
 derived files (site file, poles, polygons) carry the digest of the network they were made from, so a
@@ -52,6 +59,8 @@ from pedsafe_sumo.network.site_files import (
     write_sumocfg,
     write_view,
 )
+from pedsafe_sumo.network.traffic_lights import junctions_problem
+from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand, osm_drives_left
 from pedsafe_sumo.sumo_net import read_net
 
 __all__ = ["BuildError", "BuildReport", "build_site"]
@@ -106,16 +115,28 @@ def build_site(
     with tempfile.TemporaryDirectory(prefix=f"pedsafe_build_{name}_") as tmp:
         stage = Path(tmp)
         staged_osm = _stage_osm(stage / f"{name}.osm", osm_path, center_lat, center_lon, radius_m, clipping)
+        if osm_drives_left(staged_osm):
+            raise BuildError(f"the OSM data of {name} says driving_side=left: {LEFTHAND_REFUSAL}")
         stage_tool_inputs(stage)
         if net_from is not None:
             _stage_network(net_from, stage / net_file)  # the network as the user left it
         else:
             convert_network(stage, name, staged_osm.name, net_file, patches_dir)
+        if network_is_lefthand(stage / net_file):
+            shown = net_from or net_file
+            raise BuildError(f'{shown} is built for left-hand traffic (lefthand="true"): {LEFTHAND_REFUSAL}')
         dropped_underground = convert_polygons(stage, net_file, staged_osm.name, poly_file)
         net = _read_network(stage / net_file, net_from or net_file)
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)
         rsu_corner = rsu_corner or KERB_CORNER[rsu_watch_arm]
         approaches = approach_nodes(net, group, rsu_watch_arm, junction)
+        # A junction several lights control cannot be staged (one program per episode): refused before the
+        # poles are placed (their scorer stages the scenarios).
+        several = junctions_problem(
+            stage / net_file, [junction.getID(), *(n.getID() for n in approaches.values())]
+        )
+        if several:
+            raise BuildError(several)
         rsu_units, approach_info = place_approach_poles(
             stage, name, net, approaches, rsu_corner, rsu_watch_arm, poly_file, hosting_scorer
         )

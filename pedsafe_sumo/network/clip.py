@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,6 +26,11 @@ from osmium.osm import mutable
 from pyproj import Transformer
 
 from pedsafe_sumo.network.attribution import add_attribution_comment
+from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
+
+#: The largest clip: a study site is an intersection, not a town (tools/build_network.py --radius has the
+#: same bound).
+MAX_CLIP_RADIUS_M = 2000.0
 
 #: Keys whose presence marks a closed way as an area rather than a closed line (a roundabout).
 AREA_KEYS = ("building", "landuse", "natural", "leisure", "amenity", "area", "building:part")
@@ -312,13 +318,25 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("source", type=Path, help="OSM XML file")
     parser.add_argument("target", type=Path, help="clipped OSM XML file to write")
-    parser.add_argument("--center", required=True, help="LAT,LON of the centre in degrees")
-    parser.add_argument("--radius", type=float, required=True, help="radius in metres")
-    args = parser.parse_args(argv)
-    try:
-        lat, lon = (float(v) for v in args.center.split(","))
-    except ValueError:
-        parser.exit(2, f"clip_osm: error: --center must be LAT,LON, got '{args.center}'\n")
+    parser.add_argument(
+        "--center",
+        required=True,
+        type=parse_lat_lon,
+        help=f"LAT,LON of the centre in degrees; {NEGATIVE_HELP}",
+    )
+    parser.add_argument(
+        "--radius",
+        type=float,
+        required=True,
+        help=f"radius in metres, above 0 and at most {MAX_CLIP_RADIUS_M:g}",
+    )
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(with_negative_values(parser, argv, ["--center"]))
+    lat, lon = args.center
+    if not 0 < args.radius <= MAX_CLIP_RADIUS_M:  # also false for NaN
+        parser.exit(
+            2, f"clip_osm: error: --radius must lie in (0, {MAX_CLIP_RADIUS_M:g}] m, got {args.radius}\n"
+        )
     try:
         result = clip_osm(args.source, args.target, lat, lon, args.radius)
     except ClipError as exc:

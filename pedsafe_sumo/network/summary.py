@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.network.traffic_lights import junction_lights
 from pedsafe_sumo.sumo_net import read_net
 
 
@@ -35,11 +36,15 @@ class SiteSummary:
     sidewalk_length_m: float
     polygons: Counter = field(default_factory=Counter)
     roadside_units: list[dict] = field(default_factory=list)
+    #: The traffic lights on the main junction's connections (network.traffic_lights), by id.
+    traffic_lights: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
+        lights = ", ".join(self.traffic_lights) or "none"
         out = [
             f"site {self.name}: main junction {self.main_junction} ({self.junction_type}, "
             f"{self.phases} phases, {self.cycle_s:.0f} s cycle)",
+            f"  traffic light(s) on its connections: {lights}",
             f"  {len(self.arms)} arms:",
         ]
         for arm in self.arms:
@@ -130,6 +135,7 @@ def summarise(site: Site) -> SiteSummary:
             and not e.getLane(0).allows("passenger")
         ),
         polygons=polygons,
+        traffic_lights=list(junction_lights(site.file("net.xml"), junction.getID())),
         roadside_units=info.get("roadside_units", [info["roadside_unit"]]),
     )
 

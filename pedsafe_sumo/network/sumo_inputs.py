@@ -5,7 +5,8 @@ A site folder may come from someone else. Its .sumocfg and additional files are 
 whatever output they name: `<fcd-output value="..."/>` in a configuration, `<edgeData file="..."/>` or
 a detector's `file=` in an additional file, `<snapshot file="..."/>` in view settings. Before any such
 run, these files are checked and a site that names an output, or a file outside its folder, is refused
-in one line; our commands pass the outputs they want on SUMO's command line themselves.
+in one line; our commands pass the outputs they want on SUMO's command line themselves. A file that does
+not parse, or a file the configuration names that is not there, is refused the same way, before any work.
 
 The checks are by name, broad on purpose: a configuration option whose name holds "output", "dump",
 "save", "prefix" or "file", or names a log, is refused unless it is one of the inputs a site's
@@ -102,11 +103,25 @@ def config_inputs(cfg: Path) -> dict[str, list[Path]]:
         for name in (part.strip() for part in value.split(",")):
             if name:
                 found[kind].append(_confined(folder, name, f"{cfg} {option}"))
+    for kind, paths in found.items():
+        for path in paths:
+            if not path.is_file():
+                raise SumoInputError(f"{cfg} names the {kind} file {path.name}, which is not in {folder}")
     for path in found["additional"]:
         check_additional(path)
     for path in found["view"]:
         check_view(path)
     return found
+
+
+def check_site_sumo_files(site: Site) -> None:
+    """The site's configuration and view settings, as `sumo-gui -c` reads them: both present and parsed, the
+    files the configuration names present in the folder, none of them naming an output (one line)."""
+    for suffix in ("sumocfg", "view.xml"):
+        if not site.file(suffix).is_file():
+            raise SumoInputError(f"site {site.name}: {site.file(suffix)} is missing")
+    config_inputs(site.file("sumocfg"))
+    check_view(site.file("view.xml"))
 
 
 def check_gui_inputs(additionals: list[Path], view: Path | None) -> None:

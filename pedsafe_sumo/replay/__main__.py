@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from pedsafe_sumo.cli import OneLineParser, check_range
 from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.ncap.suite import NcapRunner
@@ -50,8 +51,12 @@ from pedsafe_sumo.sim.episode import EpisodeRunner
 #: Playback: wall-clock milliseconds per simulation step; 50 plays the 0.05 s steps in real time.
 DEFAULT_DELAY_MS = 50.0
 DEFAULT_SCREENSHOT_SIZE = (1000, 800)
+#: Playback slower than 10 s per step shows nothing a screenshot (--at) does not.
+MAX_DELAY_MS = 10_000.0
 #: Road shown across the view [m]; a screenshot widens it to keep the pedestrian in the picture.
 DEFAULT_VIEW_WIDTH_M = 60.0
+#: Wider than any study site (build_network clips at most 2 km around its centre).
+MAX_VIEW_WIDTH_M = 4000.0
 #: Space sumo-gui's menus, toolbars and status bar take around its canvas [px]: the window is made this
 #: much larger than the requested picture so that the canvas holds it.
 WINDOW_CHROME_PX = (60, 320)
@@ -60,14 +65,15 @@ UNDER_XVFB_ENV = "PEDSAFE_REPLAY_UNDER_XVFB"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog="python -m pedsafe_sumo.replay", description=__doc__.splitlines()[0]
-    )
+    parser = OneLineParser(prog="python -m pedsafe_sumo.replay", description=__doc__.splitlines()[0])
     parser.add_argument(
         "run_dir", type=Path, metavar="DIR", help="run directory written by pedsafe_sumo.batch"
     )
     parser.add_argument(
-        "--episode", type=int, required=True, help="episode number (episodes.parquet 'episode')"
+        "--episode",
+        type=int,
+        required=True,
+        help="episode number (episodes.parquet 'episode'), one the run holds",
     )
     parser.add_argument("--condition", required=True, help="sv or v2i")
     parser.add_argument("--scenario", help="scenario of the episode (needed when the run has several)")
@@ -89,8 +95,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--delay",
         type=float,
-        help=f"playback speed: milliseconds per simulation step [{DEFAULT_DELAY_MS:g}: real time with 0.05 s "
-        "steps; 0 with --screenshot]",
+        help=f"playback speed: milliseconds per simulation step, 0 to {MAX_DELAY_MS:g} "
+        f"[{DEFAULT_DELAY_MS:g}: real time with 0.05 s steps; 0 with --screenshot]",
     )
     parser.add_argument("--screenshot", type=Path, metavar="FILE", help="render one moment to a PNG and exit")
     parser.add_argument(
@@ -102,14 +108,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--size",
         default=f"{DEFAULT_SCREENSHOT_SIZE[0]},{DEFAULT_SCREENSHOT_SIZE[1]}",
         metavar="W,H",
-        help="screenshot size in pixels [%(default)s]",
+        help="screenshot size in pixels, 16 to 8000 each way [%(default)s]",
     )
     parser.add_argument(
         "--view-width",
         type=float,
         default=DEFAULT_VIEW_WIDTH_M,
         metavar="M",
-        help=f"road shown across the view, metres [{DEFAULT_VIEW_WIDTH_M:g}]",
+        help=f"road shown across the view, metres, above 0 and at most {MAX_VIEW_WIDTH_M:g} "
+        f"[{DEFAULT_VIEW_WIDTH_M:g}]",
     )
     parser.add_argument(
         "--scene-colours",
@@ -144,10 +151,9 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         raise UsageError(
             f"--export-xosc writes OpenSCENARIO: give a file name ending in .xosc, got {args.export_xosc}"
         )
-    if args.delay is not None and (not math.isfinite(args.delay) or args.delay < 0):
-        raise UsageError(f"--delay must be a number of milliseconds >= 0, got {args.delay:g}")
-    if not math.isfinite(args.view_width) or args.view_width <= 0:
-        raise UsageError(f"--view-width must be a positive number of metres, got {args.view_width:g}")
+    if args.delay is not None:
+        check_range(args.delay, "--delay", 0, MAX_DELAY_MS, unit=" ms per step")
+    check_range(args.view_width, "--view-width", 0, MAX_VIEW_WIDTH_M, unit=" m", low_open=True)
     try:
         width_px, height_px = (int(v) for v in args.size.split(","))
     except ValueError:

@@ -92,7 +92,8 @@ class TrajectoryCheck:
             return
         for column in CHECKED_COLUMNS:
             logged, replayed = self.logged[column][k], float(row[column])
-            if not abs(replayed - logged) <= TOLERANCE:
+            # NaN where nobody is (the pedestrian before they appear, after they leave) matches NaN.
+            if not (abs(replayed - logged) <= TOLERANCE or (math.isnan(logged) and math.isnan(replayed))):
                 self._found(Mismatch(float(row["time_s"]), column, float(logged), replayed))
                 return
 

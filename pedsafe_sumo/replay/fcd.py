@@ -95,6 +95,10 @@ class FcdRecorder:
         if speed_mps > 0:
             self._ped_heading_rad = math.atan2(vy, vx)
         person = api.person
+        if not math.isfinite(float(row["ped_x_m"])):
+            # Not in the scene (before they appear, after they leave): SUMO has no person to describe.
+            self.timesteps.append(Timestep(float(row["time_s"]), vehicles, ()))
+            return
         persons = (
             PersonState(
                 PED_ID,

@@ -23,7 +23,7 @@ from typing import Any
 
 from pedsafe_sumo.confine import ConfinementError, check_tree
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
-from pedsafe_sumo.report import figures
+from pedsafe_sumo.report import figures, impact
 from pedsafe_sumo.report import indexes as idx
 from pedsafe_sumo.report.audit import audit
 from pedsafe_sumo.report.html import HTML_FILE, write_html_report
@@ -79,6 +79,9 @@ def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
                 jaywalking, CASE_SCENARIO, out_dir / figures.FIGURE_FILES["injury_vs_speed"]
             )
         )
+
+    say(impact.intercept_note(ok))
+    written.append(impact.impact_speed_histogram(ok, out_dir / impact.FIGURE_FILE))
 
     summaries = detection_summaries(run.episodes)
     if summaries:

@@ -22,6 +22,7 @@ import pandas as pd
 
 from pedsafe_sumo.io.run_store import MANIFEST_FILE, Manifest, RunStoreError
 from pedsafe_sumo.safety import log as steplog
+from pedsafe_sumo.safety.episode import steps_with_pedestrian
 from pedsafe_sumo.safety.geometry import first_polyline_crossing
 from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.safety.stats import wilson_interval
@@ -150,7 +151,7 @@ def pet_undefined_reason(log) -> str:
     says who stood at its end (speed below STANDING_SPEED_MPS: the ego first, as a yielding ego decides
     the encounter), or that both were still moving, i.e. the episode ended before their paths met.
     """
-    a = steplog.as_arrays(log)
+    a = steplog.as_arrays(steps_with_pedestrian(log))
     if first_polyline_crossing(a[steplog.EGO_X], a[steplog.EGO_Y], a[steplog.PED_X], a[steplog.PED_Y]):
         return REASON_NOT_REACHED
     if a[steplog.EGO_SPEED][-1] < STANDING_SPEED_MPS:

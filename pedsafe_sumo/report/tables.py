@@ -333,6 +333,10 @@ def table_one_rows(table: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
         ]
         for r in table.itertuples(index=False)
     ]
+    if "mais3f_mean" in table.columns:  # the second injury index (safety/injury_mais3.py)
+        header.insert(6, "MAIS3+F risk mean [95% CI]")
+        for cells, r in zip(rows, table.itertuples(index=False)):
+            cells.insert(6, _with_interval(r.mais3f_mean, r.mais3f_low, r.mais3f_high))
     if "ess" in table.columns:  # importance sampling: the effective sample size and the episodes run
         header += ["ESS", "episodes run (pilots included)"]
         for cells, r in zip(rows, table.itertuples(index=False)):

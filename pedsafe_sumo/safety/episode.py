@@ -3,13 +3,16 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
+
+import numpy as np
 
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.collision import detect_collision
 from pedsafe_sumo.safety.conflict import AMINI_2022, ConflictModel, episode_conflict
 from pedsafe_sumo.safety.detection import first_detection
-from pedsafe_sumo.safety.injury import episode_injury
+from pedsafe_sumo.safety.injury import SEVERE_INJURY_MODEL, episode_injury
 from pedsafe_sumo.safety.proximity import ProximityModel, default_proximity_model, episode_proximity
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s
 
@@ -35,7 +38,51 @@ INDEX_COLUMNS = (
     "close_pass",
     # contact with a standing ego: neither a collision nor an injury
     "contact_stationary",
+    # a second injury index at a stated severity: P(MAIS 3+ or fatal), 0 without a collision
+    "injury_mais3f_probability",
 )
+
+
+#: The indexes of an episode in whose log the pedestrian is never in the scene.
+NO_PEDESTRIAN_INDEXES: dict[str, Any] = {
+    "collision": False,
+    "impact_speed_mps": math.nan,
+    "injury_probability": 0.0,
+    "conflict": False,
+    "md_m": math.nan,
+    "tmd_s": math.nan,
+    "cs_mps": math.nan,
+    "conflict_probability": math.nan,
+    "min_ttc_s": math.nan,
+    "pet_s": math.nan,
+    "first_detection_distance_m": math.nan,
+    "first_detection_time_s": math.nan,
+    "detected_by": "",
+    "min_clearance_m": math.nan,
+    "ego_speed_at_min_clearance_mps": math.nan,
+    "drac_mps2": math.nan,
+    "close_pass": False,
+    "contact_stationary": False,
+    "injury_mais3f_probability": 0.0,
+}
+
+
+def steps_with_pedestrian(log: Any) -> Any:
+    """The steps of an engine's log at which the pedestrian is in the scene: the log contract's rows
+    (safety.log). The engine logs the steps before they appear and after they leave with a NaN position
+    (ped_state "absent", "left"); those are dropped. The log itself when it has none (or no position
+    columns: `steplog.as_arrays` then names what it lacks)."""
+    names = log.columns if hasattr(log, "columns") else log.keys() if hasattr(log, "keys") else ()
+    if steplog.PED_X not in names or steplog.PED_Y not in names:
+        return log
+    x = np.asarray(log[steplog.PED_X], dtype=float).reshape(-1)
+    y = np.asarray(log[steplog.PED_Y], dtype=float).reshape(-1)
+    present = np.isfinite(x) & np.isfinite(y)
+    if present.all():
+        return log
+    if hasattr(log, "iloc"):
+        return log[present].reset_index(drop=True)
+    return {name: np.asarray(values).reshape(-1)[present] for name, values in log.items()}
 
 
 def episode_indexes(
@@ -44,6 +91,7 @@ def episode_indexes(
     injury_model: str = "saade2020",
     conflict_model: ConflictModel = AMINI_2022,
     proximity_model: ProximityModel | None = None,
+    severe_injury_model: str = SEVERE_INJURY_MODEL,
 ) -> dict[str, Any]:
     """The safety indexes of one episode's per-step log (see `pedsafe_sumo.safety.log` for the contract).
 
@@ -57,7 +105,15 @@ def episode_indexes(
     step, detection distance when never perceived); `injury_probability` is 0 without a collision.
     The proximity measures (`min_clearance_m`, `ego_speed_at_min_clearance_mps`, `drac_mps2`,
     `close_pass`) take the conflict measures' window; `proximity_model` None: the defaults file's.
+    `injury_mais3f_probability` is `injury_probability` under `severe_injury_model` (any registered
+    name; by default the MAIS 3+F risk of Monfort & Mueller 2025).
+    Only the steps with the pedestrian in the scene count (`steps_with_pedestrian`); without any, the
+    indexes are NO_PEDESTRIAN_INDEXES.
     """
+    present = steps_with_pedestrian(log)
+    if present is not log and not len(present[steplog.PED_X]):
+        return dict(NO_PEDESTRIAN_INDEXES)
+    log = present
     arrays = steplog.as_arrays(log)
     hit = detect_collision(arrays)
     conflict = episode_conflict(arrays, conflict_model, last_step=hit.step)
@@ -82,4 +138,7 @@ def episode_indexes(
         "drac_mps2": proximity.drac_mps2,
         "close_pass": proximity.close_pass,
         "contact_stationary": hit.contact_stationary,
+        "injury_mais3f_probability": episode_injury(
+            hit.collided, hit.impact_speed_mps, ped_age_years, severe_injury_model
+        ),
     }

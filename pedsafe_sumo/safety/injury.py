@@ -13,6 +13,7 @@ import numpy as np
 from scipy.special import expit
 
 from pedsafe_sumo.safety.geometry import FloatOrArray
+from pedsafe_sumo.safety.injury_mais3 import mais3f_logit
 
 KMH_PER_MPS = 3.6  # [km/h per m/s]
 
@@ -63,6 +64,17 @@ register_injury_model(
         lambda v_kmh, age: -9.1 + 0.095 * v_kmh + 0.040 * age,
     )
 )
+register_injury_model(
+    InjuryModel(
+        "monfort_mueller2025_mais3f",
+        "Risk of MAIS 3+ or fatal injury of a pedestrian struck by a vehicle's front, after Monfort & "
+        "Mueller 2025, Table 4 (MAIS 3+F): P = sigmoid(-0.460 + 0.091 (v - 42.79) + 0.029 (age - 42.42)), "
+        "v in km/h, hood leading-edge height and sex at the sample means (safety/injury_mais3.py).",
+        mais3f_logit,
+    )
+)
+#: The model of the column `injury_mais3f_probability` (Table I's second injury index).
+SEVERE_INJURY_MODEL = "monfort_mueller2025_mais3f"
 
 
 def get_injury_model(name: str) -> InjuryModel:

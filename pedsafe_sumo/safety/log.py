@@ -1,6 +1,9 @@
 """The per-step log: the contract between the episode engine (which writes it) and the safety indexes.
 
 One row per simulation step at which both the ego vehicle and the pedestrian of the scenario exist.
+The engine's step logs also hold the steps before the pedestrian appears and after they leave, with a
+NaN position (`ped_state` "absent", "left"): `safety.episode.steps_with_pedestrian` selects this
+contract's rows from them (`episode_indexes` does so itself).
 A log is a `pandas.DataFrame` or any mapping of column name -> 1-D array of equal length.
 
 Frame and units

@@ -12,6 +12,10 @@ from scipy import stats
 from pedsafe_sumo.safety.conflict import conflict_without_collision
 from pedsafe_sumo.safety.geometry import FloatOrArray
 
+#: The second injury index (safety/injury_mais3.py) and its Table I columns (mean, 95% interval); a run
+#: written before the column existed has a Table I without them.
+SEVERE_INJURY_COLUMN = "injury_mais3f_probability"
+SEVERE_INJURY_TABLE_COLUMNS = ("mais3f_mean", "mais3f_low", "mais3f_high")
 TABLE_INPUT_COLUMNS = ("scenario", "condition", "collision", "injury_probability", "conflict", "status")
 ERROR_STATUS = "error"
 TIMEOUT_STATUS = "timeout"
@@ -103,12 +107,17 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     Columns: scenario, condition, n (episodes counted), n_error (episodes with status "error" or
     "timeout", left out), collision_rate with collision_low/high (Wilson), injury_mean with
     injury_low/high (`zero_inflated_mean_interval` of the per-episode P_I), conflict_rate with
-    conflict_low/high (Wilson), where a conflict counts only in an episode without a collision.
+    conflict_low/high (Wilson), where a conflict counts only in an episode without a collision; and
+    when the episodes have values of `injury_mais3f_probability`, mais3f_mean with mais3f_low/high
+    (as the injury; NaN in a row whose episodes lack some of them).
     """
     missing = [c for c in TABLE_INPUT_COLUMNS if c not in episodes.columns]
     if missing:
         raise ValueError(f"episodes lack column(s): {', '.join(missing)}")
     rows = []
+    has_severe = SEVERE_INJURY_COLUMN in episodes.columns and bool(
+        episodes[SEVERE_INJURY_COLUMN].notna().any()
+    )
     for (scenario, condition), group in episodes.groupby(["scenario", "condition"], sort=False):
         errors = group["status"].isin(FAILED_STATUSES).to_numpy()
         ok = group[~errors]
@@ -119,6 +128,12 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
         injury_mean, injury_low, injury_high = zero_inflated_mean_interval(
             ok["injury_probability"].to_numpy(dtype=float), confidence
         )
+        # the second injury index, in runs that have it (NaN where a row lacks it: rows of older runs)
+        severe = {}
+        if has_severe:
+            values = ok[SEVERE_INJURY_COLUMN].to_numpy(dtype=float)
+            interval = zero_inflated_mean_interval(values, confidence) if not np.isnan(values).any() else None
+            severe = dict(zip(SEVERE_INJURY_TABLE_COLUMNS, interval or (math.nan,) * 3))
         rows.append(
             {
                 "scenario": scenario,
@@ -134,6 +149,7 @@ def table_one(episodes: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
                 "conflict_rate": n_con / n if n else math.nan,
                 "conflict_low": wilson_interval(n_con, n, confidence)[0],
                 "conflict_high": wilson_interval(n_con, n, confidence)[1],
+                **severe,
             }
         )
     return pd.DataFrame(rows)

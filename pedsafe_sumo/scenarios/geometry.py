@@ -26,6 +26,7 @@ from functools import lru_cache
 import sumolib
 
 from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
 
 #: A vehicle's way through the network as SUMO drives it: each lane's drawn shape (network frame, metres)
@@ -124,6 +125,14 @@ class Approach:
     #: parked at the kerb of a one-lane approach stands next to that lane (kerb_staging_problem in
     #: placements/straight.py).
     sidewalk_beside_lane: bool = True
+    #: The sidewalk's drawn centreline, towards the junction (network frame, m): approach staging's
+    #: pedestrian walks in along it (scenarios/walkways.py).
+    sidewalk_shape: tuple[tuple[float, float], ...] = ()
+    #: Every sidewalk of the site's network (walkways.Walkway): approach staging's pedestrian walks on
+    #: along the one they reach beyond the crossing.
+    walkways: tuple[Walkway, ...] = ()
+    #: The junction's centre (its node's coordinate, network frame, m).
+    junction_xy: tuple[float, float] = (math.nan, math.nan)
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -276,6 +285,9 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         through_paths=tuple(through_path(lane) for lane in vehicle_lanes),
         speed_limit_mps=max(lane.getSpeed() for lane in vehicle_lanes),
         sidewalk_beside_lane=vehicle_lanes[0].getIndex() == sidewalk.getIndex() + 1,
+        sidewalk_shape=tuple((float(x), float(y)) for x, y in sidewalk.getShape()),
+        walkways=network_walkways(net),
+        junction_xy=(float(jx), float(jy)),
         through_lanes=tuple(
             k
             for k, lane in enumerate(vehicle_lanes)

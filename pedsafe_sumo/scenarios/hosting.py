@@ -54,6 +54,17 @@ def staging_points(spec, approach, turn=None) -> list[StagingPoint]:
     return placement_of(spec).staging_points(spec, approach, turn)
 
 
+def staging_problem(site, spec, approach, turn, arm: str) -> str | None:
+    """Why `spec` cannot be staged on approach `arm` of `site` (one line), or None: the placement's own
+    reasons first (placements/base.py, staging_problem), then, under approach staging, the approach's
+    (the road before the conflict, the sidewalk to the step-off point: approach_staging_problem)."""
+    placement = placement_of(spec)
+    problem = placement.staging_problem(site, spec, approach, turn, arm)
+    if problem is None and spec.staging == "approach":
+        problem = placement.approach_staging_problem(spec, approach, turn)
+    return problem
+
+
 def _seen(spec, pose, points: list[StagingPoint], static) -> np.ndarray:
     """Per point: a pedestrian there passes the camera's culling and enough of its sample points are in
     the image with a clear line of sight past the site's static occluders (buildings, trees)."""
@@ -133,7 +144,7 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
         except ValueError as exc:
             problems[name] = f"cannot be staged: {exc}"
             continue
-        problem = placement.staging_problem(site, spec, approach, turn, spec_arm)
+        problem = staging_problem(site, spec, approach, turn, spec_arm)
         if problem:
             problems[name] = f"cannot be staged: site {site.name}: {problem}"
             continue

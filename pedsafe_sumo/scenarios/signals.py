@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pedsafe_sumo.network.traffic_lights import junction_lights, several_lights_problem
 from pedsafe_sumo.sumo_net import read_net
 
 SIGNAL_STATES = ("green", "yellow", "red", "none")
@@ -208,24 +209,45 @@ class JunctionSignals:
 
 @lru_cache(maxsize=4)
 def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
-    """Read the junction's traffic light (the one with the junction's id) from the network."""
+    """Read the traffic light that controls the junction's links from the network.
+
+    The light is the one on the junction's connections (network.traffic_lights: their `tl`), whatever
+    its id (netconvert's joinedS_..., joinedG_..., GS_<junction>); a light that controls neighbouring
+    junctions too is read whole (every link of it). SignalStagingError, in one line, for a
+    traffic-light junction none of whose connections a light controls and for a junction several
+    lights control (the scenarios stage one program); "has no traffic light" only for a junction that
+    is not a traffic-light junction and that no light controls."""
+    lights = junction_lights(net_file, junction_id)
     net = read_net(str(net_file), withInternal=True, withPedestrianConnections=True, withPrograms=True)
-    tls = next((t for t in net.getTrafficLights() if t.getID() == junction_id), None)
-    if tls is None:
+    try:
+        node = net.getNode(junction_id)
+    except KeyError:
+        raise SignalStagingError(f"{net_file.name} has no junction {junction_id}") from None
+    if not lights:
+        if node.getType().startswith("traffic_light"):
+            raise SignalStagingError(
+                f"junction {junction_id} of {net_file.name} is a traffic-light junction, but no traffic "
+                "light controls any of its connections (no tl attribute on them)"
+            )
         raise SignalStagingError(f"junction {junction_id} of {net_file.name} has no traffic light")
+    several = several_lights_problem(net_file, junction_id, lights)
+    if several:
+        raise SignalStagingError(several)
+    tls = net.getTLS(next(iter(lights)))
+    tls_id = tls.getID()
     programs = tls.getPrograms()
     if not programs:
-        raise SignalStagingError(f"traffic light {junction_id} of {net_file.name} has no program")
+        raise SignalStagingError(f"traffic light {tls_id} of {net_file.name} has no program")
     # SUMO starts the last program the network defines for a traffic light.
     program_id, program = list(programs.items())[-1]
     if program.getType() != "static":
         raise SignalStagingError(
-            f"traffic light {junction_id} runs a {program.getType()} program; scenarios stage only "
+            f"traffic light {tls_id} runs a {program.getType()} program; scenarios stage only "
             "fixed-time (static) programs"
         )
     phases = program.getPhases()
     signals = SignalProgram(
-        tls_id=junction_id,
+        tls_id=tls_id,
         program_id=str(program_id),
         durations_s=tuple(float(p.duration) for p in phases),
         states=tuple(p.state for p in phases),
@@ -233,6 +255,8 @@ def load_junction_signals(net_file: Path, junction_id: str) -> JunctionSignals:
     vehicle_links: dict[tuple[str, str], int] = {}
     crossing_links: dict[str, int] = {}
     directions: dict[tuple[str, str], str] = {}
+    # Every link of the light, the neighbouring junctions' too: a light over a split intersection (a
+    # divided road's two junctions) stages a movement through the other junction in the same program.
     for connection in tls.getConnections():
         from_lane, to_lane, link_index = connection
         to_edge = to_lane.getEdge()

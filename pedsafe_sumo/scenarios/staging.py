@@ -5,6 +5,7 @@ junction's signal program."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -19,9 +20,16 @@ from pedsafe_sumo.scenarios.signals import (
     NO_LINK,
     JunctionSignals,
     SignalStagingError,
+    cycle_start_windows,
     draw_cycle_start_s,
 )
 from pedsafe_sumo.scenarios.specs import ScenarioSpec
+from pedsafe_sumo.scenarios.walkways import polyline_length_m, shape_between
+
+#: Approach staging: when the scene from the pedestrian's appearance to after the conflict is longer than
+#: the ego's signal run, they appear this much later than the run's start would allow at the earliest,
+#: so that the window of start times is an interval, not an instant (a thousandth of a step) [s].
+SIGNAL_FIT_MARGIN_S = 1e-3
 
 
 def draw_episode(
@@ -67,13 +75,23 @@ def draw_episode(
         seed=seed,
         ego=scene.ego,
         ego_route=scene.ego_route,
-        pedestrian=pedestrian(pedestrian_traits, scene.clothing_rgb, scene.start_delay_s, scene.path),
+        pedestrian=dataclasses.replace(
+            pedestrian(pedestrian_traits, scene.clothing_rgb, scene.start_delay_s, scene.path),
+            appear_time_s=float(scene.appear_time_s),
+            kerb_index=scene.kerb_index,
+            leaves_scene=scene.leaves_scene,
+        ),
         parked=scene.parked,
         conflict_xy=(float(scene.conflict_xy[0]), float(scene.conflict_xy[1])),
         conflict_offset_s=conflict_offset_s,
-        time_limit_s=spec.time_limit_s,
+        # Under approach staging the episode lasts the approach until the pedestrian appears, then the
+        # scene (in the fixed staging they are there from the start: appear_time_s is 0).
+        time_limit_s=float(scene.appear_time_s) + spec.time_limit_s
+        if spec.staging == "approach"
+        else spec.time_limit_s,
         conflict_time_s=float(scene.conflict_time_s),
         ped_crossing_id=scene.ped_crossing_id,
+        ego_start_distance_m=float(scene.ego_start_distance_m),
     )
 
 
@@ -100,8 +118,11 @@ def stage_signals(
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
     (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
-    start, and the pedestrian's from the moment they step off, until `signal_hold_after_s` after the
-    staged conflict. SignalStagingError when the program has no such time (the message says which)."""
+    start (under approach staging from the pedestrian's appearance), and the pedestrian's from the moment
+    they step off, until `signal_hold_after_s` after the staged conflict. Under approach staging, when
+    that is longer than any run of the ego's signal, the pedestrian appears later, part of the way along
+    their walk-in (appear_later). SignalStagingError when the program has no such time (the message says
+    which)."""
     if junction is None:
         # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so
         # (ego_signal and ped_signal "none").
@@ -115,21 +136,17 @@ def stage_signals(
             f"({'signalised' if ped_link != NO_LINK else 'no signal'})"
         )
     until_s = setup.conflict_time_s + spec.signal_hold_after_s
-    # The ego from the start (it sees its signal all the way to the stop line), the pedestrian from
-    # stepping off the kerb, both until after the conflict.
-    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, 0.0, until_s)}
-    if ped_link != NO_LINK:
-        step_off_s = min(setup.pedestrian.start_delay_s, until_s)
-        ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
-        required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
-    # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too.
-    oncoming_links = [
-        junction.vehicle_link(v.lane_id, v.route[1])
-        for v in setup.parked
-        if v.vehicle_id.startswith("oncoming_") and len(v.route) == 2
-    ]
-    for link in oncoming_links:
-        required[link] = ("green", 0.0, until_s)
+    required = _required_signals(spec, setup, junction, ego_link, ped_link, until_s)
+    if spec.staging == "approach" and not cycle_start_windows(junction.program, required, until_s):
+        # From the pedestrian's appearance to after the conflict is longer than any run of the ego's
+        # signal (Xueqing's through green lasts 16 s of its 90 s cycle): they enter the scene later, part
+        # of the way along their walk-in, so that the scene fits in one run.
+        longest_s = max((hi - lo for lo, hi in junction.program.runs(ego_link, spec.ego_signal)), default=0.0)
+        later = appear_later(spec, setup, until_s - longest_s + SIGNAL_FIT_MARGIN_S)
+        if later is not None:
+            setup = later
+            required = _required_signals(spec, setup, junction, ego_link, ped_link, until_s)
+    oncoming_links = _oncoming_links(setup, junction)
     # The point in the cycle is one uniform draw on [0, 1), recorded (never proposed) as signal_cycle_u.
     source = as_draws(rng).uniform_source("signal_cycle_u")
     cycle_start_s = draw_cycle_start_s(junction.program, required, until_s, source)  # type: ignore[arg-type]
@@ -148,3 +165,57 @@ def stage_signals(
         ),
     )
     return dataclasses.replace(setup, signals=staging)
+
+
+def step_off_time_s(ped: PedestrianSetup) -> float:
+    """When the pedestrian steps off the kerb [s]: their appearance, the walk-in (the points of their path
+    before `kerb_index`, at their walking speed), then the wait at the kerb."""
+    if ped.kerb_index == 0:
+        return ped.appear_time_s + ped.start_delay_s if ped.appear_time_s else ped.start_delay_s
+    walk_in = ped.path_xy[: ped.kerb_index + 1]
+    walk_in_m = sum(math.dist(p, q) for p, q in zip(walk_in[:-1], walk_in[1:]))
+    return ped.appear_time_s + walk_in_m / ped.walking_speed_mps + ped.start_delay_s
+
+
+def _required_signals(spec, setup, junction, ego_link: int, ped_link: int, until_s: float) -> dict:
+    """Link -> (colour, from, until) each road user's signal must show (signals.cycle_start_windows)."""
+    # The ego from the start (it sees its signal all the way to the stop line; under approach staging
+    # from the pedestrian's appearance: before it the ego is on its approach and nothing is staged), the
+    # pedestrian from stepping off the kerb, both until after the conflict.
+    ego_from_s = min(setup.pedestrian.appear_time_s, until_s) if spec.staging == "approach" else 0.0
+    required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, ego_from_s, until_s)}
+    if ped_link != NO_LINK:
+        step_off_s = min(step_off_time_s(setup.pedestrian), until_s)
+        ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
+        required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
+    # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too.
+    for link in _oncoming_links(setup, junction):
+        required[link] = ("green", 0.0, until_s)
+    return required
+
+
+def _oncoming_links(setup: EpisodeSetup, junction: JunctionSignals) -> list[int]:
+    return [
+        junction.vehicle_link(v.lane_id, v.route[1])
+        for v in setup.parked
+        if v.vehicle_id.startswith("oncoming_") and len(v.route) == 2
+    ]
+
+
+def appear_later(spec: ScenarioSpec, setup: EpisodeSetup, appear_s: float) -> EpisodeSetup | None:
+    """The approach-staged `setup` with the pedestrian entering the scene at `appear_s` instead, where
+    their walk-in would have brought them by then (the step-off and everything after it unchanged), and
+    the episode's time limit moved with it; None when their walk-in is shorter than the delay."""
+    ped = setup.pedestrian
+    if appear_s <= ped.appear_time_s:
+        return setup
+    walk = ped.path_xy[: ped.kerb_index + 1]
+    walk_m = polyline_length_m(walk)
+    cut_m = (appear_s - ped.appear_time_s) * ped.walking_speed_mps
+    if cut_m >= walk_m:
+        return None
+    rest = shape_between(walk, cut_m, walk_m)[:-1]
+    later = dataclasses.replace(
+        ped, path_xy=(*rest, *ped.path_xy[ped.kerb_index :]), kerb_index=len(rest), appear_time_s=appear_s
+    )
+    return dataclasses.replace(setup, pedestrian=later, time_limit_s=appear_s + spec.time_limit_s)

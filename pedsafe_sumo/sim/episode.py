@@ -11,7 +11,9 @@ The loop, at every step of `step_length_s` (default 0.05 s):
   5. actuate the ego the TraCI way (speed mode 0, setSpeed to the stack's command);
   6. move the pedestrian by the behaviour model (person.moveToXY, so jaywalking leaves the crosswalks),
      which sees the vehicle bodies and casts its line of sight to the ego through the same geometry;
+     add them to SUMO when they appear (PedestrianSetup.appear_time_s), remove them when they leave;
   7. log the step, and advance SUMO.
+While the pedestrian is not in the scene no sensor runs (step 3) and the row logs them absent.
 The episode ends on a collision (contact while the ego moves at `STATIONARY_SPEED_MPS` or faster; a
 contact with a standing ego is logged), once both road users have cleared the conflict area (the ego's rear
 past the pedestrian's path, the pedestrian past the ego's far flank), when the ego has left the network, or
@@ -48,7 +50,6 @@ from pedsafe_sumo.control.agent import (
     Command,
     EgoState,
     Observation,
-    PerceivedPedestrian,
     check_sensor_names,
 )
 from pedsafe_sumo.control.stack_calls import checked_speed_mps, close_quietly, setup_within, stack_label
@@ -65,12 +66,11 @@ from pedsafe_sumo.perception import (
     WorldSnapshot,
     perceive,
 )
-from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.safety.geometry_kernels import rectangle_circle_clearance_m
 from pedsafe_sumo.safety.proximity import ProximityModel
 from pedsafe_sumo.sampling.draws import Draws, draw_lognormal, draw_pedestrian_traits
 from pedsafe_sumo.sampling.importance import Family
-from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.scenarios.geometry import approach_unit_ids, refuge_walkingareas
 from pedsafe_sumo.scenarios.oncoming import load_oncoming
 from pedsafe_sumo.scenarios.placements import placement_of
@@ -88,6 +88,13 @@ from pedsafe_sumo.sim.outcome import (
     sumo_collision_record,
 )
 from pedsafe_sumo.sim.road_map import load_net_map
+from pedsafe_sumo.sim.scene import (
+    appearing_pose,
+    episode_end,
+    in_scene_from_start,
+    perceived_pedestrians,
+    vehicle_bodies,
+)
 from pedsafe_sumo.sim.staging import (
     EGO_ID,
     PED_ID,
@@ -221,7 +228,9 @@ class EpisodeRunner:
             setup = dataclasses.replace(setup, approach=spec.approach)
         setup = stage_signals(spec, setup, self.signals, draws)
         if spec.background_traffic:
-            background = draw_background(spec, self._site_data, self.params["traffic"], traffic_seq)
+            background = draw_background(
+                spec, self._site_data, self.params["traffic"], traffic_seq, setup.time_limit_s
+            )
             setup = dataclasses.replace(setup, background=background)
         return setup, draws
 
@@ -261,17 +270,25 @@ class EpisodeRunner:
 
         ped = setup.pedestrian
         behaviour = behaviour_params(self.params["pedestrians"], ped)
-        walker = PedestrianWalker(ped.path_xy, behaviour, start_delay_s=ped.start_delay_s)
+        walker = PedestrianWalker(
+            ped.path_xy,
+            behaviour,
+            start_delay_s=ped.start_delay_s,
+            kerb_index=ped.kerb_index,
+            appear_time_s=ped.appear_time_s,
+            leaves_scene=ped.leaves_scene,
+        )
         agent, wanted = self._start_agent(setup, condition, seed)
         sensors = self.sensors_for(spec)
         link = V2ILink(sensors.v2i, np.random.default_rng(streams[3])) if "v2i" in wanted else None
         feeds = ObservationFeeds.for_agent(
             api, EGO_ID, wanted, condition, self.site.file("net.xml"), sensors, self.params["perception"]
         )
-        start_x, start_y, start_heading = walker.position(0.0)
-        pose = PedestrianPose(start_x, start_y, start_heading, 0.0, "waiting")
-        move_pedestrian(api, pose, ped.radius_m)
-        moved_at_s = api.simulation.getTime()  # the move above is pending until SUMO steps (sim/flush.py)
+        pose = appearing_pose(walker)
+        moved_at_s = math.nan
+        if in_scene_from_start(ped):  # else the loop adds them to SUMO when they appear
+            move_pedestrian(api, pose, ped.radius_m)
+            moved_at_s = api.simulation.getTime()  # the move is pending until SUMO steps (sim/flush.py)
         # run_step under the per-step time limit: AgentTimeoutError ends the episode (status "timeout").
         run_step = guard_step(agent.run_step, self.agent_timeout_s).start()
         try:
@@ -297,6 +314,8 @@ class EpisodeRunner:
                 eye_height_m=self.params["pedestrians"]["eye_height_fraction"] * ped.height_m,
                 net_file=str(self.site.file("net.xml")),
                 timings=timings,
+                add_pedestrian=partial(self.staging.add_pedestrian_now, api, self.approach),
+                body_speeds=behaviour.body_rule_needs_notice,
             )
         finally:
             run_step.stop()
@@ -329,60 +348,6 @@ class EpisodeRunner:
         return agent, set(agent.sensors()) & granted
 
 
-def vehicle_bodies(
-    ids: tuple[str, ...], dims: Mapping[str, VehicleDims]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """(lengths, widths, heights, half_diagonals, colours, ego_index) of the vehicles `ids`, in order:
-    the snapshot's body arrays, rebuilt only when a vehicle enters or leaves."""
-    sizes = np.array([dims[vid][:3] for vid in ids], dtype=float).reshape(-1, 3)
-    lengths, widths, heights = sizes[:, 0].copy(), sizes[:, 1].copy(), sizes[:, 2].copy()
-    half_diagonals = 0.5 * np.hypot(lengths, widths)
-    colours = np.array([dims[vid][3] for vid in ids], dtype=float).reshape(-1, 3)
-    return lengths, widths, heights, half_diagonals, colours, ids.index(EGO_ID)
-
-
-def perceived_pedestrians(detections, wanted: set[str]) -> list[PerceivedPedestrian]:
-    """The pedestrians the sensors the stack gets (`wanted`) report, each once, by its first reporter
-    in the order onboard camera, onboard LiDAR, V2I."""
-    reported: list[PerceivedPedestrian] = []
-    sources = (
-        ("onboard_camera", detections.camera),
-        ("onboard_lidar", detections.lidar),
-        ("v2i", detections.v2i_received),
-    )
-    for source, found in sources:
-        if source not in wanted:
-            continue
-        for pid, xy in zip(found.ids, found.xy_m):
-            if all(p.ped_id != pid for p in reported):
-                reported.append(PerceivedPedestrian(pid, float(xy[0]), float(xy[1]), source))
-    return reported
-
-
-def episode_end(
-    time_s: float,
-    clearance_m: float,
-    ego: EgoState,
-    pose: PedestrianPose,
-    walker: PedestrianWalker,
-    ped: PedestrianSetup,
-    time_limit_s: float,
-) -> str | None:
-    """Why the episode ends at the state of `time_s`, or None when it goes on. A contact with a standing
-    ego is no collision (safety.collision): the step is logged and the episode goes on."""
-    if clearance_m <= 0.0 and ego.speed_mps >= STATIONARY_SPEED_MPS:
-        return "collision"
-    cleared = walker.cleared((ego.x_m, ego.y_m), ego.yaw_rad, ego.length_m, ego.width_m)
-    if cleared is None:  # the ego's heading does not cross the path: its rear past the pedestrian
-        lon = (pose.x_m - ego.x_m) * math.cos(ego.yaw_rad) + (pose.y_m - ego.y_m) * math.sin(ego.yaw_rad)
-        cleared = (lon < -(ego.length_m / 2 + ped.radius_m), walker.finished)
-    if all(cleared) and time_s > ped.start_delay_s:
-        return "both_cleared"
-    if time_s >= time_limit_s:
-        return "time_limit"
-    return None
-
-
 def _drive(
     pose: PedestrianPose,
     run_step: Callable[[Observation, float], Command],
@@ -406,13 +371,22 @@ def _drive(
     eye_height_m: float,
     net_file: str,
     timings: dict[str, float],
+    add_pedestrian: Callable[[], None] | None = None,
+    body_speeds: bool = False,
 ) -> EpisodeTrace:
     """Step a staged episode from the pedestrian's first `pose` until it ends (module docstring).
 
     `v2i`: the condition is V2I (its detections reach the log); `start_s`: SUMO's time at the episode's
     t = 0 (sim/kerb.py); `dims`: the bodies of the vehicles the loop sees, by id (`register_departed`
     adds the background's as they enter); `net_file`: the network, read for lateral commands; `timings`
-    gets the seconds of each part of the loop added."""
+    gets the seconds of each part of the loop added; `add_pedestrian()` adds the pedestrian to SUMO when
+    they appear (PedestrianSetup.appear_time_s > 0); `body_speeds`: the behaviour model gets the vehicles'
+    speeds (its body rule depends on them).
+
+    While the pedestrian is not in the scene (before appear_time_s, after leaving it) they are in neither
+    SUMO nor the snapshot, no sensor runs (the AD stack gets no pedestrians; raw-data feeds see the scene
+    without them) and the step's row has ped_state "absent" or "left", NaN position and velocity and an
+    infinite clearance."""
     clock = time.perf_counter
     tc = api.constants
     var_position, var_angle, var_speed = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED
@@ -443,6 +417,11 @@ def _drive(
     closest_clearance_m = math.inf
     closest_edge = ""
     end_reason = "time_limit"
+    in_scene = in_scene_from_start(ped)
+    gone = False  # left the scene at the end of their path
+    appear_s = ped.appear_time_s - 1e-9
+    nobody = Pedestrians((), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
+    nan = math.nan
     while True:
         # The world at time_s, from SUMO's subscriptions.
         t0 = clock()
@@ -475,22 +454,26 @@ def _drive(
             sumo_collision = bool(sumo_record)
         # Built directly from float arrays of matching lengths (what .build would check and convert).
         vehicles = VehicleBoxes(ids, centre_x, centre_y, yaw, lengths, widths, heights, colours)
-        pedestrians = Pedestrians(
-            ped_ids, np.array([pose.x_m]), np.array([pose.y_m]), ped_radii, ped_heights, ped_rgb
-        )
+        if in_scene:
+            pedestrians = Pedestrians(
+                ped_ids, np.array([pose.x_m]), np.array([pose.y_m]), ped_radii, ped_heights, ped_rgb
+            )
+        else:
+            pedestrians = nobody
         snapshot = WorldSnapshot(time_s, vehicles, pedestrians, static)
         t1 = clock()
         timings["snapshot_s"] += t1 - t0
 
         # What the sensors report.
         ego_pose = EgoPose(ego_x, ego_y, ego_yaw, EGO_ID)
-        detections = perceive(snapshot, ego_pose, sensors, perception_rng, time_s, link)
+        # Nobody to perceive while the pedestrian is not in the scene: the sensors do not run.
+        detections = perceive(snapshot, ego_pose, sensors, perception_rng, time_s, link) if in_scene else None
         extra = feeds.step(snapshot, ego_pose, ego_index, time_s) if feeds is not None else {}
         t2 = clock()
         timings["perception_s"] += t2 - t1
 
         # The AD stack's command, from what its condition grants.
-        reported = perceived_pedestrians(detections, wanted)
+        reported = perceived_pedestrians(detections, wanted) if detections is not None else []
         ego = EgoState(ego_x, ego_y, ego_yaw, ego_speed, ego_length, ego_width)
         command: Command = run_step(Observation(ego, tuple(reported), step_length_s, **extra), time_s)
         target_mps = checked_speed_mps(command, stack, time_s)  # or StackError (control/stack_calls.py)
@@ -505,43 +488,52 @@ def _drive(
 
         # The step's log row. Compiled scalar form of safety.geometry.rectangle_circle_distance_m (the
         # same bits).
-        clearance_m = float(
-            rectangle_circle_clearance_m(
-                ego_x, ego_y, ego_yaw, ego_length, ego_width, pose.x_m, pose.y_m, ped_radius_m
+        if detections is None:  # nobody in the scene
+            clearance_m = math.inf
+            rows.append(
+                (time_s, ego_x, ego_y, ego_yaw, ego_speed, ego_length, ego_width, nan, nan, nan, nan,
+                 ped_radius_m, False, False, False, False, False, clearance_m, target_mps,
+                 bool(command.info.get("braking", False)), "left" if gone else "absent", sumo_collision,
+                 refused)
+            )  # fmt: skip
+        else:
+            clearance_m = float(
+                rectangle_circle_clearance_m(
+                    ego_x, ego_y, ego_yaw, ego_length, ego_width, pose.x_m, pose.y_m, ped_radius_m
+                )
             )
-        )
-        if clearance_m < closest_clearance_m:
-            closest_clearance_m = clearance_m
-            closest_edge = api.person.getRoadID(PED_ID)
-        # One tuple per step in LOG_COLUMNS' order (a dict per step cost more than the values).
-        rows.append(
-            (
-                time_s,
-                ego_x,
-                ego_y,
-                ego_yaw,
-                ego_speed,
-                ego_length,
-                ego_width,
-                pose.x_m,
-                pose.y_m,
-                # The pose's heading is the direction of motion (flipped when stepping back).
-                abs(pose.speed_mps) * math.cos(pose.heading_rad),
-                abs(pose.speed_mps) * math.sin(pose.heading_rad),
-                ped_radius_m,
-                PED_ID in detections.camera,
-                PED_ID in detections.lidar,
-                v2i and PED_ID in detections.v2i_received,
-                any(p.ped_id == PED_ID for p in reported),
-                PED_ID in detections.roadside,
-                clearance_m,
-                target_mps,
-                bool(command.info.get("braking", False)),
-                pose.state,
-                sumo_collision,
-                refused,
+            if clearance_m < closest_clearance_m:
+                closest_clearance_m = clearance_m
+                closest_edge = api.person.getRoadID(PED_ID)
+            # One tuple per step in LOG_COLUMNS' order (a dict per step cost more than the values).
+            rows.append(
+                (
+                    time_s,
+                    ego_x,
+                    ego_y,
+                    ego_yaw,
+                    ego_speed,
+                    ego_length,
+                    ego_width,
+                    pose.x_m,
+                    pose.y_m,
+                    # The pose's heading is the direction of motion (flipped when stepping back).
+                    abs(pose.speed_mps) * math.cos(pose.heading_rad),
+                    abs(pose.speed_mps) * math.sin(pose.heading_rad),
+                    ped_radius_m,
+                    PED_ID in detections.camera,
+                    PED_ID in detections.lidar,
+                    v2i and PED_ID in detections.v2i_received,
+                    any(p.ped_id == PED_ID for p in reported),
+                    PED_ID in detections.roadside,
+                    clearance_m,
+                    target_mps,
+                    bool(command.info.get("braking", False)),
+                    pose.state,
+                    sumo_collision,
+                    refused,
+                )
             )
-        )
         signal_states.append(tls_state())
         timings["logging_s"] += clock() - t3
         if on_step is not None:
@@ -557,19 +549,32 @@ def _drive(
         api.vehicle.setSpeed(EGO_ID, target_mps)
         if steer is not None:
             steer()
-        bodies = VehicleBodies(centre_x, centre_y, yaw, lengths, widths, half_diagonals)
-        pose = walker.step(
-            step_length_s,
-            time_s,
-            (ego_x, ego_y),
-            ego_yaw,
-            ego_speed,
-            ego_length,
-            ego_width,
-            sees_ego=partial(ego_in_sight, snapshot, ego_index, (pose.x_m, pose.y_m, eye_height_m)),
-            bodies=bodies,
-        )
-        move_pedestrian(api, pose, ped_radius_m)
+        if in_scene:
+            speeds = np.array([results[vid][var_speed] for vid in ids]) if body_speeds else None
+            bodies = VehicleBodies(
+                centre_x, centre_y, yaw, lengths, widths, half_diagonals, speeds, ego_index
+            )
+            pose = walker.step(
+                step_length_s,
+                time_s,
+                (ego_x, ego_y),
+                ego_yaw,
+                ego_speed,
+                ego_length,
+                ego_width,
+                sees_ego=partial(ego_in_sight, snapshot, ego_index, (pose.x_m, pose.y_m, eye_height_m)),
+                bodies=bodies,
+            )
+            if pose.state == "left":  # at the end of their path, out of the scene
+                api.person.remove(PED_ID)
+                in_scene, gone = False, True
+            else:
+                move_pedestrian(api, pose, ped_radius_m)
+        elif not gone and time_s + step_length_s >= appear_s and add_pedestrian is not None:
+            # In the scene from the next step on: into SUMO, at the start of their path.
+            add_pedestrian()
+            move_pedestrian(api, pose, ped_radius_m)
+            in_scene = True
         api.simulation.step()
         timings["sumo_s"] += clock() - t4
 

@@ -2,11 +2,13 @@
 
 The indexes come from the per-step log (pedsafe_sumo.safety.episode); SUMO's own collision check is
 read during the loop (`sumo_collision_record`) and counts only where SUMO looks; the signals are those
-SUMO showed at the staged conflict (`conflict_step`, `signals_at_conflict`).
+SUMO showed at the staged conflict (`conflict_step`, `signals_at_conflict`); who struck whom in a
+collision from the logged geometry at its first step (`collision_type`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -126,6 +128,52 @@ def signals_at_conflict(log: pd.DataFrame, states: Sequence[str], setup: Episode
     return colour_of_link(state, staging.ego_link_index), colour_of_link(state, staging.ped_link_index)
 
 
+def first_collision_step(log: pd.DataFrame) -> int | None:
+    """Row of the first contact with the moving ego (the collision of safety.collision), or None."""
+    if not len(log):
+        return None
+    clearance = log["clearance_m"].to_numpy(dtype=float)
+    moving = log["ego_speed_mps"].to_numpy(dtype=float) >= STATIONARY_SPEED_MPS
+    strikes = np.flatnonzero((clearance <= 0.0) & moving)
+    return int(strikes[0]) if strikes.size else None
+
+
+def collision_type(log: pd.DataFrame, step: int | None) -> str:
+    """Who struck whom at the collision's first contact row `step` (None: no collision): one of
+    io.episodes.COLLISION_TYPES, from the logged geometry (docs/engine.md, "Collisions").
+
+    In the ego's frame (x forward along its heading, y to its left) the pedestrian's centre is at (lon,
+    lat). The ego's front face moved speed x step length in the step that ended in contact: a centre
+    within that distance of the front face's line, or ahead of it, is where the front (or a front corner)
+    came onto them: "ego_strikes_pedestrian". A centre farther back lies beside the box (or behind its
+    front corners, from which a forward-moving box moves away); it is "pedestrian_strikes_side" if the
+    pedestrian moved towards the box's centreline faster than the box's side moved towards them (the
+    side point at lon moves sideways at yaw rate x lon while the ego turns), else the ego drove into
+    them: "ego_strikes_pedestrian"."""
+    if step is None:
+        return "none"
+    row = log.iloc[step]
+    times = log["time_s"].to_numpy(dtype=float)
+    yaws = log["ego_yaw_rad"].to_numpy(dtype=float)
+    step_s = times[step] - times[step - 1] if step > 0 else (times[1] - times[0] if len(times) > 1 else 0.05)
+    cos, sin = math.cos(row["ego_yaw_rad"]), math.sin(row["ego_yaw_rad"])
+    dx, dy = row["ped_x_m"] - row["ego_x_m"], row["ped_y_m"] - row["ego_y_m"]
+    lon, lat = cos * dx + sin * dy, -sin * dx + cos * dy
+    front_travel_m = row["ego_speed_mps"] * step_s
+    if lon >= row["ego_length_m"] / 2 - front_travel_m:
+        return "ego_strikes_pedestrian"
+    side = math.copysign(1.0, lat)  # +1: the pedestrian is on the ego's left
+    ped_towards_mps = -side * (-sin * row["ped_vx_mps"] + cos * row["ped_vy_mps"])
+    yaw_rate = 0.0
+    if step > 0:
+        turned = (yaws[step] - yaws[step - 1] + math.pi) % (2 * math.pi) - math.pi
+        yaw_rate = turned / step_s
+    side_towards_mps = side * yaw_rate * lon
+    if ped_towards_mps > 0.0 and ped_towards_mps > side_towards_mps:
+        return "pedestrian_strikes_side"
+    return "ego_strikes_pedestrian"
+
+
 def judge_episode(
     setup: EpisodeSetup,
     condition: str,
@@ -164,7 +212,7 @@ def judge_episode(
         "approach": arm,
         "ego_start_distance_m": setup.ego_start_distance_m,
         "ped_appear_time_s": ped.appear_time_s,
-        "collision_type": "ego_strikes_pedestrian" if indexes["collision"] else "none",
+        "collision_type": collision_type(log, first_collision_step(log)) if indexes["collision"] else "none",
         "witness_collision": witness.collided,
         "witness_collision_time_s": witness.time_s,
         "status": "ok",

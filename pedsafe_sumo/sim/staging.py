@@ -118,13 +118,18 @@ def _junction_signals(site: Site, junction_id: str):
 
 
 def draw_background(
-    spec: ScenarioSpec, data: SiteData, traffic_params: dict[str, Any], seed_seq: np.random.SeedSequence
+    spec: ScenarioSpec,
+    data: SiteData,
+    traffic_params: dict[str, Any],
+    seed_seq: np.random.SeedSequence,
+    duration_s: float,
 ) -> tuple[BackgroundVehicle, ...]:
-    """Demand-model vehicles for [-warm-up, time limit] on `data`'s background lanes; the early ones
-    already down their first edge."""
+    """Demand-model vehicles for [-warm-up, `duration_s`] on `data`'s background lanes (the episode's
+    time limit: under approach staging the approach plus the scene); the early ones already down their
+    first edge."""
     warmup_s = spec.background_warmup_s
     demand_seq, colour_seq = seed_seq.spawn(2)
-    drawn = generate_vehicles(data.background_lanes, traffic_params, warmup_s + spec.time_limit_s, demand_seq)
+    drawn = generate_vehicles(data.background_lanes, traffic_params, warmup_s + duration_s, demand_seq)
     colour_rng = np.random.default_rng(colour_seq)
     vehicles = []
     for vehicle in drawn:
@@ -174,6 +179,8 @@ def behaviour_params(pedestrian_params: dict[str, Any], ped: PedestrianSetup) ->
         gap_startup_clearance_s=p["gap_startup_clearance_s"],
         detour_wait_s=p["detour_wait_s"],
         detour_max_offset_m=p["detour_max_offset_m"],
+        yield_at_kerb=p["yield_at_kerb"],
+        body_rule_needs_notice=p["body_rule_needs_notice"],
         stopped_speed_mps=STATIONARY_SPEED_MPS,
         radius_m=ped.radius_m,
         avoids_bodies=ped.avoids_vehicle_bodies,
@@ -326,7 +333,8 @@ def populate(api, setup: EpisodeSetup, approach: Approach, refuges: bool, start_
     api.vehicletype.setLength("ped_type", 2 * ped.radius_m)
     api.vehicletype.setHeight("ped_type", ped.height_m)
     api.vehicletype.setColor("ped_type", (*ped.clothing_rgb, 255))
-    add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", refuges, start_s)
+    if ped.appear_time_s <= 0.0:  # else the loop adds them when they appear (SumoStaging.add_pedestrian_now)
+        add_pedestrian(api, approach.sidewalk_lane_id.rsplit("_", 1)[0], "ped_type", refuges, start_s)
 
 
 def start_signals(api, staging: SignalStaging | None, program=None) -> None:
@@ -437,6 +445,12 @@ class SumoStaging:
         """Add the episode's road users (module function `populate`); a subclass may add to the scene
         here, before the traffic light is started."""
         populate(api, setup, approach, self.refuges, start_s)
+
+    def add_pedestrian_now(self, api, approach: Approach) -> None:
+        """Add the episode's pedestrian (type "ped_type", made by `populate`) to SUMO now: the loop calls
+        it when they appear, and moves them where the behaviour model puts them before SUMO steps."""
+        sidewalk_edge = approach.sidewalk_lane_id.rsplit("_", 1)[0]
+        add_pedestrian(api, sidewalk_edge, "ped_type", self.refuges, api.simulation.getTime())
 
     def stage(
         self, session: SumoSession, setup: EpisodeSetup, seed: int, approach: Approach, program=None

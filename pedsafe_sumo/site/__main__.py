@@ -8,8 +8,10 @@ import sys
 from pedsafe_sumo import OSM_ATTRIBUTION, SHIPPED_DIR
 from pedsafe_sumo.network.build import BuildError, build_site
 from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_to_read
-from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
+from pedsafe_sumo.network.sites import SITE_HELP, SiteError, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
+from pedsafe_sumo.network.sumo_inputs import check_site_sumo_files
+from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
 from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 
@@ -60,6 +62,11 @@ def main(argv: list[str] | None = None) -> int:
             f"built {site.directory} from {origin} in {report.seconds:.1f} s "
             f"({len(report.written)} file(s) changed, {len(report.unchanged)} unchanged)"
         )
+        print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
+    try:  # `sumo-gui -c` (the line "open it" below) reads them
+        check_site_sumo_files(site)
+    except SiteError as exc:
+        parser.exit(2, f"error: {exc}\n")
     for line in summarise(site).lines():
         print(line)
     print("  scenarios:")

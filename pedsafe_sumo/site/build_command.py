@@ -8,30 +8,23 @@ network build meets the scenarios.
 
 from __future__ import annotations
 
-import argparse
+import sys
 from pathlib import Path
 
 from pedsafe_sumo import WRITE_ROOT
+from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
+from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SiteError, resolve_site
+from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, TRAFFIC_SIDE_NOTE
 from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
 DEFAULT_RADIUS_M = 200.0
 #: Largest clip radius [m]: an intersection study site, not a town; netconvert's time grows with the area.
 MAX_RADIUS_M = 2000.0
-
-
-def _parse_center(text: str) -> tuple[float, float]:
-    try:
-        lat, lon = (float(part) for part in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"centre must be LAT,LON in degrees, got '{text}'") from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
-        raise argparse.ArgumentTypeError(f"centre {text} is not a latitude,longitude pair")
-    return lat, lon
 
 
 def _refresh(parser, folder: Path) -> BuildReport:
@@ -66,7 +59,7 @@ def _refresh(parser, folder: Path) -> BuildReport:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="build_network",
         description="Build a SUMO study site folder (net, polygons, roadside units, sumocfg, site file) from "
         "OpenStreetMap; every command takes the folder as --site.",
@@ -78,10 +71,15 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--osm", type=Path, help="OSM XML file to clip (default: the site's source extract)")
     parser.add_argument(
-        "--center", type=_parse_center, help="LAT,LON of the intersection (default: the site's)"
+        "--center",
+        type=parse_lat_lon,
+        metavar="LAT,LON",
+        help=f"LAT,LON of the intersection in degrees (default: the site's); {NEGATIVE_HELP}",
     )
     parser.add_argument(
-        "--radius", type=float, help=f"clip radius in metres, at most {MAX_RADIUS_M:g} (default: the site's)"
+        "--radius",
+        type=float,
+        help=f"clip radius in metres, above 0 and at most {MAX_RADIUS_M:g} (default: the site's)",
     )
     parser.add_argument("--name", help="name of the built site (default: --site's)")
     parser.add_argument("--description", help="one line saying where the junction is")
@@ -112,7 +110,16 @@ def main(argv: list[str] | None = None) -> int:
         help="keep the network of site folder DIR as it is (e.g. edited in netedit) and re-derive its site "
         "file, poles and polygons from it",
     )
-    args = parser.parse_args(argv)
+    parser.add_argument(
+        "--lefthand",
+        action="store_true",
+        help="the junction's traffic keeps left (the build cannot tell from OSM data alone): refused, "
+        "left-hand traffic is not supported yet",
+    )
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(with_negative_values(parser, argv, ["--center"]))
+    if args.lefthand:
+        parser.exit(2, f"build_network: error: {LEFTHAND_REFUSAL}\n")
     try:
         if args.refresh is not None:
             report = _refresh(parser, args.refresh)
@@ -121,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     except (BuildError, SiteError) as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
+    print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
     if report.signal_nodes and len(report.signal_nodes) > 1:
         print(
             f"  the intersection has {len(report.signal_nodes)} signal nodes: "

@@ -5,6 +5,7 @@ here, not through pedsafe_sumo.protocol."""
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 
@@ -84,7 +85,15 @@ def test_run_json_records_the_protocols_values(tmp_path):
     data = tomllib.loads(PROTOCOL.read_text(encoding="utf-8"))
     run = json.loads((out / "run.json").read_text(encoding="utf-8"))
     assert run["protocol"]["sha256"] == hashlib.sha256(PROTOCOL.read_bytes()).hexdigest()
-    assert run["parameters"] == data["parameters"]
+    # The parameters it was written before are recorded as the behaviour it ran with.
+    expected_parameters = copy.deepcopy(data["parameters"])
+    for dotted, value in VALUES_BEFORE["parameters"].items():
+        *tables, key = dotted.split(".")
+        target = expected_parameters
+        for table in tables:
+            target = target.setdefault(table, {})
+        target[key] = value
+    assert run["parameters"] == expected_parameters
     header = data["protocol"]
     assert list(run["scenarios"]) == header["scenarios"]
     for name, fields in data["scenarios"].items():

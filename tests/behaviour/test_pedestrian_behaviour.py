@@ -18,8 +18,16 @@ PATH = [(30.0, -6.0), (30.0, 6.0)]
 DT = 0.05
 
 
-def run(risk, seconds, ego_xy=(0.0, 0.0), ego_speed=10.0, reaction_time_s=1.0, start_s=0.0, **kwargs):
-    walker = PedestrianWalker(PATH, BehaviourParams(risk, 1.5, reaction_time_s=reaction_time_s))
+#: The yielder's rule in the road: with yield_at_kerb a yielder who notices the ego at the kerb (s = 0
+#: here) waits there instead (tests/behaviour/test_kerb_and_side_strike.py).
+IN_ROAD = {"yield_at_kerb": False}
+
+
+def run(
+    risk, seconds, ego_xy=(0.0, 0.0), ego_speed=10.0, reaction_time_s=1.0, start_s=0.0, params=None, **kwargs
+):
+    behaviour = BehaviourParams(risk, 1.5, reaction_time_s=reaction_time_s, **(params or {}))
+    walker = PedestrianWalker(PATH, behaviour)
     walker.s_m = start_s
     pose = None
     for k in range(round(seconds / DT)):
@@ -62,7 +70,7 @@ def test_a_threat_that_passes_within_the_reaction_time_leaves_a_hastener_at_thei
 
 
 def test_yield_stops_short_of_the_ego_flank():
-    walker, pose = run("yield", 3.0)
+    walker, pose = run("yield", 3.0, params=IN_ROAD)
     # 1 s reacting (1.5 m walked), then stands where they are: 1.5 m is short of the 3.8 m stand line.
     assert walker.s_m == pytest.approx(1.5)
     assert pose.state == "yielding" and pose.speed_mps == 0.0
@@ -86,7 +94,7 @@ def test_yield_past_the_centreline_clears_forwards():
 
 
 def test_yielder_resumes_only_once_the_standing_ego_was_seen_standing_for_a_reaction_time():
-    walker, pose = run("yield", 3.0)  # steps 0..59: standing at 1.5 m
+    walker, pose = run("yield", 3.0, params=IN_ROAD)  # steps 0..59: standing at 1.5 m
     assert pose.state == "yielding"
     # The ego stands from step 60 (t = 3.0 s). Still waiting at t = 3.95 s (stood 0.95 s < 1 s) ...
     pose = advance(walker, 60, 80, (0.0, 0.0), 0.0)
@@ -100,10 +108,10 @@ def test_yielder_resumes_on_an_accepted_gap_to_a_moving_ego():
     # Standing at 1.5 m, to be across they walk 7.2 - 1.5 = 5.7 m at 1.5 m/s = 3.8 s; plus the 3 s start-up
     # and clearance time, the critical gap is 6.8 s. An ego at 1 m/s whose centre is d m before the path
     # reaches the body line in d - 2.55 s.
-    walker, _ = run("yield", 3.0)
+    walker, _ = run("yield", 3.0, params=IN_ROAD)
     pose = advance(walker, 60, 70, (21.0, 0.0), 1.0)  # d = 9: 6.45 s < 6.8 s, keeps standing
     assert walker.s_m == pytest.approx(1.5) and pose.state == "yielding"
-    walker, _ = run("yield", 3.0)
+    walker, _ = run("yield", 3.0, params=IN_ROAD)
     pose = advance(walker, 60, 61, (20.0, 0.0), 1.0)  # d = 10: 7.45 s >= 6.8 s, walks on
     assert walker.s_m == pytest.approx(1.575) and pose.state == "walking"
 
@@ -126,7 +134,7 @@ def test_nobody_reacts_to_an_ego_they_cannot_see():
         looks.append(1)
         return True
 
-    walker, pose = run("yield", 2.0, sees_ego=sees)
+    walker, pose = run("yield", 2.0, sees_ego=sees, params=IN_ROAD)
     assert walker.s_m == pytest.approx(1.5) and pose.state == "yielding" and len(looks) == 1
 
 

@@ -40,7 +40,7 @@ def ncap(*args: str, module: str = "pedsafe_sumo.ncap") -> subprocess.CompletedP
         (["--site", "atlantis"], "unknown site 'atlantis'"),
         (["--algorithm", "nosuchpkg.mod:Stack"], "cannot import module 'nosuchpkg.mod'"),
         (["--condition", "v3i"], "--condition must be sv, v2i or both"),
-        (["--seed", "-1"], "--seed must be >= 0"),
+        (["--seed", "-1"], "--seed must not be negative"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, args, says):

@@ -22,6 +22,7 @@ FIGURES = (
     "injury_vs_speed.png",
     "first_detection_distance.png",
     "case_speed_vs_frame.png",
+    "impact_speed.png",
 )
 TABLES = ("table1.csv", "table1.md", "paired.csv", "paired.md")
 
@@ -76,7 +77,10 @@ def test_without_jaywalking_the_injury_figures_are_skipped(tmp_path, capsys):
     assert "note: no jaywalking episodes (status ok) in this run: injury figures skipped" in out
     assert "note: no case pair" in out and "case figure skipped" in out
     assert not out.startswith("run ")  # no run.json, no header
-    assert sorted(p.name for p in (run / "figures").iterdir()) == ["first_detection_distance.png"]
+    assert sorted(p.name for p in (run / "figures").iterdir()) == [
+        "first_detection_distance.png",
+        "impact_speed.png",
+    ]
     assert_real_png(run / "figures" / "first_detection_distance.png", 5.0, 4.2)
     # Table I, the paired tests, and the checks of the indexes this run has columns for (the episodes
     # carry every column of EPISODE_COLUMNS, contact_stationary included)

@@ -18,7 +18,9 @@ DESIGN_COLUMNS = (
     "first_detection_distance_m first_detection_time_s detected_by sumo_collision status error "
     # the proximity measure's own columns
     "min_clearance_m ego_speed_at_min_clearance_mps drac_mps2 close_pass "
-    "contact_stationary"
+    "contact_stationary "
+    # the second injury index (docs/safety_indexes.md)
+    "injury_mais3f_probability"
 ).split()
 
 
@@ -73,7 +75,8 @@ def test_steps_after_the_first_contact_are_ignored(collision_log):
 
 
 def test_unknown_injury_model_is_an_error(near_miss_log):
-    with pytest.raises(ValueError, match="known models: rosen_sander2009, saade2020"):
+    known = "known models: monfort_mueller2025_mais3f, rosen_sander2009, saade2020"
+    with pytest.raises(ValueError, match=known):
         episode_indexes(near_miss_log, 30.0, injury_model="bogus")
 
 

@@ -9,6 +9,7 @@ registered object, never the name.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
@@ -61,6 +62,16 @@ class StagedScene:
     conflict_time_s: float
     #: The signalised crossing whose signal faces the pedestrian ("" when none does).
     ped_crossing_id: str
+    #: Distance along the ego's path from its front at the start to `conflict_xy` [m].
+    ego_start_distance_m: float = math.nan
+    #: Approach staging (placements/approach.py): when the pedestrian enters the scene [s], the index in
+    #: `path` of their step-off point (the points before it are their walk along the sidewalk to it), and
+    #: whether they leave the scene at the end of `path`. The fixed staging: 0, 0, False.
+    appear_time_s: float = 0.0
+    kerb_index: int = 0
+    leaves_scene: bool = False
+    #: Approach staging: the fallbacks its timing took (placements/approach.py, FALLBACKS), in order.
+    approach_fallbacks: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -101,6 +112,13 @@ class Placement:
     ) -> str | None:
         """Why `spec` cannot be staged on approach `arm` of `site` (one line), or None."""
         raise NotImplementedError
+
+    def approach_staging_problem(
+        self, spec: ScenarioSpec, approach: Approach, turn: Turn | None
+    ) -> str | None:
+        """Why `spec`, which `staging_problem` lets stage, cannot be staged under approach staging (one
+        line), or None (hosting.staging_problem asks it after `staging_problem`)."""
+        return None
 
 
 def first_crossing(polyline, path) -> tuple[float, float] | None:

@@ -20,6 +20,7 @@ from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.scenarios.episode_setup import VehicleSetup
 from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import Approach, Turn, path_pos_m, straight_staging_problem
+from pedsafe_sumo.scenarios.placements.approach import stage_approach
 from pedsafe_sumo.scenarios.placements.base import Placement, StagedScene, StagingInputs, first_crossing
 from pedsafe_sumo.scenarios.road_users import (
     CAR_COLOURS_RGB,
@@ -28,10 +29,15 @@ from pedsafe_sumo.scenarios.road_users import (
     VEHICLE_CLASSES,
     VehicleSize,
 )
+from pedsafe_sumo.scenarios.walkways import sidewalk_before_m
 
 if TYPE_CHECKING:
     # Annotations only: specs.py imports the placement registry to validate a spec's placement.
     from pedsafe_sumo.scenarios.specs import ScenarioSpec
+
+#: Approach staging: a sidewalk shorter than this upstream of the step-off point leads nowhere (a step;
+#: the walk-in is at least walk_in_min_s, 2 s by default: about 3 m).
+MIN_WALK_IN_SIDEWALK_M = 1.0
 
 
 class KerbRow:
@@ -116,6 +122,8 @@ class StraightPlacement(Placement):
         walk_to_conflict_s = math.dist(path[0], conflict_xy) / inputs.traits["walking_speed_mps"]
         start_delay_s = spec.ped_start_delay_s
         ego_conflict_pos = lane_pos_of(approach, row.ego_lane, conflict_xy)
+        if spec.staging == "approach":
+            return self.stage_approach(inputs, row, path, parked, clothing, conflict_xy, ego_conflict_pos)
         arrival_s = start_delay_s + walk_to_conflict_s + inputs.conflict_offset_s
         front_pos = ego_conflict_pos - ego_speed_mps * arrival_s
         if front_pos < ego_size.length_m:
@@ -135,6 +143,44 @@ class StraightPlacement(Placement):
             conflict_xy=conflict_xy,
             conflict_time_s=(ego_conflict_pos - front_pos) / ego_speed_mps,
             ped_crossing_id=self.ped_crossing_id(approach),
+            ego_start_distance_m=ego_conflict_pos - front_pos,
+        )
+
+    def stage_approach(
+        self, inputs: StagingInputs, row: KerbRow, path, parked, clothing, conflict_xy, conflict_pos_m: float
+    ) -> StagedScene:
+        """The scene under approach staging (placements/approach.py): the ego starts out of every
+        sensor's reach, the pedestrian walks in along the sidewalk, crosses along `path` and walks on."""
+        approach = inputs.approach
+        ego_size = VEHICLE_CLASSES["car"]
+        ego_mps = inputs.ego_speed_mps
+        lane_length_m = approach.lane_lengths_m[row.ego_lane]
+        timing = stage_approach(
+            inputs,
+            path,
+            conflict_pos_m,
+            math.dist(path[0], conflict_xy) / inputs.traits["walking_speed_mps"],
+            # The ego's front on its lane (not yet on the junction), its whole body on it.
+            (max(conflict_pos_m - lane_length_m, 0.0), conflict_pos_m - ego_size.length_m),
+        )
+        ego = VehicleSetup(
+            "ego", approach.lane_ids[row.ego_lane], timing.front_pos_m, ego_mps, EGO_BLUE_RGB, ego_size
+        )
+        return StagedScene(
+            ego=ego,
+            ego_route=approach.through_route,
+            path=timing.path,
+            clothing_rgb=clothing,
+            start_delay_s=timing.start_delay_s,
+            parked=tuple(parked),
+            conflict_xy=conflict_xy,
+            conflict_time_s=(conflict_pos_m - timing.front_pos_m) / ego_mps,
+            ped_crossing_id=self.ped_crossing_id(approach),
+            ego_start_distance_m=timing.start_distance_m,
+            appear_time_s=timing.appear_time_s,
+            kerb_index=timing.kerb_index,
+            leaves_scene=True,
+            approach_fallbacks=timing.fallbacks,
         )
 
     def staging_problem(
@@ -144,6 +190,31 @@ class StraightPlacement(Placement):
         if not problem and len(approach.lane_ids) == 1:
             problem = self.kerb_staging_problem(spec, approach)
         return problem
+
+    def approach_staging_problem(
+        self, spec: ScenarioSpec, approach: Approach, turn: Turn | None
+    ) -> str | None:
+        """Why `spec` cannot be staged under approach staging, or None: the ego's lane must hold a start
+        `ego_start_min_m` before the nearest conflict point the placement stages (out of every onboard
+        sensor's reach), its whole body on the lane, and a sidewalk must lead to the step-off point."""
+        ego_lane = 0 if len(approach.lane_ids) == 1 else 1
+        points = self.staging_points(spec, approach, None)
+        room_m = min(lane_pos_of(approach, ego_lane, p.xy) for p in points) - VEHICLE_CLASSES["car"].length_m
+        if room_m < spec.ego_start_min_m:
+            return (
+                f"approach staging: lane {approach.lane_ids[ego_lane]} holds the ego at most {room_m:.1f} m "
+                f"before the nearest conflict point, less than ego_start_min_m {spec.ego_start_min_m:g} m"
+            )
+        start = next(p for p in points if p.start)
+        if spec.walk_in_max_s > 0 and (
+            len(approach.sidewalk_shape) < 2
+            or sidewalk_before_m(approach.sidewalk_shape, start.xy) < MIN_WALK_IN_SIDEWALK_M
+        ):
+            return (
+                f"approach staging: no sidewalk of approach {approach.edge_id} leads to where the pedestrian "
+                f"steps off ({start.where}) for their walk-in"
+            )
+        return None
 
     def kerb_staging_problem(self, spec: ScenarioSpec, approach: Approach) -> str | None:
         """Why `spec` cannot be staged with cars parked at the kerb of a one-lane approach, or None: the

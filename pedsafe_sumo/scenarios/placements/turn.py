@@ -53,6 +53,8 @@ class TurnPlacement(Placement):
         spec, approach, turn, draws = inputs.spec, inputs.approach, inputs.turn, inputs.draws
         if turn is None:
             raise ScenarioError(f"scenario '{spec.name}' needs the geometry of its {spec.turn} turn")
+        if spec.staging == "approach":
+            raise ScenarioError(approach_refusal(spec))
         ego_size = VEHICLE_CLASSES["car"]
         ego_speed_mps = inputs.ego_speed_mps
         # Drawn after the shared draws (and only when there is a leader), so the scenarios without one
@@ -112,6 +114,7 @@ class TurnPlacement(Placement):
             conflict_xy=conflict_xy,
             conflict_time_s=(ego_conflict_pos - front_pos) / ego_speed_mps,
             ped_crossing_id=turn.crosswalk_id,
+            ego_start_distance_m=ego_conflict_pos - front_pos,
         )
 
     def staging_points(self, spec: ScenarioSpec, approach: Approach, turn: Turn | None) -> list[StagingPoint]:
@@ -133,9 +136,16 @@ class TurnPlacement(Placement):
     def staging_problem(
         self, site: Site, spec: ScenarioSpec, approach: Approach, turn: Turn | None, arm: str
     ) -> str | None:
+        if spec.staging == "approach":
+            return approach_refusal(spec)
         if getattr(spec, "oncoming_vehicle", 0) and turn is not None:
             return oncoming_signal_problem(site, arm, approach.lane_ids[turn.lane_index], turn.route[1])
         return None
+
+
+def approach_refusal(spec: ScenarioSpec) -> str:
+    """Why a turning scenario cannot be staged under approach staging (one line)."""
+    return f"scenario '{spec.name}': the turn placement stages the fixed staging only (staging=fixed)"
 
 
 def draw_turn_leader(spec: ScenarioSpec, draws: Draws) -> tuple[tuple, float]:

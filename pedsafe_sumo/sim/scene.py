@@ -1,0 +1,86 @@
+"""What the episode loop (sim/episode.py) derives from the scene at each step: the vehicles' bodies for the
+snapshot, the pedestrians the stack's sensors report, whether the pedestrian is in the scene, and why the
+episode ends."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from pedsafe_sumo.behaviour.pedestrian import PedestrianPose, PedestrianWalker
+from pedsafe_sumo.control.agent import EgoState, PerceivedPedestrian
+from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
+from pedsafe_sumo.scenarios.episode_setup import PedestrianSetup
+from pedsafe_sumo.sim.staging import EGO_ID, VehicleDims
+
+
+def vehicle_bodies(
+    ids: tuple[str, ...], dims: Mapping[str, VehicleDims]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """(lengths, widths, heights, half_diagonals, colours, ego_index) of the vehicles `ids`, in order:
+    the snapshot's body arrays, rebuilt only when a vehicle enters or leaves."""
+    sizes = np.array([dims[vid][:3] for vid in ids], dtype=float).reshape(-1, 3)
+    lengths, widths, heights = sizes[:, 0].copy(), sizes[:, 1].copy(), sizes[:, 2].copy()
+    half_diagonals = 0.5 * np.hypot(lengths, widths)
+    colours = np.array([dims[vid][3] for vid in ids], dtype=float).reshape(-1, 3)
+    return lengths, widths, heights, half_diagonals, colours, ids.index(EGO_ID)
+
+
+def perceived_pedestrians(detections, wanted: set[str]) -> list[PerceivedPedestrian]:
+    """The pedestrians the sensors the stack gets (`wanted`) report, each once, by its first reporter
+    in the order onboard camera, onboard LiDAR, V2I."""
+    reported: list[PerceivedPedestrian] = []
+    sources = (
+        ("onboard_camera", detections.camera),
+        ("onboard_lidar", detections.lidar),
+        ("v2i", detections.v2i_received),
+    )
+    for source, found in sources:
+        if source not in wanted:
+            continue
+        for pid, xy in zip(found.ids, found.xy_m):
+            if all(p.ped_id != pid for p in reported):
+                reported.append(PerceivedPedestrian(pid, float(xy[0]), float(xy[1]), source))
+    return reported
+
+
+def in_scene_from_start(ped: PedestrianSetup) -> bool:
+    """Whether the pedestrian is in the scene (and in SUMO) from the episode's start."""
+    return ped.appear_time_s <= 0.0
+
+
+def appearing_pose(walker: PedestrianWalker) -> PedestrianPose:
+    """The pedestrian's pose as they enter the scene: at the start of their path, walking in to the
+    step-off point or waiting there."""
+    x, y, heading = walker.position(0.0)
+    if walker.kerb_reached_s is None:
+        return PedestrianPose(x, y, heading, walker.params.walking_speed_mps, "walking_in")
+    return PedestrianPose(x, y, heading, 0.0, "waiting")
+
+
+def episode_end(
+    time_s: float,
+    clearance_m: float,
+    ego: EgoState,
+    pose: PedestrianPose,
+    walker: PedestrianWalker,
+    ped: PedestrianSetup,
+    time_limit_s: float,
+) -> str | None:
+    """Why the episode ends at the state of `time_s`, or None when it goes on. A contact with a standing
+    ego is no collision (safety.collision): the step is logged and the episode goes on. `pose` is the
+    pedestrian's last pose in the scene (before they appear: where they will); a pedestrian who has left
+    the scene has cleared it; `clearance_m` is +inf while nobody is in the scene."""
+    if clearance_m <= 0.0 and ego.speed_mps >= STATIONARY_SPEED_MPS:
+        return "collision"
+    cleared = walker.cleared((ego.x_m, ego.y_m), ego.yaw_rad, ego.length_m, ego.width_m)
+    if cleared is None:  # the ego's heading does not cross the path: its rear past the pedestrian
+        lon = (pose.x_m - ego.x_m) * math.cos(ego.yaw_rad) + (pose.y_m - ego.y_m) * math.sin(ego.yaw_rad)
+        cleared = (lon < -(ego.length_m / 2 + ped.radius_m), walker.finished)
+    if all(cleared) and time_s > walker.crossing_from_s:
+        return "both_cleared"
+    if time_s >= time_limit_s:
+        return "time_limit"
+    return None
