@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo.cli import OneLineParser, check_seed
+from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
 from pedsafe_sumo.control.stack_calls import StackError
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
@@ -187,6 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
+    prepare_compiled_kernels()
     runner = EpisodeRunner(site, params, agent_class, gui=args.gui, agent_timeout_s=agent_timeout_s)
     try:
         for condition in conditions:

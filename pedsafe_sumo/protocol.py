@@ -1,6 +1,7 @@
 """Protocols: every value of a study fixed in one dated file before it runs.
 
     python -m pedsafe_sumo.batch --protocol protocols/paper-v7.toml --out DIR [--episodes N] [--workers K]
+    pedsafe-sumo batch --protocol paper-v7 --out DIR     # a bare name: a shipped protocol, from any folder
     python -m pedsafe_sumo.protocol write paper-v8 --date 2026-12-01 --out protocols/paper-v8.toml
 
 A protocol file (TOML) holds:
@@ -28,6 +29,7 @@ from typing import Any
 
 import tomllib
 
+from pedsafe_sumo import PROTOCOLS_DIR
 from pedsafe_sumo.cli import MAX_EPISODES, OneLineParser, check_seed
 from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params, overlay, validate
 from pedsafe_sumo.scenarios import specs
@@ -182,13 +184,33 @@ def with_parameters_before(named: dict[str, Any]) -> dict[str, Any]:
     return named
 
 
+def shipped_protocols() -> list[str]:
+    """Names of the protocols shipped with the package (protocols/ of the checkout, or its installed copy)."""
+    return sorted(p.stem for p in PROTOCOLS_DIR.glob("*.toml"))
+
+
+def find_protocol(path: Path) -> Path:
+    """The file a --protocol value names: an existing path as given; a bare name (paper-v7 or
+    paper-v7.toml) not found in the working folder is the shipped protocol of that name."""
+    if path.exists() or str(path.parent) != ".":
+        return path
+    shipped = PROTOCOLS_DIR / (path.name if path.suffix == ".toml" else f"{path.name}.toml")
+    return shipped if shipped.is_file() else path
+
+
 def load_protocol(path: Path) -> Protocol:
-    """Read and check a protocol file; raises ProtocolError naming the first problem."""
+    """Read and check a protocol file (a path, or a shipped protocol's name: find_protocol); raises
+    ProtocolError naming the first problem."""
+    path = find_protocol(path)
     try:
         data = path.read_bytes()
         tree = tomllib.loads(data.decode("utf-8"))
     except FileNotFoundError:
-        raise ProtocolError(f"protocol file not found: {path}") from None
+        shipped = ", ".join(shipped_protocols()) or "none"
+        raise ProtocolError(
+            f"protocol file not found: {path} (give a protocol file's path, or a shipped protocol's name: "
+            f"{shipped})"
+        ) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ProtocolError(f"protocol {path} is not valid TOML: {exc}") from None
     except OSError as exc:

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
 import pytest
 
 from pedsafe_sumo import REPO_ROOT
@@ -63,52 +62,8 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
 
 def compile_numba_kernels() -> None:
-    """One frame through every compiled kernel: the perception pipeline with a roadside unit and its
-    V2I link, the ray casting of the sight and vehicle-detection callers, and the clearance kernels."""
+    """One frame through every compiled kernel (the package's own warm-up, which says when it compiles)."""
     # Imported here: a run on one core never needs them before its tests do.
-    from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.perception import (
-        EgoPose,
-        Pedestrians,
-        RoadsideUnit,
-        SensorSuite,
-        StaticOccluders,
-        V2ILink,
-        VehicleBoxes,
-        WorldSnapshot,
-        perceive,
-    )
-    from pedsafe_sumo.perception.raycast import cast_rays
-    from pedsafe_sumo.safety.geometry_kernels import rectangle_circle_clearance_m, walks_into_body
+    from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 
-    grey, red = (120, 120, 120), (200, 30, 30)
-    vehicles = VehicleBoxes.build(
-        ["ego", "car"], [0.0, 15.0], [0.0, 3.0], [0.0, 0.3], [4.5, 4.8], [1.8, 1.9], [1.5, 1.6], [grey, grey]
-    )
-    pedestrians = Pedestrians.build(["ped"], [20.0], [-1.0], [0.25], [1.7], [red])
-    building = np.array([[30.0, 5.0], [40.0, 5.0], [40.0, 15.0], [30.0, 15.0]])
-    static = StaticOccluders.build(
-        [("b", "building", building, 0.0, 10.0, grey)],
-        [(25.0, -6.0, 0.15, 0.0, 2.5, (90, 60, 30)), (25.0, -6.0, 2.0, 2.5, 7.0, (40, 110, 40))],
-    )
-    unit = RoadsideUnit("rsu", 22.0, -12.0, 6.0, float(np.radians(90.0)), float(np.radians(30.0)))
-    suite = SensorSuite.from_params(load_params()["perception"], [unit])
-    link = V2ILink(suite.v2i, np.random.default_rng(1))
-    ego = EgoPose(0.0, 0.0, 0.0, "ego")
-    rng = np.random.default_rng(0)
-    for step in range(3):
-        perceive(
-            WorldSnapshot(0.05 * step, vehicles, pedestrians, static), ego, suite, rng, 0.05 * step, link
-        )
-    snapshot = WorldSnapshot(0.0, vehicles, pedestrians, static)
-    origin = np.array([[0.0, 0.0, 1.6], [0.0, 0.0, 1.6]])
-    direction = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    ones = np.ones(2, dtype=np.int64)
-    for skip_vehicle in (0, np.full(2, -1)):  # one for all groups; one per group (read-only once broadcast)
-        cast_rays(
-            snapshot, origin, direction, np.full(2, 50.0), np.arange(2), ones, np.full(2, -1), skip_vehicle
-        )
-    rectangle_circle_clearance_m(0.0, 0.0, 0.0, 4.5, 1.8, 3.0, 1.0, 0.25)
-    walks_into_body(
-        *(np.array([v]) for v in (0.0, 0.0, 0.0, 4.5, 1.8, 2.4)), 5.0, 0.0, 4.0, 0.0, 0.25, 0.3, 0.05
-    )
+    prepare_compiled_kernels()

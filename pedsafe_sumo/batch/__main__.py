@@ -242,8 +242,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--protocol",
         type=Path,
-        metavar="FILE.toml",
-        help="run a protocol file (protocols/): it fixes every value of the model; beside it only --episodes,"
+        metavar="FILE.toml|NAME",
+        help="run a protocol: a file, or the name of a shipped one (paper-v7): it fixes every value of the "
+        "model; beside it only --episodes,"
         " how the run is carried out (--workers, --recycle-chunks, --keep-logs, --out) and how it samples "
         "(--sampler, --is-*) may be given (docs/protocols.md)",
     )

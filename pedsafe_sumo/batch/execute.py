@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 import platform
-import subprocess
 import sys
 import time
 from datetime import datetime, timezone
@@ -16,7 +15,6 @@ import numpy
 import pandas
 from tqdm import tqdm
 
-from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.batch.chunks import Chunk, auto_chunk_size, plan_chunks
 from pedsafe_sumo.batch.executors import DaskBackend, ProcessPoolBackend
 from pedsafe_sumo.batch.plan import Plan
@@ -24,27 +22,15 @@ from pedsafe_sumo.batch.rundir import BatchRunDirectory, utc_now
 from pedsafe_sumo.batch.runner import ChunkOutput, worker_versions
 from pedsafe_sumo.batch.sampled import plan_sampled_chunks, run_sampled
 from pedsafe_sumo.batch.summary import print_table
+from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.timeout import TIMEOUT_STATUS
 from pedsafe_sumo.io.run_store import STATE_COMPLETE, STATE_RUNNING, STEPLOGS_DIR
 from pedsafe_sumo.io.step_logs import KEEP_ALL
 from pedsafe_sumo.network.sites import resolve_site
+from pedsafe_sumo.provenance import git_commit
 from pedsafe_sumo.safety.stats import ERROR_STATUS
 
 Backend = DaskBackend | ProcessPoolBackend
-
-
-def git_commit() -> str:
-    """The repository's commit, with "-dirty" when the work tree has changes; "" outside git."""
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=5
-        )
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=5
-        )
-        return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "") if out.returncode == 0 else ""
-    except (OSError, subprocess.SubprocessError):
-        return ""
 
 
 def _versions() -> dict[str, str]:
@@ -83,7 +69,8 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
         "workers": backend.n_workers,
         "executor": backend.description,
         "versions": _versions(),
-        "commit": git_commit(),
+        # Only when known: a package installed from a wheel has no commit to record.
+        **({"commit": commit} if (commit := git_commit()) else {}),
         "sessions": [],
         "wall_time_s": None,
         "episodes_per_s": None,
@@ -108,7 +95,7 @@ def run_batch(plan: Plan, backend: Backend, argv: list[str]) -> int:
         for note in run_dir.reopen():
             print(f"note: {note}", file=sys.stderr)
         commit = git_commit()
-        if commit != run_info.get("commit"):
+        if commit != run_info.get("commit", ""):
             print(
                 f"note: the run was started at commit {run_info.get('commit') or '?'}, this is "
                 f"{commit or '?'}",
@@ -133,11 +120,11 @@ def run_batch(plan: Plan, backend: Backend, argv: list[str]) -> int:
     total = sum(chunk.n_rows for chunk in chunks)
     done_rows = total - sum(chunk.n_rows for chunk in todo)
     session_index = len(run_info["sessions"])
-    session = {
+    session: dict[str, Any] = {
         "started_utc": utc_now(),
         "command": "python -m pedsafe_sumo.batch " + " ".join(argv),
         "executor": backend.description,
-        "commit": git_commit(),
+        **({"commit": commit} if (commit := git_commit()) else {}),
         "chunks_to_run": len(todo),
         "wall_time_s": None,
     }
@@ -150,6 +137,7 @@ def run_batch(plan: Plan, backend: Backend, argv: list[str]) -> int:
         f"{what} in {len(chunks)} chunk(s) of up to {plan.identity['chunk_size_pairs']} pair(s){resumed}; "
         f"{len(todo)} chunk(s) to run on {backend.description} -> {plan.out}"
     )
+    prepare_compiled_kernels()  # here, once: the workers then load them from numba's cache
     started = time.perf_counter()
     with tqdm(
         total=total, initial=done_rows, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr

@@ -15,7 +15,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo import WRITE_ROOT
 from pedsafe_sumo.batch.arguments import RUN_ARGUMENT_DEFAULTS, explicit_arguments, resumed_arguments
 from pedsafe_sumo.batch.chunks import EPISODE_SEED_RULE
 from pedsafe_sumo.batch.executors import MAX_RECYCLE_CHUNKS
@@ -177,7 +177,7 @@ def prepare(args: argparse.Namespace) -> Plan:
         agent_timeout_s=agent_timeout_s,
     )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
-    out = args.out or REPO_ROOT / "results" / f"{scenario}-{stamp}"
+    out = args.out or WRITE_ROOT / "results" / f"{scenario}-{stamp}"
     total, count_text = episode_count(scenarios, conditions, arguments, identity["sampler"])
     plan = Plan(arguments, scenarios, conditions, identity, config, out, recorded, total, count_text)
     if recorded is not None:

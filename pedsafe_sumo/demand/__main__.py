@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from pedsafe_sumo import ROUTES_DIR
+from pedsafe_sumo import WRITE_ROOT
 from pedsafe_sumo.cli import OneLineParser, check_seed
 from pedsafe_sumo.demand.generate import MAX_DURATION_S, generate_demand
 from pedsafe_sumo.demand.site import SiteError
@@ -28,7 +28,9 @@ def main(argv: list[str] | None = None) -> int:
         help=f"demand horizon in s, above 0 and at most {MAX_DURATION_S:g} (default 3600)",
     )
     parser.add_argument("--seed", type=int, default=1, help="run seed, 0 to 2**63 - 1 (default 1)")
-    parser.add_argument("--out", type=Path, default=ROUTES_DIR, help="output folder (default routes/)")
+    parser.add_argument(
+        "--out", type=Path, default=WRITE_ROOT / "routes", help="output folder (default routes/)"
+    )
     parser.add_argument("--params", type=Path, help="parameter TOML laid over the defaults")
     parser.add_argument("--net", type=Path, help="use this .net.xml instead of the site's network")
     args = parser.parse_args(argv)

@@ -32,6 +32,7 @@ from tqdm import tqdm
 
 from pedsafe_sumo import __version__
 from pedsafe_sumo.cli import OneLineParser, check_seed
+from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
@@ -138,6 +139,7 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     except NcapError as exc:
         runner.close()
         return error(f"site {site.name}: {exc}")
+    prepare_compiled_kernels()
     out.mkdir(parents=True, exist_ok=True)
     episodes: list[dict[str, Any]] = []
     started = time.perf_counter()

@@ -7,8 +7,9 @@ file: name, description, centre, clip radius, where its OpenStreetMap data came 
 the roadside poles, and the hashes that tie the derived files to the network they were made from.
 
 `resolve_site(name_or_path)` is the one way every command finds a site (`--site NAME_OR_PATH`):
-- a name (letters, digits, '_' or '-') is the folder networks/<name>/, or $PEDSAFE_NETWORKS_DIR/<name>/
-  when that variable is set;
+- a name (letters, digits, '_' or '-') is the folder <name>/ of the first folder of the search path that
+  holds one: each folder of $PEDSAFE_NETWORKS_DIR (separated by ':', ';' on Windows), then the shipped
+  sites (networks/ of the checkout, or the installed package's copy);
 - anything else (it has a '/', or is '.' or '..') is the path of the folder itself.
 It reads the site file and checks that the derived files (site file, poles, polygons) were made from the
 network in the folder: a network edited since, or a pole or building moved by hand, is refused in one
@@ -31,14 +32,14 @@ from pedsafe_sumo.network.traffic_lights import junctions_problem
 from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand
 
 OSM_DIR = REPO_ROOT / "osm"
-#: Environment variable naming another folder of site folders (<folder>/<site>/<site>.net.xml, ...) in
-#: place of networks/: a batch on a modified copy of a site, or a package installed away from its
-#: checkout. Read at every lookup, so worker processes started by a batch see what the batch saw.
+#: Environment variable naming folders of site folders (<folder>/<site>/<site>.net.xml, ...) searched
+#: before the shipped sites: the user's own sites, or a batch on a modified copy of a shipped site. Read at
+#: every lookup, so worker processes started by a batch see what the batch saw.
 NETWORKS_DIR_ENV = "PEDSAFE_NETWORKS_DIR"
 #: The help text of every command's --site.
 SITE_HELP = (
-    "study site: a name (the folder networks/NAME, or $PEDSAFE_NETWORKS_DIR/NAME) or the path of a site "
-    "folder written by tools/build_network.py [xueqing]"
+    "study site: a name (the folder NAME in $PEDSAFE_NETWORKS_DIR's folders, then in the shipped sites) or "
+    "the path of a site folder written by `pedsafe-sumo site build` [xueqing]"
 )
 DEFAULT_SITE = "xueqing"
 #: Files every site folder holds, by suffix; the first four are read by the episodes.
@@ -87,7 +88,7 @@ class Site:
     @property
     def rebuild_command(self) -> str:
         """The command that re-derives the site file, poles and polygons from the folder's network."""
-        return f"python tools/build_network.py --refresh {_shown(self.directory)}"
+        return f"pedsafe-sumo site build --refresh {_shown(self.directory)}"
 
 
 def _shown(path: Path) -> str:
@@ -97,30 +98,37 @@ def _shown(path: Path) -> str:
         return str(path)
 
 
-def networks_dir() -> Path:
-    override = os.environ.get(NETWORKS_DIR_ENV)
-    return Path(override) if override else NETWORKS_DIR
+def networks_dirs() -> list[Path]:
+    """The search path of site names: each folder of $PEDSAFE_NETWORKS_DIR, then the shipped sites."""
+    own = [Path(entry) for entry in os.environ.get(NETWORKS_DIR_ENV, "").split(os.pathsep) if entry]
+    return [*own, NETWORKS_DIR]
 
 
 def available_sites() -> list[str]:
-    """Names of the site folders under networks/ (or $PEDSAFE_NETWORKS_DIR)."""
-    root = networks_dir()
-    if not root.is_dir():
-        return []
-    return sorted(d.name for d in root.iterdir() if d.is_dir() and (d / f"{d.name}.site.json").is_file())
+    """Names of the site folders on the search path (networks_dirs)."""
+    names = {
+        d.name
+        for root in networks_dirs()
+        if root.is_dir()
+        for d in root.iterdir()
+        if d.is_dir() and (d / f"{d.name}.site.json").is_file()
+    }
+    return sorted(names)
 
 
 def site_folder(name_or_path: str | os.PathLike) -> Path:
     """The folder a --site value names (see the module docstring); SiteError if there is none."""
     text = str(name_or_path)
     if SITE_NAME.fullmatch(text):
-        folder = networks_dir() / text
-        if not folder.is_dir():
-            known = ", ".join(available_sites()) or "none"
-            raise SiteError(
-                f"unknown site '{text}' (known: {known}; or give the path of a site folder, e.g. ./{text})"
-            )
-        return folder
+        for root in networks_dirs():
+            if (root / text).is_dir():
+                return root / text
+        known = ", ".join(available_sites()) or "none"
+        looked = ", ".join(str(root) for root in networks_dirs())
+        raise SiteError(
+            f"unknown site '{text}' (known: {known}; looked in {looked}): give a site folder's path "
+            f"(--site ./{text}) or add the folder that holds {text}/ to ${NETWORKS_DIR_ENV}"
+        )
     folder = Path(text)
     if folder.is_file():
         raise SiteError(f"{folder} is a file: --site takes a site's name or its folder")
@@ -139,7 +147,7 @@ def _site_file_in(folder: Path) -> Path:
     if not found:
         raise SiteError(
             f"{folder} is not a site folder (no <name>.site.json): build one with "
-            f"python tools/build_network.py --osm FILE --center LAT,LON --name NAME --out {folder}"
+            f"pedsafe-sumo site build --osm FILE --center LAT,LON --name NAME --out {folder}"
         )
     raise SiteError(f"{folder} holds several site files ({', '.join(p.name for p in found)}): keep one")
 

@@ -8,9 +8,10 @@ the same surface (the last of vehicles, pedestrians, trees, walls, each in ascen
 are the same; only transcendental functions may differ from numpy's in the last bit.
 ``tests/perception/test_compiled_equivalence.py`` checks both paths against each other on random scenes.
 
-Compiled on first use and cached on disk (``cache=True``: beside this file in ``__pycache__``, else
-numba's user-wide cache directory, or ``NUMBA_CACHE_DIR``); where no cache location is writable the
-kernels compile once per process instead. Numba's cache is keyed on the file that defines a function
+Compiled on first use and cached on disk (``cache=True``) in the folder :mod:`.numba_cache` chooses
+(``NUMBA_CACHE_DIR``, by default under the user's cache folder); where no cache location is writable the
+kernels compile once per process instead. :func:`pedsafe_sumo.compiled_kernels.prepare_compiled_kernels`
+compiles them all at once, saying so. Numba's cache is keyed on the file that defines a function
 alone: the ``KIND_*`` codes of :mod:`.surfaces` used here are frozen into the cached code, and so are the
 functions of this file into the cached sensor kernels of :mod:`.kernels` (and
 :mod:`pedsafe_sumo.safety.geometry_kernels`). After changing this file or those constants, touch
@@ -26,6 +27,7 @@ import warnings
 import numba
 import numpy as np
 
+from .numba_cache import use_kernel_cache
 from .surfaces import (
     KIND_CYLINDER,
     KIND_GROUND,
@@ -39,6 +41,11 @@ from .world import EDGE_GRID_CELL_M
 
 _INF = np.inf
 
+# Before the first @_jit below: numba picks a function's cache folder when the function is decorated.
+KERNEL_CACHE_DIR = use_kernel_cache()
+#: Every compiled kernel of the package (pedsafe_sumo.compiled_kernels checks their cache).
+COMPILED_KERNELS: list[numba.core.dispatcher.Dispatcher] = []
+
 _warned_no_cache = False
 
 
@@ -46,7 +53,9 @@ def _jit(fn):
     # error_model="numpy": division by zero gives inf/nan as in numpy (the slab tests rely on it).
     global _warned_no_cache
     try:
-        return numba.njit(cache=True, error_model="numpy")(fn)
+        kernel = numba.njit(cache=True, error_model="numpy")(fn)
+        COMPILED_KERNELS.append(kernel)
+        return kernel
     except RuntimeError:  # no writable cache location: compile in every process instead
         if not _warned_no_cache:
             _warned_no_cache = True

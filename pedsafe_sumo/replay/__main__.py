@@ -27,6 +27,7 @@ from pathlib import Path
 import pandas as pd
 
 from pedsafe_sumo.cli import OneLineParser, check_range
+from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
 from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.ncap.suite import NcapRunner
 from pedsafe_sumo.network.sumo_inputs import SumoInputError, check_gui_site
@@ -260,6 +261,7 @@ def main(argv: list[str] | None = None) -> int:
             check_gui_site(logged.site, view=None)
     except (UsageError, ReplayError, SumoInputError) as exc:
         return error(str(exc))
+    prepare_compiled_kernels()
     if args.export_fcd is not None:
         say_header(logged, print)
         return export_fcd(logged, args.export_fcd, print)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pedsafe_sumo import OSM_ATTRIBUTION
+from pedsafe_sumo import OSM_ATTRIBUTION, SHIPPED_DIR
 from pedsafe_sumo.network.build import BuildError, build_site
 from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SITE_HELP, SiteError, UnknownSiteError, resolve_site
@@ -25,6 +25,13 @@ def main(argv: list[str] | None = None) -> int:
         site = resolve_site(args.site, verify=args.no_build)
     except UnknownSiteError as exc:
         parser.exit(2, f"error: {exc}\n")
+    if not args.no_build and site.directory.resolve().is_relative_to(SHIPPED_DIR):
+        # An installed package holds neither the OSM data a rebuild reads nor a folder the user may write.
+        parser.exit(
+            2,
+            f"error: site {site.name} is installed with the package: summarise it with --no-build; a rebuild "
+            "runs in a checkout of the repository, where its OpenStreetMap data is\n",
+        )
     if not args.no_build:
         # Rebuild from the committed clip when the source extract is not beside the checkout.
         # Only what the site file may name (network/site_paths.py, docs/trust.md).

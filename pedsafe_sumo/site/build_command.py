@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from pedsafe_sumo import NETWORKS_DIR
+from pedsafe_sumo import WRITE_ROOT
 from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
@@ -167,7 +167,7 @@ def _build(parser, args) -> BuildReport:
             2,
             f"build_network: error: radius must be positive and at most {MAX_RADIUS_M:g} m, got {radius_m}\n",
         )
-    out_dir = args.out_dir or (site.directory.parent / name if site else NETWORKS_DIR / name)
+    out_dir = args.out_dir or (site.directory.parent / name if site else WRITE_ROOT / "networks" / name)
     try:
         check_output_dir(out_dir, "--out", BuildError)
         if args.osm_out is not None:

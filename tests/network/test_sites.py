@@ -67,7 +67,7 @@ def test_unknown_sites_are_one_line(value, message):
 
 def test_a_folder_without_a_site_file_says_how_to_make_one(tmp_path):
     (tmp_path / "empty").mkdir()
-    with pytest.raises(SiteError, match=r"not a site folder .*tools/build_network.py .*--out"):
+    with pytest.raises(SiteError, match=r"not a site folder .*pedsafe-sumo site build .*--out"):
         resolve_site(str(tmp_path / "empty"))
 
 
@@ -88,7 +88,7 @@ def test_an_edited_network_is_refused_with_the_rebuild_command(tmp_path):
     end = text.index('"', start + 7)
     net.write_text(text[:start] + 'speed="8.33' + text[end:])
     message = _refused(folder, "xueqing.net.xml changed after its site file, poles and polygons were made")
-    assert f"python tools/build_network.py --refresh {folder}" in message
+    assert f"pedsafe-sumo site build --refresh {folder}" in message
 
 
 @pytest.mark.parametrize("suffix", ["rsu.add.xml", "poly.xml"])
