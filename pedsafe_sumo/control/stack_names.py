@@ -6,21 +6,14 @@ protocol file, run.json. Anything else is taken as "package.module:Class" itself
 
 from __future__ import annotations
 
-from importlib.util import find_spec
-
-#: name -> stack. "reference": the baseline stack an evaluation compares against; "paper-v7": the stack
-#: protocols/paper-v7.toml ran (it brakes for pedestrians only, forgets them after 0.5 s).
+#: name -> stack. "reference": the baseline stack an evaluation compares against; "human": an attentive
+#: human driver (docs/human_driver.md); "paper-v7": the stack protocols/paper-v7.toml ran (it brakes for
+#: pedestrians only, forgets them after 0.5 s).
 SHIPPED_STACKS: dict[str, str] = {
     "reference": "pedsafe_sumo.control.baseline:BaselineStack",
+    "human": "pedsafe_sumo.control.human:HumanDriverStack",
     "paper-v7": "pedsafe_sumo.control.reference:ReferenceStack",
 }
-#: Stacks registered only where their module is part of the installed package (one line each).
-OPTIONAL_STACKS: dict[str, str] = {
-    "human": "pedsafe_sumo.control.human:HumanDriverStack",
-}
-SHIPPED_STACKS.update(
-    {name: spec for name, spec in OPTIONAL_STACKS.items() if find_spec(spec.partition(":")[0]) is not None}
-)
 #: Joins an algorithm and a perception in one stack spec (control.agent.PERCEPTION_JOIN).
 _JOIN = "+"
 
