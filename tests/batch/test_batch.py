@@ -125,3 +125,22 @@ def test_automatic_chunk_size_gives_each_worker_several_chunks_of_at_most_25_pai
     assert auto_chunk_size(100, 2) == 7  # 15 chunks: about 8 per worker
     assert auto_chunk_size(10_000, 2) == 25
     assert auto_chunk_size(10_000, 64) == 20
+
+
+@pytest.mark.slow
+def test_approach_staging_gives_identical_tables_on_one_and_two_workers(tmp_path):
+    # The approach staging draws more (start distance, walk-in) and adds the pedestrian to SUMO mid-episode:
+    # still a function of the seed alone, whatever worker runs the pair.
+    args = (
+        "--scenario", "crossing,jaywalking", "--set", "staging=approach", "--episodes", "3",
+        "--seed", "5", "--chunk-size", "1",
+    )  # fmt: skip
+    tables = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"run{workers}"
+        proc = batch(*args, "--workers", workers, "--out", str(out))
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        tables.append(pd.read_parquet(out / "episodes.parquet"))
+    pd.testing.assert_frame_equal(tables[0], tables[1])
+    # The staging's own columns are drawn, not defaults: every pedestrian appears after the start.
+    assert (tables[0]["ped_appear_time_s"] > 0).any() and tables[0]["ego_start_distance_m"].min() >= 100.0
