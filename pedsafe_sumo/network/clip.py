@@ -14,17 +14,18 @@ fixed order, so the same input always gives the same file.
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NoReturn
 
 import osmium
 import osmium.io
 from osmium.osm import mutable
 from pyproj import Transformer
 
-from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.network.attribution import add_attribution_comment
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
 
@@ -312,8 +313,16 @@ def _id_order(obj_id: int) -> tuple[int, int]:
     return (0, obj_id) if obj_id > 0 else (1, -obj_id)
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse whose errors are one line (exit 2). pedsafe_sumo.cli has the same for the commands; it sits
+    above network/ (it imports the settings, which import the scenarios, which import network/)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"clip_osm: error: {message}\n")
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = OneLineParser(
+    parser = _OneLineParser(
         prog="clip_osm", description="Clip an OSM XML file to a circle, cutting ways at the boundary."
     )
     parser.add_argument("source", type=Path, help="OSM XML file")

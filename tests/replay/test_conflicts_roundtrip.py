@@ -34,9 +34,14 @@ RELATIVE_TOLERANCE = 1e-5
 @pytest.fixture(scope="module")
 def crossing_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("crossing") / "run"
+    # The conflicts tool measures the minimum clearance over every step of an interaction (proximity scope
+    # "episode"); the batch is asked for the same.
+    params = out.parent / "episode_scope.toml"
+    params.write_text('[safety]\nproximity_scope = "episode"\n', encoding="utf-8")
     proc = run_cli(
         "pedsafe_sumo.batch",
         *("--scenario", "crossing", "--episodes", "3", "--seed", "11", "--workers", "1", "--out", str(out)),
+        *("--params", str(params)),
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     return out
@@ -72,7 +77,7 @@ def roundtrip(run_dir, episode: int, condition: str, tmp_path) -> tuple[dict, pd
     )
     out = tmp_path / f"e{episode}{condition}.csv"
     proc = run_cli(
-        "pedsafe_sumo.conflicts", str(fcd), "--out", str(out), "--types", str(types), "--radius", "10000"
+        "pedsafe_sumo.conflicts", str(fcd), "--out", str(out), "--types", str(types), "--radius", "1000"
     )
     assert proc.returncode == 0, proc.stderr
     table = pd.read_csv(out)

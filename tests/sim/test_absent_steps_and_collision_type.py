@@ -3,6 +3,7 @@ classification of a collision (sim.outcome.collision_type), on hand-built logs."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -10,6 +11,7 @@ import pandas as pd
 import pytest
 
 from pedsafe_sumo.safety.episode import INDEX_COLUMNS, NO_PEDESTRIAN_INDEXES, episode_indexes
+from pedsafe_sumo.safety.proximity import SCOPE_EPISODE, default_proximity_model
 from pedsafe_sumo.sim.outcome import collision_type, first_collision_step
 
 DT = 0.05
@@ -50,8 +52,13 @@ def _same(a, b):
 
 def test_steps_without_the_pedestrian_change_no_index():
     log = _log(n_absent_before=30, n_left_after=25)
-    with_absent = episode_indexes(log, 40.0)
-    present_only = episode_indexes(log[~log["ped_state"].isin(["absent", "left"])], 40.0)
+    # The minimum clearance over every step with the pedestrian (scope "episode"): the pedestrian here
+    # stands beside the ego's path, which the interaction scope leaves out.
+    every_step = dataclasses.replace(default_proximity_model(), scope=SCOPE_EPISODE)
+    with_absent = episode_indexes(log, 40.0, proximity_model=every_step)
+    present_only = episode_indexes(
+        log[~log["ped_state"].isin(["absent", "left"])], 40.0, proximity_model=every_step
+    )
     assert set(with_absent) == set(INDEX_COLUMNS)
     for name in INDEX_COLUMNS:
         assert _same(with_absent[name], present_only[name]), name

@@ -15,7 +15,7 @@ import pytest
 
 from pedsafe_sumo.control.agent import load_agent_class
 from pedsafe_sumo.network.sites import get_site
-from pedsafe_sumo.params import load_params
+from pedsafe_sumo.params import load_params, with_overrides
 from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
 from pedsafe_sumo.protocol import VALUES_BEFORE
 from pedsafe_sumo.scenarios.specs import get_scenario
@@ -33,9 +33,10 @@ SEED = 0
 
 
 def _runner(params=None):
-    return EpisodeRunner(
-        SITE, params or load_params(), load_agent_class("tests.sim.plugin_agents:NeverBrakes")
-    )
+    # Minimum clearance over every step with the pedestrian in the scene (proximity scope "episode"):
+    # these tests follow the pedestrian after they cross, beside the ego's path.
+    every_step = with_overrides(load_params(), {"safety.proximity_scope": "episode"})
+    return EpisodeRunner(SITE, params or every_step, load_agent_class("tests.sim.plugin_agents:NeverBrakes"))
 
 
 @pytest.fixture(scope="module")
