@@ -163,6 +163,10 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "safety.proximity_scope": "episode",
         "safety.interaction_margin_m": 0.5,
         "safety.interaction_horizon_s": 4.0,
+        # The ego's physical limits: none applied before them.
+        "vehicle.physical_limits": False,
+        "vehicle.max_decel_mps2": 9.0,
+        "vehicle.max_accel_mps2": 4.0,
     },
 }
 

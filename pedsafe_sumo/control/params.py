@@ -24,3 +24,26 @@ def validate_algorithm(section: dict[str, Any], where: str) -> None:
     if section["max_decel_mps2"] <= 0:
         raise ParameterError(f"{where}.max_decel_mps2 must be > 0, got {section['max_decel_mps2']}")
     check_upper_bounds(section, ALGORITHM_UPPER_BOUNDS, where)
+
+
+VEHICLE_UPPER_BOUNDS: Bounds = {
+    "max_decel_mps2": (15.0, "1.5 g, beyond the grip of tyres on dry asphalt"),
+    "max_accel_mps2": (15.0, "1.5 g, beyond any road car's acceleration"),
+}
+
+
+@register_validator("vehicle")
+def validate_vehicle(section: dict[str, Any], where: str) -> None:
+    """[vehicle]: the ego's physical limits (sim/episode.py applies them to the stack's command)."""
+    if not isinstance(section.get("physical_limits"), bool):
+        raise ParameterError(f"{where}.physical_limits must be true or false")
+    for key in ("max_decel_mps2", "max_accel_mps2"):
+        value = section.get(key)
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+            or value <= 0
+        ):
+            raise ParameterError(f"{where}.{key} must be a finite number > 0, got {value!r}")
+    check_upper_bounds(section, VEHICLE_UPPER_BOUNDS, where)

@@ -1,4 +1,6 @@
-"""Lateral actuation of the ego beyond speed: lane changes and target paths, the TraCI way.
+"""Actuation of the ego: its physical limits on the commanded speed (`speed_change_limits_mps`: the
+parameter file's [vehicle] section), and lateral actuation beyond speed, lane changes and target paths,
+the TraCI way.
 
 * ``Command.lane_change`` (+1 left, -1 right): ``vehicle.changeLane`` to the neighbouring lane of the
   current edge, held for the rest of the episode (the ego's lane-change mode is 0: SUMO's own lane
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -118,3 +121,13 @@ def plan_lateral(
         return f"{what} refused: ({cx:.1f}, {cy:.1f}) leaves the road", None
     angle = float(yaw_rad_to_sumo_angle(heading))
     return "", lambda: api.vehicle.moveToXY(ego_id, "", -1, fx, fy, angle=angle, keepRoute=2)
+
+
+def speed_change_limits_mps(
+    vehicle: dict[str, Any] | None, step_length_s: float
+) -> tuple[float, float] | None:
+    """(most speed lost, most speed gained) in one step from the parameter file's [vehicle] limits, or
+    None when none apply (`physical_limits` false, or a run recorded before the section existed)."""
+    if not vehicle or not vehicle.get("physical_limits", False):
+        return None
+    return float(vehicle["max_decel_mps2"]) * step_length_s, float(vehicle["max_accel_mps2"]) * step_length_s

@@ -76,7 +76,7 @@ from pedsafe_sumo.scenarios.oncoming import load_oncoming
 from pedsafe_sumo.scenarios.placements import placement_of
 from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.scenarios.staging import draw_episode, stage_signals
-from pedsafe_sumo.sim.actuation import plan_lateral, wants_lateral
+from pedsafe_sumo.sim.actuation import plan_lateral, speed_change_limits_mps, wants_lateral
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.flush import step_if_moved_since
 from pedsafe_sumo.sim.observation import ObservationFeeds, granted_names, sensor_mounts
@@ -316,6 +316,9 @@ class EpisodeRunner:
                 timings=timings,
                 add_pedestrian=partial(self.staging.add_pedestrian_now, api, self.approach),
                 body_speeds=behaviour.body_rule_needs_notice,
+                speed_change_limits_mps=speed_change_limits_mps(
+                    self.params.get("vehicle"), self.step_length_s
+                ),
             )
         finally:
             run_step.stop()
@@ -377,6 +380,7 @@ def _drive(
     timings: dict[str, float],
     add_pedestrian: Callable[[], None] | None = None,
     body_speeds: bool = False,
+    speed_change_limits_mps: tuple[float, float] | None = None,
 ) -> EpisodeTrace:
     """Step a staged episode from the pedestrian's first `pose` until it ends (module docstring).
 
@@ -550,7 +554,13 @@ def _drive(
 
         # Actuate the ego, move the pedestrian, advance SUMO.
         t4 = clock()
-        api.vehicle.setSpeed(EGO_ID, target_mps)
+        if speed_change_limits_mps is None:
+            api.vehicle.setSpeed(EGO_ID, target_mps)
+        else:  # what the ego can do in one step, whatever was commanded (the log keeps the command)
+            down_mps, up_mps = speed_change_limits_mps
+            api.vehicle.setSpeed(
+                EGO_ID, max(0.0, min(max(target_mps, ego_speed - down_mps), ego_speed + up_mps))
+            )
         if steer is not None:
             steer()
         if in_scene:
