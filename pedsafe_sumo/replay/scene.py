@@ -33,6 +33,13 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.perception.sensors import CameraSpec
+from pedsafe_sumo.replay.annotate import (
+    LegendEntry,
+    draw_legend,
+    draw_pedestrian_marker,
+    draw_stamp,
+    world_to_pixel,
+)
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
@@ -75,6 +82,8 @@ class ScreenshotRequest:
     step_index: int
     width_px: int
     height_px: int
+    #: Stamped in the picture's top-left corner: the time and the moment, what it measures, the episode.
+    stamp_lines: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -248,8 +257,46 @@ class ReplayScene:
             self._request_screenshot(api, shot)
         elif k == shot.step_index:
             wait_for_file(self._canvas_path(shot), SCREENSHOT_TIMEOUT_S)
-            crop_to(self._canvas_path(shot), shot.path, shot.width_px, shot.height_px)
+            shown = self.reference.iloc[shot.step_index]
+            ped_xy = (float(shown["ped_x_m"]), float(shown["ped_y_m"]))
+            finish_screenshot(
+                self._canvas_path(shot),
+                shot,
+                api.gui.getBoundary(VIEW_ID),
+                ped_xy if all(map(math.isfinite, ped_xy)) else None,
+                self.legend(shot.step_index),
+            )
             raise ScreenshotTaken(str(shot.path))
+
+    def legend(self, step_index: int) -> list[LegendEntry]:
+        """The legend of the frame of `step_index`: the road users and the drawings it holds."""
+        if self.scene_colours:
+            entries = [LegendEntry("ego (its own colour)", self.setup.ego.colour_rgb, "box")]
+        else:
+            entries = [LegendEntry("ego", EGO_RGBA[:3], "box")]
+        entries.append(LegendEntry("pedestrian", PEDESTRIAN_RGBA[:3], "ring"))
+        if self.setup.parked:
+            entries.append(
+                LegendEntry(
+                    "kerb-lane vehicles (occluder, queue)"
+                    + (" in their own colours" if self.scene_colours else ""),
+                    tuple(self.setup.parked[0].colour_rgb)
+                    if self.scene_colours
+                    else KERB_LANE_VEHICLE_RGBA[:3],
+                    "box",
+                )
+            )
+        if self.setup.background:
+            entries.append(LegendEntry("other vehicles (their own colours)", (150, 150, 150), "box"))
+        entries.append(LegendEntry("onboard camera view, LiDAR range", ONBOARD_CAMERA_FOV_RGBA[:3], "line"))
+        if self.sensors.roadside_units:
+            entries.append(LegendEntry("roadside camera pole", ROADSIDE_FOV_RGBA[:3], "box"))
+            entries.append(LegendEntry("roadside camera view", ROADSIDE_FOV_RGBA[:3], "line"))
+        for marker in self.markers:
+            if marker.step_index <= step_index:
+                rgba = ONBOARD_DETECTION_RGBA if marker.kind == "onboard" else ROADSIDE_DETECTION_RGBA
+                entries.append(LegendEntry(f"first {marker.kind} detection", rgba[:3], "dot"))
+        return entries
 
     # ------------------------------------------------------------------ view
     def _start(self, api, row: dict[str, Any]) -> None:
@@ -387,15 +434,31 @@ def wait_for_file(path: Path, timeout_s: float) -> None:
     raise TimeoutError(f"sumo-gui did not write {path} within {timeout_s:.0f} s")
 
 
-def crop_to(canvas_path: Path, path: Path, width_px: int, height_px: int) -> None:
-    """The centre `width_px` x `height_px` of the rendered canvas (all of it where it is smaller), written
-    to `path`; the canvas file is removed."""
+def finish_screenshot(
+    canvas_path: Path,
+    shot: ScreenshotRequest,
+    view_boundary,
+    ped_xy: tuple[float, float] | None,
+    legend: list[LegendEntry],
+) -> None:
+    """The centre `shot.width_px` x `shot.height_px` of the rendered canvas (all of it where it is
+    smaller), with the pedestrian's ring (at `ped_xy`, when in the scene), the stamp and the legend,
+    written to `shot.path`; the canvas file is removed. `view_boundary` is the world box the canvas
+    shows (gui.getBoundary)."""
     image = cv2.imread(str(canvas_path), cv2.IMREAD_COLOR)
     if image is None:
         raise RuntimeError(f"sumo-gui wrote an unreadable screenshot {canvas_path}")
     height, width = image.shape[:2]
-    top, left = max(0, (height - height_px) // 2), max(0, (width - width_px) // 2)
-    cropped = image[top : top + height_px, left : left + width_px]
+    top, left = max(0, (height - shot.height_px) // 2), max(0, (width - shot.width_px) // 2)
+    cropped = np.ascontiguousarray(image[top : top + shot.height_px, left : left + shot.width_px])
+    if ped_xy is not None:
+        column, row = world_to_pixel(ped_xy, view_boundary, (width, height))
+        draw_pedestrian_marker(cropped, (column - left, row - top), PEDESTRIAN_RGBA[:3])
+    if shot.stamp_lines:
+        draw_stamp(cropped, list(shot.stamp_lines))
+    if legend:
+        draw_legend(cropped, legend)
+    path = shot.path
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
     if not cv2.imwrite(str(tmp), cropped):
         raise RuntimeError(f"cannot write {path}")
