@@ -186,19 +186,32 @@ def first_detection_markers(log: pd.DataFrame, sensors, condition: str) -> list[
     return markers
 
 
+def ring_shape(row: dict[str, Any]) -> list[tuple[float, float]]:
+    """The white ring around the pedestrian; shrunk to a point on the ego (invisible) while the pedestrian
+    is not in the scene (NaN position, before they appear and after they leave)."""
+    x, y = row["ped_x_m"], row["ped_y_m"]
+    if math.isfinite(x) and math.isfinite(y):
+        return circle_xy((x, y), RING_RADIUS_M, RING_SEGMENTS)
+    return circle_xy((row["ego_x_m"], row["ego_y_m"]), 0.0, RING_SEGMENTS)
+
+
 def screenshot_frame(
     log: pd.DataFrame, step_index: int, minimum_width_m: float, aspect: float
 ) -> tuple[tuple[float, float], tuple[float, float]]:
     """Centre and size (width, height in metres) of the picture of step `step_index`: the ego (SUMO's
     position of it, the front bumper) and the pedestrian with 10 m to spare around them, centred on
-    their midpoint, at least `minimum_width_m` wide; `aspect` is width / height."""
+    their midpoint, at least `minimum_width_m` wide; `aspect` is width / height. A step without the
+    pedestrian in the scene (NaN position) is framed on the ego alone."""
     row = log.iloc[step_index]
     half_length_m = row.ego_length_m / 2
     front_x = row.ego_x_m + half_length_m * math.cos(row.ego_yaw_rad)
     front_y = row.ego_y_m + half_length_m * math.sin(row.ego_yaw_rad)
-    dx, dy = abs(row.ped_x_m - front_x), abs(row.ped_y_m - front_y)
+    ped_x, ped_y = row.ped_x_m, row.ped_y_m
+    if not (math.isfinite(ped_x) and math.isfinite(ped_y)):
+        ped_x, ped_y = front_x, front_y
+    dx, dy = abs(ped_x - front_x), abs(ped_y - front_y)
     width_m = max(minimum_width_m, dx + 20.0, (dy + 20.0) * aspect)
-    centre = ((front_x + row.ped_x_m) / 2, (front_y + row.ped_y_m) / 2)
+    centre = ((front_x + ped_x) / 2, (front_y + ped_y) / 2)
     return (float(centre[0]), float(centre[1])), (float(width_m), float(width_m / aspect))
 
 
@@ -243,9 +256,7 @@ class ReplayScene:
             # Moved by hand: SUMO 1.28 crashes (segmentation fault) in the step after a collision when a
             # polygon tracks the person with addDynamics. Drawn in the next frame, the ring trails the
             # pedestrian by one step (under 0.15 m), well inside its 1.2 m radius.
-            api.polygon.setShape(
-                PEDESTRIAN_RING_ID, circle_xy((row["ped_x_m"], row["ped_y_m"]), RING_RADIUS_M, RING_SEGMENTS)
-            )
+            api.polygon.setShape(PEDESTRIAN_RING_ID, ring_shape(row))
         for marker in self.markers:
             # Drawn in the hook before their step so that they are in that step's frame.
             if marker.step_index == k + 1 or (marker.step_index == 0 and k == 0):
@@ -311,7 +322,7 @@ class ReplayScene:
         self._draw_sensors(api, row)
         api.polygon.add(
             PEDESTRIAN_RING_ID,
-            circle_xy((row["ped_x_m"], row["ped_y_m"]), RING_RADIUS_M, RING_SEGMENTS),
+            ring_shape(row),
             PEDESTRIAN_RING_RGBA,
             fill=False,
             layer=MARKER_LAYER,
