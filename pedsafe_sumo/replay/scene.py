@@ -246,6 +246,7 @@ class ReplayScene:
             )
             self.label_offset_m = LABEL_OFFSET_SHARE * self.shot_size_m[0]
         self.step_index = 0
+        self.pedestrian_coloured = False
 
     def __call__(self, api, row: dict[str, Any]) -> None:
         k = self.step_index
@@ -257,6 +258,10 @@ class ReplayScene:
             # polygon tracks the person with addDynamics. Drawn in the next frame, the ring trails the
             # pedestrian by one step (under 0.15 m), well inside its 1.2 m radius.
             api.polygon.setShape(PEDESTRIAN_RING_ID, ring_shape(row))
+        if not self.scene_colours and not self.pedestrian_coloured and PED_ID in api.person.getIDList():
+            # A staging that lets the pedestrian appear later adds them to SUMO then.
+            api.person.setColor(PED_ID, PEDESTRIAN_RGBA)
+            self.pedestrian_coloured = True
         for marker in self.markers:
             # Drawn in the hook before their step so that they are in that step's frame.
             if marker.step_index == k + 1 or (marker.step_index == 0 and k == 0):
@@ -318,7 +323,6 @@ class ReplayScene:
             api.vehicle.setColor(EGO_ID, EGO_RGBA)
             for vehicle in self.setup.parked:
                 api.vehicle.setColor(vehicle.vehicle_id, KERB_LANE_VEHICLE_RGBA)
-            api.person.setColor(PED_ID, PEDESTRIAN_RGBA)
         self._draw_sensors(api, row)
         api.polygon.add(
             PEDESTRIAN_RING_ID,
