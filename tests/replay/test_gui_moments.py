@@ -1,6 +1,7 @@
 """Screenshots of chosen moments (under Xvfb): the step `--at closest-approach` names, worked out from the
 case log here; the pedestrian's ring at least 20 px across whatever the zoom; the stamp in the top-left
-corner (black text on white, pedsafe_sumo/replay/annotate.py).
+corner (black text on white, pedsafe_sumo/replay/annotate.py); a pedestrian who appears after the
+first step (the approach staging), before they appear and once there.
 """
 
 from __future__ import annotations
@@ -46,10 +47,11 @@ def assert_stamped(image: np.ndarray) -> None:
 
 
 def shoot(run_dir, out, *args: str):
+    episode = () if "--episode" in args else ("--episode", "1")
     proc = run_cli(
         "pedsafe_sumo.replay",
         str(run_dir),
-        *("--episode", "1", "--condition", "sv", "--screenshot", str(out), *args),
+        *(*episode, "--condition", "sv", "--screenshot", str(out), *args),
         env=GUI_ENV,
         timeout=240,
     )
@@ -89,4 +91,34 @@ def test_default_moment_of_a_collision_zoomed_out_keeps_the_ring_and_the_stamp(r
     image = read_rgb(out)
     assert_stamped(image)
     width_px, height_px = ring_size_px(image)
+    assert 20 <= width_px <= 60 and 20 <= height_px <= 60, (width_px, height_px)
+
+
+@pytest.mark.gui
+@pytest.mark.slow
+@pytest.mark.skipif(not HAVE_DISPLAY and not os.environ.get("CI"), reason="needs Xvfb (apt-get install xvfb)")
+def test_a_pedestrian_who_appears_later_is_ringed_when_there_and_absent_before(tmp_path):
+    run_dir = tmp_path / "approach"
+    proc = run_cli(
+        "pedsafe_sumo.batch",
+        *("--scenario", "jaywalking", "--episodes", "1", "--seed", "3", "--workers", "1"),
+        *("--set", "staging=approach", "--keep-logs", "all", "--out", str(run_dir)),
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    steps = pd.concat(pd.read_parquet(p) for p in sorted((run_dir / "steplogs").glob("*.parquet")))
+    log = steps[steps["condition"] == "sv"].reset_index(drop=True)
+    absent = ~(np.isfinite(log["ped_x_m"]) & np.isfinite(log["ped_y_m"]))
+    assert absent.iloc[0], "the pedestrian of this episode is in the scene from the start"
+    before_s = float(log["time_s"][int(absent.to_numpy().argmin()) - 1])  # the last step before they appear
+
+    early = shoot(run_dir, tmp_path / "early.png", "--episode", "0", "--at", f"{before_s}")
+    assert f"t = {before_s:.2f} s: the pedestrian is not in the scene" in early.stdout, early.stdout
+    image = read_rgb(tmp_path / "early.png")
+    assert_stamped(image)
+    orange = np.all(np.abs(image - np.array(PEDESTRIAN_ORANGE)) <= 40, axis=-1)
+    assert orange.sum() < 300  # the legend's swatch only: no ring
+
+    default = shoot(run_dir, tmp_path / "default.png", "--episode", "0")
+    assert "screenshot at the" in default.stdout, default.stdout
+    width_px, height_px = ring_size_px(read_rgb(tmp_path / "default.png"))
     assert 20 <= width_px <= 60 and 20 <= height_px <= 60, (width_px, height_px)
