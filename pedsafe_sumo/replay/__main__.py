@@ -33,6 +33,7 @@ from pedsafe_sumo.ncap.suite import NcapRunner
 from pedsafe_sumo.network.sumo_inputs import SumoInputError, check_gui_site
 from pedsafe_sumo.replay.check import CHECKED_OUTCOME, TrajectoryCheck, outcome_mismatches
 from pedsafe_sumo.replay.fcd import FcdRecorder, write_fcd
+from pedsafe_sumo.replay.moments import find_moment, moment_step  # noqa: F401 - moment_step: the CLI's API
 from pedsafe_sumo.replay.rundir import LoggedEpisode, ReplayError, load_logged_episode
 from pedsafe_sumo.replay.scene import (
     EGO_RGBA,
@@ -102,7 +103,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--at",
         metavar="MOMENT",
-        help="moment of --screenshot: first-detection, collision or a time in seconds [collision]",
+        help="moment of --screenshot: collision, least-ttc, closest-approach, first-detection or a time in "
+        "seconds [the collision, else the least TTC, else the closest approach]",
     )
     parser.add_argument(
         "--size",
@@ -141,8 +143,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def check_args(args: argparse.Namespace) -> tuple[int, int]:
     if args.at is not None and args.screenshot is None:
         raise UsageError("--at chooses the moment of --screenshot: give --screenshot FILE too")
-    if args.screenshot is not None and args.at is None:
-        args.at = "collision"
     if args.screenshot is not None and args.export_fcd is not None:
         raise UsageError("--screenshot and --export-fcd are separate runs: give one of them")
     if args.export_xosc is not None and (args.screenshot is not None or args.export_fcd is not None):
@@ -170,32 +170,6 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         if path is not None:
             check_output_file(path, option, UsageError, make_parents=True)
     return width_px, height_px
-
-
-def moment_step(reference: pd.DataFrame, moment: str, logged: LoggedEpisode) -> tuple[int, str]:
-    """Index of the reference step `--at` names, and a phrase saying which moment it is."""
-    times = reference["time_s"].to_numpy()
-    if moment == "collision":
-        hits = (reference["clearance_m"] <= 0.0).to_numpy().nonzero()[0]
-        if hits.size == 0:
-            raise ReplayError(
-                f"there is no collision in {logged.describe()} (it ended at t={times[-1]:.2f} s without one)"
-            )
-        return int(hits[0]), "the collision"
-    if moment == "first-detection":
-        seen = reference["perceived"].to_numpy(bool).nonzero()[0]
-        if seen.size == 0:
-            raise ReplayError(f"the AD stack never perceived the pedestrian in {logged.describe()}")
-        return int(seen[0]), "the first detection"
-    try:
-        time_s = float(moment)
-    except ValueError:
-        raise ReplayError(
-            f"--at must be first-detection, collision or a time in seconds, got '{moment}'"
-        ) from None
-    if not math.isfinite(time_s) or time_s < 0.0 or time_s > times[-1] + 1e-9:
-        raise ReplayError(f"--at {moment}: the episode runs from t=0 to t={times[-1]:.2f} s")
-    return int((times >= time_s - 1e-9).nonzero()[0][0]), "the requested time"
 
 
 def runner_class(logged: LoggedEpisode) -> type[EpisodeRunner]:
@@ -401,15 +375,18 @@ def plan_replay(logged: LoggedEpisode, args: argparse.Namespace, size_px: tuple[
         headless.close()
     screenshot = None
     if args.screenshot is not None:
-        step_index, what = moment_step(reference, args.at, logged)
+        moment = find_moment(reference, args.at, logged.describe())
+        step_index = moment.step_index
         if step_index == 0:
             step_index = 1
             say(
                 f"  note: the first step (t={reference['time_s'].iloc[0]:.2f} s) is never drawn; "
                 "rendering the next one"
             )
-        screenshot = ScreenshotRequest(args.screenshot.resolve(), step_index, *size_px)
-        say(f"  rendering {what}: t={reference['time_s'].iloc[step_index]:.2f} s")
+        time_s = float(reference["time_s"].iloc[step_index])
+        stamp = (f"t = {time_s:.2f} s  {moment.phrase}", moment.detail, logged.describe())
+        screenshot = ScreenshotRequest(args.screenshot.resolve(), step_index, *size_px, stamp_lines=stamp)
+        say(moment.line())
     return ReplayPlan(setup, reference, screenshot)
 
 

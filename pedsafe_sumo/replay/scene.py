@@ -33,6 +33,13 @@ import numpy as np
 import pandas as pd
 
 from pedsafe_sumo.perception.sensors import CameraSpec
+from pedsafe_sumo.replay.annotate import (
+    LegendEntry,
+    draw_legend,
+    draw_pedestrian_marker,
+    draw_stamp,
+    world_to_pixel,
+)
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 
@@ -75,6 +82,8 @@ class ScreenshotRequest:
     step_index: int
     width_px: int
     height_px: int
+    #: Stamped in the picture's top-left corner: the time and the moment, what it measures, the episode.
+    stamp_lines: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -177,19 +186,32 @@ def first_detection_markers(log: pd.DataFrame, sensors, condition: str) -> list[
     return markers
 
 
+def ring_shape(row: dict[str, Any]) -> list[tuple[float, float]]:
+    """The white ring around the pedestrian; shrunk to a point on the ego (invisible) while the pedestrian
+    is not in the scene (NaN position, before they appear and after they leave)."""
+    x, y = row["ped_x_m"], row["ped_y_m"]
+    if math.isfinite(x) and math.isfinite(y):
+        return circle_xy((x, y), RING_RADIUS_M, RING_SEGMENTS)
+    return circle_xy((row["ego_x_m"], row["ego_y_m"]), 0.0, RING_SEGMENTS)
+
+
 def screenshot_frame(
     log: pd.DataFrame, step_index: int, minimum_width_m: float, aspect: float
 ) -> tuple[tuple[float, float], tuple[float, float]]:
     """Centre and size (width, height in metres) of the picture of step `step_index`: the ego (SUMO's
     position of it, the front bumper) and the pedestrian with 10 m to spare around them, centred on
-    their midpoint, at least `minimum_width_m` wide; `aspect` is width / height."""
+    their midpoint, at least `minimum_width_m` wide; `aspect` is width / height. A step without the
+    pedestrian in the scene (NaN position) is framed on the ego alone."""
     row = log.iloc[step_index]
     half_length_m = row.ego_length_m / 2
     front_x = row.ego_x_m + half_length_m * math.cos(row.ego_yaw_rad)
     front_y = row.ego_y_m + half_length_m * math.sin(row.ego_yaw_rad)
-    dx, dy = abs(row.ped_x_m - front_x), abs(row.ped_y_m - front_y)
+    ped_x, ped_y = row.ped_x_m, row.ped_y_m
+    if not (math.isfinite(ped_x) and math.isfinite(ped_y)):
+        ped_x, ped_y = front_x, front_y
+    dx, dy = abs(ped_x - front_x), abs(ped_y - front_y)
     width_m = max(minimum_width_m, dx + 20.0, (dy + 20.0) * aspect)
-    centre = ((front_x + row.ped_x_m) / 2, (front_y + row.ped_y_m) / 2)
+    centre = ((front_x + ped_x) / 2, (front_y + ped_y) / 2)
     return (float(centre[0]), float(centre[1])), (float(width_m), float(width_m / aspect))
 
 
@@ -224,6 +246,7 @@ class ReplayScene:
             )
             self.label_offset_m = LABEL_OFFSET_SHARE * self.shot_size_m[0]
         self.step_index = 0
+        self.pedestrian_coloured = False
 
     def __call__(self, api, row: dict[str, Any]) -> None:
         k = self.step_index
@@ -234,9 +257,11 @@ class ReplayScene:
             # Moved by hand: SUMO 1.28 crashes (segmentation fault) in the step after a collision when a
             # polygon tracks the person with addDynamics. Drawn in the next frame, the ring trails the
             # pedestrian by one step (under 0.15 m), well inside its 1.2 m radius.
-            api.polygon.setShape(
-                PEDESTRIAN_RING_ID, circle_xy((row["ped_x_m"], row["ped_y_m"]), RING_RADIUS_M, RING_SEGMENTS)
-            )
+            api.polygon.setShape(PEDESTRIAN_RING_ID, ring_shape(row))
+        if not self.scene_colours and not self.pedestrian_coloured and PED_ID in api.person.getIDList():
+            # A staging that lets the pedestrian appear later adds them to SUMO then.
+            api.person.setColor(PED_ID, PEDESTRIAN_RGBA)
+            self.pedestrian_coloured = True
         for marker in self.markers:
             # Drawn in the hook before their step so that they are in that step's frame.
             if marker.step_index == k + 1 or (marker.step_index == 0 and k == 0):
@@ -248,8 +273,46 @@ class ReplayScene:
             self._request_screenshot(api, shot)
         elif k == shot.step_index:
             wait_for_file(self._canvas_path(shot), SCREENSHOT_TIMEOUT_S)
-            crop_to(self._canvas_path(shot), shot.path, shot.width_px, shot.height_px)
+            shown = self.reference.iloc[shot.step_index]
+            ped_xy = (float(shown["ped_x_m"]), float(shown["ped_y_m"]))
+            finish_screenshot(
+                self._canvas_path(shot),
+                shot,
+                api.gui.getBoundary(VIEW_ID),
+                ped_xy if all(map(math.isfinite, ped_xy)) else None,
+                self.legend(shot.step_index),
+            )
             raise ScreenshotTaken(str(shot.path))
+
+    def legend(self, step_index: int) -> list[LegendEntry]:
+        """The legend of the frame of `step_index`: the road users and the drawings it holds."""
+        if self.scene_colours:
+            entries = [LegendEntry("ego (its own colour)", self.setup.ego.colour_rgb, "box")]
+        else:
+            entries = [LegendEntry("ego", EGO_RGBA[:3], "box")]
+        entries.append(LegendEntry("pedestrian", PEDESTRIAN_RGBA[:3], "ring"))
+        if self.setup.parked:
+            entries.append(
+                LegendEntry(
+                    "kerb-lane vehicles (occluder, queue)"
+                    + (" in their own colours" if self.scene_colours else ""),
+                    tuple(self.setup.parked[0].colour_rgb)
+                    if self.scene_colours
+                    else KERB_LANE_VEHICLE_RGBA[:3],
+                    "box",
+                )
+            )
+        if self.setup.background:
+            entries.append(LegendEntry("other vehicles (their own colours)", (150, 150, 150), "box"))
+        entries.append(LegendEntry("onboard camera view, LiDAR range", ONBOARD_CAMERA_FOV_RGBA[:3], "line"))
+        if self.sensors.roadside_units:
+            entries.append(LegendEntry("roadside camera pole", ROADSIDE_FOV_RGBA[:3], "box"))
+            entries.append(LegendEntry("roadside camera view", ROADSIDE_FOV_RGBA[:3], "line"))
+        for marker in self.markers:
+            if marker.step_index <= step_index:
+                rgba = ONBOARD_DETECTION_RGBA if marker.kind == "onboard" else ROADSIDE_DETECTION_RGBA
+                entries.append(LegendEntry(f"first {marker.kind} detection", rgba[:3], "dot"))
+        return entries
 
     # ------------------------------------------------------------------ view
     def _start(self, api, row: dict[str, Any]) -> None:
@@ -260,11 +323,10 @@ class ReplayScene:
             api.vehicle.setColor(EGO_ID, EGO_RGBA)
             for vehicle in self.setup.parked:
                 api.vehicle.setColor(vehicle.vehicle_id, KERB_LANE_VEHICLE_RGBA)
-            api.person.setColor(PED_ID, PEDESTRIAN_RGBA)
         self._draw_sensors(api, row)
         api.polygon.add(
             PEDESTRIAN_RING_ID,
-            circle_xy((row["ped_x_m"], row["ped_y_m"]), RING_RADIUS_M, RING_SEGMENTS),
+            ring_shape(row),
             PEDESTRIAN_RING_RGBA,
             fill=False,
             layer=MARKER_LAYER,
@@ -387,15 +449,31 @@ def wait_for_file(path: Path, timeout_s: float) -> None:
     raise TimeoutError(f"sumo-gui did not write {path} within {timeout_s:.0f} s")
 
 
-def crop_to(canvas_path: Path, path: Path, width_px: int, height_px: int) -> None:
-    """The centre `width_px` x `height_px` of the rendered canvas (all of it where it is smaller), written
-    to `path`; the canvas file is removed."""
+def finish_screenshot(
+    canvas_path: Path,
+    shot: ScreenshotRequest,
+    view_boundary,
+    ped_xy: tuple[float, float] | None,
+    legend: list[LegendEntry],
+) -> None:
+    """The centre `shot.width_px` x `shot.height_px` of the rendered canvas (all of it where it is
+    smaller), with the pedestrian's ring (at `ped_xy`, when in the scene), the stamp and the legend,
+    written to `shot.path`; the canvas file is removed. `view_boundary` is the world box the canvas
+    shows (gui.getBoundary)."""
     image = cv2.imread(str(canvas_path), cv2.IMREAD_COLOR)
     if image is None:
         raise RuntimeError(f"sumo-gui wrote an unreadable screenshot {canvas_path}")
     height, width = image.shape[:2]
-    top, left = max(0, (height - height_px) // 2), max(0, (width - width_px) // 2)
-    cropped = image[top : top + height_px, left : left + width_px]
+    top, left = max(0, (height - shot.height_px) // 2), max(0, (width - shot.width_px) // 2)
+    cropped = np.ascontiguousarray(image[top : top + shot.height_px, left : left + shot.width_px])
+    if ped_xy is not None:
+        column, row = world_to_pixel(ped_xy, view_boundary, (width, height))
+        draw_pedestrian_marker(cropped, (column - left, row - top), PEDESTRIAN_RGBA[:3])
+    if shot.stamp_lines:
+        draw_stamp(cropped, list(shot.stamp_lines))
+    if legend:
+        draw_legend(cropped, legend)
+    path = shot.path
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
     if not cv2.imwrite(str(tmp), cropped):
         raise RuntimeError(f"cannot write {path}")

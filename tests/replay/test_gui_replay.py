@@ -54,7 +54,7 @@ def test_screenshot_of_a_logged_collision_shows_the_ego_and_the_pedestrian(repla
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     log = pd.read_parquet(case_files(replay_run, 1, "sv")[0])
     collision_s = log.loc[log["clearance_m"] <= 0, "time_s"].iloc[0]
-    assert f"rendering the collision: t={collision_s:.2f} s" in proc.stdout
+    assert f"screenshot at the collision, t = {collision_s:.2f} s" in proc.stdout
 
     image = read_rgb(out)
     height, width, _ = image.shape
