@@ -25,7 +25,8 @@ from functools import lru_cache
 
 import sumolib
 
-from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.network.approaches import LEG_NAME, legs_at
+from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
 
@@ -155,8 +156,23 @@ class Approach:
         )
 
 
-#: The arms an approach can come from (compass sectors of the junction, network frame).
+#: The arms an approach can come from when each leg of the junction lies alone in its compass sector
+#: (network frame); other legs are named as network.approaches.leg_names says (NE, ..., B055).
 ARMS = ("N", "E", "S", "W")
+
+
+def is_leg_name(text: str) -> bool:
+    """Whether `text` is a name a leg of a junction can have (N, E, S, W, NE, SE, SW, NW, B000..B359)."""
+    return LEG_NAME.fullmatch(text) is not None and not (text.startswith("B") and int(text[1:]) >= 360)
+
+
+def leg_order_key(name: str) -> float:
+    """A leg's place clockwise from north, from its name alone (N 0, NE 45, E 90, ..., B055 55)."""
+    if name.startswith("B"):
+        return float(name[1:])
+    return {"N": 0.0, "NE": 45.0, "E": 90.0, "SE": 135.0, "S": 180.0, "SW": 225.0, "W": 270.0, "NW": 315.0}[
+        name
+    ]
 
 
 def site_approaches(site: Site) -> dict[str, str]:
@@ -212,7 +228,8 @@ def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str, turn: 
 
 @lru_cache(maxsize=16)
 def load_approach(site: Site, arm: str | None = None) -> Approach:
-    """The approach from `arm` (N, E, S or W; None or "": the site's own approach, default_arm)."""
+    """The approach from leg `arm` (N, E, S, W or another leg name, network.approaches.junction_legs; None
+    or "": the site's own approach, default_arm)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     net = read_net(str(site.file("net.xml")), withInternal=True)
     arm = arm or info["roadside_unit"]["watched_arm"]
@@ -223,15 +240,12 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         )
     junction = net.getNode(approaches[arm])
     jx, jy = junction.getCoord()
-
-    def sector(x: float, y: float) -> str:
-        return compass_sector((jx, jy), (x, y))
-
+    leg_edges = {edge_id for leg in legs_at(net, junction) if leg.name == arm for edge_id in leg.edge_ids}
     candidates = [
         e
         for e in junction.getIncoming()
         if e.getFunction() == ""
-        and sector(*e.getShape()[0]) == arm
+        and e.getID() in leg_edges
         and sum(lane.allows("passenger") for lane in e.getLanes()) >= 1
     ]
     if not candidates:
