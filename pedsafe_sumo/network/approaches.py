@@ -12,6 +12,7 @@ the eight-point rose) when no other leg shares it, else by its bearing ("B055").
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
 from dataclasses import dataclass
@@ -60,6 +61,20 @@ LEG_MERGE_TOLERANCE_DEG = 30.0
 LEG_NAME = re.compile(r"[NESW]|NE|SE|SW|NW|B\d{3}")
 
 _EIGHT_POINTS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")
+
+
+def is_leg_name(text: str) -> bool:
+    """Whether `text` is a name a leg of a junction can have (N, E, S, W, NE, SE, SW, NW, B000..B359)."""
+    return LEG_NAME.fullmatch(text) is not None and not (text.startswith("B") and int(text[1:]) >= 360)
+
+
+def leg_argument(text: str) -> str:
+    """argparse type of an --approach naming one leg."""
+    if not is_leg_name(text):
+        raise argparse.ArgumentTypeError(
+            f"'{text}' is not a leg name (N, E, S, W, NE, SE, SW, NW or B000-B359)"
+        )
+    return text
 
 
 @dataclass(frozen=True)
@@ -133,7 +148,7 @@ def _is_carriageway(edge) -> bool:
 
 
 def junction_legs(group: list) -> list[Leg]:
-    """The legs of the intersection whose signal nodes are `group`, clockwise from north: its incoming
+    """The legs of the intersection whose signal nodes are `group`, clockwise from north-west: its incoming
     carriageways from outside the group, clustered by bearing (cluster_bearings), named (leg_names)."""
     group_ids = {n.getID() for n in group}
     entering = [
@@ -146,7 +161,8 @@ def junction_legs(group: list) -> list[Leg]:
     clusters = [
         (_mean_bearing_deg([bearings[i] for i in members]), members) for members in cluster_bearings(bearings)
     ]
-    clusters.sort(key=lambda c: c[0])
+    # Clockwise from the start of the north sector (bearing 315): N, E, S, W in that order.
+    clusters.sort(key=lambda c: (c[0] + 45.0) % 360.0)
     names = leg_names([b for b, _ in clusters])
     legs = []
     for name, (bearing, members) in zip(names, clusters):

@@ -8,7 +8,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.network.approaches import bearing_deg, leg_towards, legs_at
+from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.network.traffic_lights import junction_lights
 from pedsafe_sumo.sumo_net import read_net
 
@@ -89,8 +90,13 @@ def summarise(site: Site) -> SiteSummary:
     }
     signalised = {c.get("to") for c in root.iter("connection") if c.get("to") in crossings and c.get("tl")}
 
+    # The junction's legs (network.approaches.junction_legs); a road out is on the leg nearest its far end.
+    legs = legs_at(net, junction)
+
     def direction(edge, incoming: bool) -> str:
-        return compass_sector((jx, jy), edge.getShape()[0] if incoming else edge.getShape()[-1])
+        return leg_towards(
+            legs, bearing_deg((jx, jy), edge.getShape()[0] if incoming else edge.getShape()[-1])
+        )
 
     arms: dict[str, Arm] = {}
     edge_dir: dict[str, str] = {}
@@ -123,7 +129,7 @@ def summarise(site: Site) -> SiteSummary:
         junction_type=junction.getType(),
         cycle_s=sum(phases),
         phases=len(phases),
-        arms=[arms[d] for d in "NESW" if d in arms],
+        arms=[arms[leg.name] for leg in legs if leg.name in arms],
         crosswalks_signalised=len(signalised),
         road_edges=len(roads),
         road_length_m=sum(e.getLength() for e in roads),

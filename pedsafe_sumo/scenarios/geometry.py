@@ -25,7 +25,7 @@ from functools import lru_cache
 
 import sumolib
 
-from pedsafe_sumo.network.approaches import LEG_NAME, legs_at
+from pedsafe_sumo.network.approaches import legs_at
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
@@ -156,16 +156,6 @@ class Approach:
         )
 
 
-#: The arms an approach can come from when each leg of the junction lies alone in its compass sector
-#: (network frame); other legs are named as network.approaches.leg_names says (NE, ..., B055).
-ARMS = ("N", "E", "S", "W")
-
-
-def is_leg_name(text: str) -> bool:
-    """Whether `text` is a name a leg of a junction can have (N, E, S, W, NE, SE, SW, NW, B000..B359)."""
-    return LEG_NAME.fullmatch(text) is not None and not (text.startswith("B") and int(text[1:]) >= 360)
-
-
 def leg_order_key(name: str) -> float:
     """A leg's place clockwise from north, from its name alone (N 0, NE 45, E 90, ..., B055 55)."""
     if name.startswith("B"):
@@ -189,6 +179,26 @@ def default_arm(site: Site) -> str:
     """The site's own approach: the arm its first roadside pole watches (what runs without --approach)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     return str(info["roadside_unit"]["watched_arm"])
+
+
+#: A leg more than this far from straight across [deg] is no opposite leg (opposite_leg). Assumption: half
+#: the 90 degrees between the legs of a four-leg junction.
+OPPOSITE_LEG_MAX_DEG = 45.0
+
+
+def opposite_leg(site: Site, arm: str) -> str:
+    """The leg of the site straight across from leg `arm` (the one whose nominal direction, leg_order_key,
+    is nearest the reverse of its own, within OPPOSITE_LEG_MAX_DEG); ValueError when there is none."""
+    reverse_deg = (leg_order_key(arm) + 180.0) % 360.0
+
+    def off_deg(name: str) -> float:
+        d = abs(leg_order_key(name) - reverse_deg) % 360.0
+        return min(d, 360.0 - d)
+
+    others = [name for name in site_approaches(site) if name != arm]
+    if not others or off_deg(min(others, key=off_deg)) > OPPOSITE_LEG_MAX_DEG:
+        raise ValueError(f"site {site.name}: no leg lies across from the {arm} leg")
+    return min(others, key=off_deg)
 
 
 #: Arms clockwise; a left turn leaves by the next arm clockwise, a right turn by the previous one.
