@@ -242,5 +242,6 @@ def _main_approach(
     group = signal_group(net, center_xy)
     junction, chosen_arm = choose_approach(net, group, watch_arm)
     if watch_arm is not None and chosen_arm != watch_arm:
-        raise BuildError(f"the main junction has no leg {watch_arm}")
+        legs = ", ".join(leg.name for leg in junction_legs(group))
+        raise BuildError(f"the main junction has no leg {watch_arm} (legs: {legs})")
     return group, junction, chosen_arm
