@@ -209,6 +209,24 @@ def leg_named(legs: list[Leg], name: str) -> Leg:
     )
 
 
+def junction_arms(legs: list[Leg], leaving_bearings: list[float]) -> dict[str, float]:
+    """Name -> bearing of every arm of a junction, clockwise from north-west: its legs, and the directions
+    roads only leave by (leaving bearings further than LEG_MERGE_TOLERANCE_DEG from every leg, clustered
+    as legs are). Those are named by the rule of leg_names over all the arms, by bearing ("B090") where
+    that name is a leg's; the legs keep theirs."""
+    out_only = [
+        b
+        for b in leaving_bearings
+        if all(angle_between_deg(b, leg.bearing_deg) > LEG_MERGE_TOLERANCE_DEG for leg in legs)
+    ]
+    out_means = [_mean_bearing_deg([out_only[i] for i in members]) for members in cluster_bearings(out_only)]
+    names = leg_names([leg.bearing_deg for leg in legs] + out_means)[len(legs) :]
+    arms = {leg.name: leg.bearing_deg for leg in legs}
+    for name, bearing in zip(names, out_means):
+        arms[name if name not in arms else f"B{round(bearing) % 360:03d}"] = bearing
+    return dict(sorted(arms.items(), key=lambda arm: (arm[1] + 45.0) % 360.0))
+
+
 def kerb_corner(leg: Leg) -> str:
     """The corner (NE, SE, SW or NW) the pole watching a leg stands on: the one 45 degrees anticlockwise of
     the leg (right-hand traffic: KERB_CORNER for a leg due N, E, S or W)."""

@@ -22,11 +22,13 @@ import sumolib
 from pedsafe_sumo.batch.plan import UsageError, approach_units
 from pedsafe_sumo.network.approaches import (
     LEG_MERGE_TOLERANCE_DEG,
+    Leg,
     approach_nodes,
     arm_axis,
     choose_approach,
     cluster_bearings,
     is_leg_name,
+    junction_arms,
     junction_legs,
     leg_names,
     signal_group,
@@ -172,6 +174,15 @@ def test_bearings_cluster_round_the_circle():
     assert cluster_bearings([0.0, LEG_MERGE_TOLERANCE_DEG]) == [[0, 1]]
     assert leg_names([55.0, 120.0, 235.0, 300.0]) == ["NE", "SE", "SW", "NW"]
     assert leg_names([2.0, 88.0, 181.0, 268.0]) == ["N", "E", "S", "W"]
+
+
+def test_roads_only_leaving_are_arms_of_their_own_in_the_summary():
+    # A T of one-way roads: one leg in from the north, roads out to the east and west (and north).
+    north = Leg("N", 0.0, ("n_in",), ("C",), "")
+    assert junction_arms([north], [2.0, 90.0, 270.0]) == {"N": 0.0, "E": 90.0, "W": 270.0}
+    # A road out 20 degrees off a leg is on that leg; one 40 off is an arm (NE beside the leg due E).
+    east = Leg("E", 90.0, ("e_in",), ("C",), "")
+    assert list(junction_arms([east], [110.0, 50.0])) == ["NE", "E"]
 
 
 def test_xueqing_legs_stay_n_e_s_w():
