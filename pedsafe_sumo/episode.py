@@ -134,7 +134,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1, help="episode seed, 0 to 2**63 - 1 (default 1)")
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument(
-        "--approach", type=leg_argument, help="the arm the ego comes in on [the site's own approach]"
+        "--approach",
+        type=leg_argument,
+        help="the leg the ego comes in on (N, E, S, W, NE, ..., B055) [the site's own approach]",
     )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
