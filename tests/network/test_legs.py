@@ -10,8 +10,10 @@ bearing). Xueqing's legs are checked against the bearings read from its net.xml 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
+import shutil
 import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -33,9 +35,9 @@ from pedsafe_sumo.network.approaches import (
     leg_names,
     signal_group,
 )
-from pedsafe_sumo.network.sites import resolve_site
+from pedsafe_sumo.network.sites import Site, resolve_site
 from pedsafe_sumo.scenarios.errors import ScenarioError
-from pedsafe_sumo.scenarios.geometry import site_approaches
+from pedsafe_sumo.scenarios.geometry import load_approach, site_approaches
 from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
@@ -158,6 +160,35 @@ def test_each_leg_can_be_selected(nets, junction):
     found = approach_nodes(net, group, legs[0].name, group[0])
     assert sorted(found) == sorted(names.values())
     assert len(set(names.values())) == len(JUNCTIONS[junction])
+
+
+@pytest.mark.parametrize("junction", ["diagonal", "five", "six", "tee"])
+def test_each_leg_stages_on_its_own_road(nets, junction):
+    """A site whose file lists every leg as an approach: load_approach(site, leg) stages the scenarios on
+    that leg's incoming road (its two vehicle lanes, beside the guessed sidewalk); the stem of the T has no
+    road straight ahead, so nothing going straight is staged there."""
+    net_file = nets[junction]
+    _net, _group, legs = _legs(net_file)
+    name = f"{junction}_site"
+    shutil.copy(net_file, net_file.parent / f"{name}.net.xml")
+    (net_file.parent / f"{name}.site.json").write_text(
+        json.dumps(
+            {
+                "approaches": {leg.name: {"junction": "C", "poles": []} for leg in legs},
+                "roadside_unit": {"watched_arm": legs[0].name},
+            }
+        )
+    )
+    site = Site(name, net_file.parent, "", 0.0, 0.0, ROAD_M, None, net_file.parent / f"{name}.osm")
+    for leg in legs:
+        (edge_id,) = leg.edge_ids
+        if junction == "tee" and leg.name == "N":
+            with pytest.raises(ValueError, match="no straight movement from a_in"):
+                load_approach(site, leg.name)
+            continue
+        approach = load_approach(site, leg.name)
+        assert approach.edge_id == edge_id
+        assert approach.lane_ids == (f"{edge_id}_1", f"{edge_id}_2")  # lane 0 is the sidewalk
 
 
 def test_two_carriageways_of_one_road_are_one_leg(nets):
