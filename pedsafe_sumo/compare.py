@@ -42,6 +42,7 @@ from scipy import optimize, special
 
 from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir
+from pedsafe_sumo.network.approaches import leg_argument
 from pedsafe_sumo.report.html import replay_commands
 from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, load_run_per_approach
 from pedsafe_sumo.safety.conflict import conflict_without_collision
@@ -309,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, help="also write compare.csv and worse_episodes.csv here")
     parser.add_argument(
         "--approach",
-        choices=list("NESW"),
+        type=leg_argument,
         help="compare the episodes on this approach only (default: every approach the runs hold, each on "
         "its own)",
     )

@@ -23,6 +23,7 @@ from pedsafe_sumo.control.stack_calls import StackError
 from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutError, check_timeout_s
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
+from pedsafe_sumo.network.approaches import leg_argument
 from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
@@ -133,7 +134,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1, help="episode seed, 0 to 2**63 - 1 (default 1)")
     parser.add_argument("--site", default="xueqing", help=SITE_HELP)
     parser.add_argument(
-        "--approach", choices=list("NESW"), help="the arm the ego comes in on [the site's own approach]"
+        "--approach",
+        type=leg_argument,
+        help="the leg the ego comes in on (N, E, S, W, NE, ..., B055) [the site's own approach]",
     )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(

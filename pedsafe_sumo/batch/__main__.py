@@ -122,8 +122,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--site", help=SITE_HELP)
     parser.add_argument(
         "--approach",
-        help="N, E, S, W or all: the arm the ego comes in on (staging, poles and signals follow it); all "
-        "runs every approach the site can host [the site's own approach]",
+        help="a leg of the junction (N, E, S, W; NE, SE, SW, NW or B055 for legs sharing a compass "
+        "sector; python -m pedsafe_sumo.site --site NAME lists them) or all: the leg the ego comes in on "
+        "(staging, poles and signals follow it); all runs every approach the site can host [the site's own "
+        "approach]",
     )
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(

@@ -30,6 +30,7 @@ from pedsafe_sumo.control.stack_names import resolve_stack_name
 from pedsafe_sumo.control.timeout import check_timeout_s
 from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS
+from pedsafe_sumo.network.approaches import is_leg_name
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site, site_reference
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.protocol import Protocol, load_protocol
@@ -41,7 +42,7 @@ from pedsafe_sumo.sampling.stages import (
     stage_layout,
 )
 from pedsafe_sumo.scenarios.errors import ScenarioError
-from pedsafe_sumo.scenarios.geometry import ARMS, default_arm, site_approaches
+from pedsafe_sumo.scenarios.geometry import default_arm, leg_order_key, site_approaches
 from pedsafe_sumo.scenarios.hosting import check_hosting, hosting_matrix, split_hosted
 from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure, parse_set
@@ -308,12 +309,15 @@ def approach_units(
     """The run's units `<scenario>@<arm>` under --approach, with their specs (the field `approach` set).
     With --scenario all or --approach all, every combination the site hosts (the others printed with why);
     a combination named explicitly that the site cannot host is refused in one line (UsageError)."""
-    if approach_arg not in (*ARMS, "all"):
-        raise UsageError(f"unknown approach '{approach_arg}' (known: {', '.join(ARMS)}, all)")
+    if approach_arg != "all" and not is_leg_name(approach_arg):
+        raise UsageError(
+            f"unknown approach '{approach_arg}' (a leg: N, E, S, W, NE, SE, SW, NW or B000-B359; or all)"
+        )
     known = list(site_approaches(site))
     own = default_arm(site)
     if approach_arg == "all":
-        arms = [own] + [arm for arm in ARMS if arm in known and arm != own]
+        # Every leg, the site's own first, the others clockwise from north.
+        arms = [own] + sorted((arm for arm in known if arm != own), key=leg_order_key)
     elif approach_arg not in known:
         raise UsageError(
             f"site {site.name} has no approach from the {approach_arg} (approaches: {', '.join(known)})"

@@ -39,7 +39,14 @@ from pathlib import Path
 
 import sumolib
 
-from pedsafe_sumo.network.approaches import KERB_CORNER, approach_nodes, choose_approach, signal_group
+from pedsafe_sumo.network.approaches import (
+    approach_nodes,
+    choose_approach,
+    junction_legs,
+    kerb_corner,
+    leg_named,
+    signal_group,
+)
 from pedsafe_sumo.network.clip import ClipError, clip_osm, read_osm
 from pedsafe_sumo.network.convert import (
     SUMO_TYPEMAPS,
@@ -128,7 +135,7 @@ def build_site(
         dropped_underground = convert_polygons(stage, net_file, staged_osm.name, poly_file)
         net = _read_network(stage / net_file, net_from or net_file)
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)
-        rsu_corner = rsu_corner or KERB_CORNER[rsu_watch_arm]
+        rsu_corner = rsu_corner or kerb_corner(leg_named(junction_legs(group), rsu_watch_arm))
         approaches = approach_nodes(net, group, rsu_watch_arm, junction)
         # A junction several lights control cannot be staged (one program per episode): refused before the
         # poles are placed (their scorer stages the scenarios).
@@ -235,5 +242,6 @@ def _main_approach(
     group = signal_group(net, center_xy)
     junction, chosen_arm = choose_approach(net, group, watch_arm)
     if watch_arm is not None and chosen_arm != watch_arm:
-        raise BuildError(f"the main junction has no arm towards {watch_arm}")
+        legs = ", ".join(leg.name for leg in junction_legs(group))
+        raise BuildError(f"the main junction has no leg {watch_arm} (legs: {legs})")
     return group, junction, chosen_arm

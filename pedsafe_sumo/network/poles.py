@@ -16,9 +16,16 @@ from pathlib import Path
 
 import sumolib
 
-from pedsafe_sumo.network.approaches import KERB_CORNER, arm_axis
+from pedsafe_sumo.network.approaches import (
+    arm_axis,
+    bearing_deg,
+    kerb_corner,
+    leg_named,
+    leg_towards,
+    legs_at,
+)
 from pedsafe_sumo.network.errors import BuildError
-from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.network.sites import Site
 
 #: Given the staged site of one approach (its site file names that approach's junction and corner pole),
 #: the function that counts how many of the scenarios staged there a pole pair lets the site host:
@@ -69,7 +76,7 @@ def place_roadside_unit(
     dx, dy = cx - jx, cy - jy
     dist = math.hypot(dx, dy) or 1.0
     px, py = cx + setback_m * dx / dist, cy + setback_m * dy / dist
-    ax, ay = arm_axis(junction, watch_arm)
+    ax, ay = arm_axis(net, junction, watch_arm)
     aim_xy = (jx + aim_distance_m * ax, jy + aim_distance_m * ay)
     return _pole_aimed_at((px, py), aim_xy, corner, watch_arm)
 
@@ -119,9 +126,10 @@ def place_roadside_unit_across(
     place_roadside_unit looks at them over the vehicle's front and sees only the vehicle.
     """
     jx, jy = junction.getCoord()
+    legs = legs_at(net, junction)
 
     def in_arm(edge, far_end) -> bool:
-        return edge.getFunction() == "" and compass_sector((jx, jy), far_end) == watch_arm
+        return edge.getFunction() == "" and leg_towards(legs, bearing_deg((jx, jy), far_end)) == watch_arm
 
     def vehicle_lanes(edge) -> list:
         return [lane for lane in edge.getLanes() if lane.allows("passenger")]
@@ -245,7 +253,14 @@ def place_approach_poles(
             poles = [
                 {**pole, "id": f"{pole['id']}_{arm}"}
                 for pole in place_poles(
-                    stage, name, net, node, KERB_CORNER[arm], arm, poly_file, hosting_scorer
+                    stage,
+                    name,
+                    net,
+                    node,
+                    kerb_corner(leg_named(legs_at(net, node), arm)),
+                    arm,
+                    poly_file,
+                    hosting_scorer,
                 )
             ]
         except BuildError as exc:

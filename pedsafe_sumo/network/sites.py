@@ -328,6 +328,6 @@ def site_reference(name_or_path: str | os.PathLike, site: Site) -> str:
 
 def compass_sector(centre_xy: tuple[float, float], point_xy: tuple[float, float]) -> str:
     """ "N", "E", "S" or "W": the 90-degree sector of `point_xy` seen from `centre_xy` (network frame,
-    y north). How the arms of a junction are named everywhere in the package."""
+    y north). A leg of a junction alone in its sector is named by it (network.approaches.leg_names)."""
     bearing_deg = math.degrees(math.atan2(point_xy[0] - centre_xy[0], point_xy[1] - centre_xy[1])) % 360.0
     return "NESW"[int(((bearing_deg + 45.0) % 360.0) // 90.0)]

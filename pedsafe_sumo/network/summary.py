@@ -8,7 +8,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.network.approaches import angle_between_deg, bearing_deg, junction_arms, legs_at
+from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.network.traffic_lights import junction_lights
 from pedsafe_sumo.sumo_net import read_net
 
@@ -89,8 +90,18 @@ def summarise(site: Site) -> SiteSummary:
     }
     signalised = {c.get("to") for c in root.iter("connection") if c.get("to") in crossings and c.get("tl")}
 
+    # The junction's arms: its legs (network.approaches.junction_legs) and the directions roads only leave
+    # by; a road is on the arm nearest the bearing of its far end.
+    def far_bearing_deg(edge, incoming: bool) -> float:
+        return bearing_deg((jx, jy), edge.getShape()[0] if incoming else edge.getShape()[-1])
+
+    arm_bearings = junction_arms(
+        legs_at(net, junction), [far_bearing_deg(e, False) for e in junction.getOutgoing() if _is_road(e)]
+    )
+
     def direction(edge, incoming: bool) -> str:
-        return compass_sector((jx, jy), edge.getShape()[0] if incoming else edge.getShape()[-1])
+        bearing = far_bearing_deg(edge, incoming)
+        return min(arm_bearings, key=lambda name: angle_between_deg(arm_bearings[name], bearing))
 
     arms: dict[str, Arm] = {}
     edge_dir: dict[str, str] = {}
@@ -123,7 +134,7 @@ def summarise(site: Site) -> SiteSummary:
         junction_type=junction.getType(),
         cycle_s=sum(phases),
         phases=len(phases),
-        arms=[arms[d] for d in "NESW" if d in arms],
+        arms=[arms[name] for name in arm_bearings if name in arms],
         crosswalks_signalised=len(signalised),
         road_edges=len(roads),
         road_length_m=sum(e.getLength() for e in roads),

@@ -23,6 +23,7 @@ from typing import Any
 
 from pedsafe_sumo.confine import ConfinementError, check_tree
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
+from pedsafe_sumo.network.approaches import leg_argument
 from pedsafe_sumo.report import figures, impact
 from pedsafe_sumo.report import indexes as idx
 from pedsafe_sumo.report.audit import audit
@@ -301,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--approach",
-        choices=list("NESW"),
+        type=leg_argument,
         help="report the episodes on this approach only (a batch run with --approach all holds several)",
     )
     args = parser.parse_args(argv)

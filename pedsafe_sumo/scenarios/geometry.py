@@ -25,7 +25,8 @@ from functools import lru_cache
 
 import sumolib
 
-from pedsafe_sumo.network.sites import Site, compass_sector
+from pedsafe_sumo.network.approaches import legs_at
+from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
 
@@ -155,8 +156,13 @@ class Approach:
         )
 
 
-#: The arms an approach can come from (compass sectors of the junction, network frame).
-ARMS = ("N", "E", "S", "W")
+def leg_order_key(name: str) -> float:
+    """A leg's place clockwise from north, from its name alone (N 0, NE 45, E 90, ..., B055 55)."""
+    if name.startswith("B"):
+        return float(name[1:])
+    return {"N": 0.0, "NE": 45.0, "E": 90.0, "SE": 135.0, "S": 180.0, "SW": 225.0, "W": 270.0, "NW": 315.0}[
+        name
+    ]
 
 
 def site_approaches(site: Site) -> dict[str, str]:
@@ -173,6 +179,26 @@ def default_arm(site: Site) -> str:
     """The site's own approach: the arm its first roadside pole watches (what runs without --approach)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     return str(info["roadside_unit"]["watched_arm"])
+
+
+#: A leg more than this far from straight across [deg] is no opposite leg (opposite_leg). Assumption: half
+#: the 90 degrees between the legs of a four-leg junction.
+OPPOSITE_LEG_MAX_DEG = 45.0
+
+
+def opposite_leg(site: Site, arm: str) -> str:
+    """The leg of the site straight across from leg `arm` (the one whose nominal direction, leg_order_key,
+    is nearest the reverse of its own, within OPPOSITE_LEG_MAX_DEG); ValueError when there is none."""
+    reverse_deg = (leg_order_key(arm) + 180.0) % 360.0
+
+    def off_deg(name: str) -> float:
+        d = abs(leg_order_key(name) - reverse_deg) % 360.0
+        return min(d, 360.0 - d)
+
+    others = [name for name in site_approaches(site) if name != arm]
+    if not others or off_deg(min(others, key=off_deg)) > OPPOSITE_LEG_MAX_DEG:
+        raise ValueError(f"site {site.name}: no leg lies across from the {arm} leg")
+    return min(others, key=off_deg)
 
 
 #: Arms clockwise; a left turn leaves by the next arm clockwise, a right turn by the previous one.
@@ -212,7 +238,8 @@ def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str, turn: 
 
 @lru_cache(maxsize=16)
 def load_approach(site: Site, arm: str | None = None) -> Approach:
-    """The approach from `arm` (N, E, S or W; None or "": the site's own approach, default_arm)."""
+    """The approach from leg `arm` (N, E, S, W or another leg name, network.approaches.junction_legs; None
+    or "": the site's own approach, default_arm)."""
     info = json.loads(site.file("site.json").read_text(encoding="utf-8"))
     net = read_net(str(site.file("net.xml")), withInternal=True)
     arm = arm or info["roadside_unit"]["watched_arm"]
@@ -223,15 +250,12 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         )
     junction = net.getNode(approaches[arm])
     jx, jy = junction.getCoord()
-
-    def sector(x: float, y: float) -> str:
-        return compass_sector((jx, jy), (x, y))
-
+    leg_edges = {edge_id for leg in legs_at(net, junction) if leg.name == arm for edge_id in leg.edge_ids}
     candidates = [
         e
         for e in junction.getIncoming()
         if e.getFunction() == ""
-        and sector(*e.getShape()[0]) == arm
+        and e.getID() in leg_edges
         and sum(lane.allows("passenger") for lane in e.getLanes()) >= 1
     ]
     if not candidates:

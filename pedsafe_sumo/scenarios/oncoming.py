@@ -24,6 +24,7 @@ from pedsafe_sumo.scenarios.geometry import (
     lane_pos_to_offset_m,
     load_approach,
     offset_to_lane_pos_m,
+    opposite_leg,
 )
 from pedsafe_sumo.scenarios.signals import SignalStagingError, load_junction_signals
 from pedsafe_sumo.sumo_net import read_net
@@ -58,8 +59,8 @@ def load_oncoming(site: Site, arm: str | None = None) -> OncomingPath:
     """The oncoming through movement for an ego coming in from `arm` (None: the site's own approach): from
     the median lane of the opposite arm's approach, straight on."""
     arm = arm or default_arm(site)
-    opposite = OPPOSITE_ARM[arm]
     try:
+        opposite = OPPOSITE_ARM.get(arm) or opposite_leg(site, arm)
         approach = load_approach(site, opposite)
     except ValueError as exc:
         raise OncomingError(f"no oncoming traffic for the {arm} approach: {exc}") from None

@@ -30,6 +30,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from pedsafe_sumo.network.approaches import is_leg_name
 from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.placements import PLACEMENTS
 from pedsafe_sumo.scenarios.road_users import VEHICLE_CLASSES
@@ -220,7 +221,10 @@ class ScenarioSpec:
                 self.waiting_vehicle_class in ("", *VEHICLE_CLASSES),
                 f"waiting_vehicle_class in {sorted(VEHICLE_CLASSES)} or empty",
             ),
-            (self.approach in ("", "N", "E", "S", "W"), "approach is N, E, S, W or empty"),
+            (
+                self.approach == "" or is_leg_name(self.approach),
+                "approach is a leg name (N, E, S, W, NE, ..., B055) or empty",
+            ),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.staging in STAGINGS, f"staging in {STAGINGS}"),
             (0 < self.ego_start_min_m <= self.ego_start_max_m, "0 < ego_start_min_m <= ego_start_max_m"),

@@ -14,6 +14,7 @@ from pathlib import Path
 from pedsafe_sumo import WRITE_ROOT
 from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
+from pedsafe_sumo.network.approaches import leg_argument
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
@@ -97,7 +98,9 @@ def main(argv: list[str] | None = None) -> int:
         help="folder of *.nod/edg/con/tll.xml patches (default: networks/NAME/patches)",
     )
     parser.add_argument("--rsu-corner", choices=["NE", "NW", "SE", "SW"], help="corner of the camera pole")
-    parser.add_argument("--rsu-watch", choices=list("NESW"), help="arm the roadside camera watches")
+    parser.add_argument(
+        "--rsu-watch", type=leg_argument, help="leg the roadside camera watches (N, E, S, W, NE, ..., B055)"
+    )
     parser.add_argument(
         "--no-clip",
         action="store_true",
