@@ -19,7 +19,6 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-import sumolib
 
 from pedsafe_sumo.batch.plan import UsageError, approach_units
 from pedsafe_sumo.network.approaches import (
@@ -40,6 +39,7 @@ from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import load_approach, site_approaches
 from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.sumo_binaries import sumo_binary
+from pedsafe_sumo.sumo_net import read_net
 
 ROAD_M = 200.0
 #: A leg's bearing (to the far end of its incoming edge's shape) against the end node's: the edge's shape
@@ -123,7 +123,7 @@ def nets(tmp_path_factory) -> dict[str, Path]:
 
 
 def _legs(net_file: Path):
-    net = sumolib.net.readNet(str(net_file), withInternal=True)
+    net = read_net(net_file, withInternal=True)
     group = signal_group(net, net.getNode("C").getCoord())
     return net, group, junction_legs(group)
 
@@ -237,7 +237,7 @@ def test_xueqing_legs_stay_n_e_s_w():
         expected[edge.get("id")] = _bearing_deg(x - jx, y - jy)
     sectors = {edge_id: "NESW"[int(((b + 45.0) % 360.0) // 90.0)] for edge_id, b in expected.items()}
     assert sorted(sectors.values()) == ["E", "N", "S", "W"]
-    net = sumolib.net.readNet(str(site.file("net.xml")), withInternal=True)
+    net = read_net(site.file("net.xml"), withInternal=True)
     legs = junction_legs(signal_group(net, net.getNode(main).getCoord()))
     assert [leg.name for leg in legs] == ["N", "E", "S", "W"]
     for leg in legs:

@@ -8,6 +8,7 @@ import math
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from pedsafe_sumo import REPO_ROOT
@@ -140,9 +141,14 @@ def test_plugin_loaded_by_path_drives_the_ego():
         runner.close()
     log = result.log
     first = log.index[log["perceived"]][0]
-    # It commands 0 m/s from the first perception on; SUMO applies the command in the next step.
+    # It commands 0 m/s from the first perception on; SUMO applies the command in the next step, within
+    # the ego's physical limits ([vehicle]): down by max_decel_mps2 x 0.05 s a step until it stands.
     assert (log.loc[first:, "command_speed_mps"] == 0.0).all()
-    assert (log.loc[first + 1 :, "ego_speed_mps"] == 0.0).all()
+    decel_per_step_mps = load_params()["vehicle"]["max_decel_mps2"] * 0.05
+    v0 = log.loc[first, "ego_speed_mps"]
+    steps = np.arange(1, len(log) - first)
+    expected = np.maximum(v0 - decel_per_step_mps * steps, 0.0)
+    np.testing.assert_allclose(log.loc[first + 1 :, "ego_speed_mps"].to_numpy(), expected, atol=1e-6)
     assert not result.outcome["collision"]
 
 
