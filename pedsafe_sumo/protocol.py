@@ -273,12 +273,15 @@ def parameter_reasons(defaults_text: str) -> dict[str, str]:
     # The comment block above a [section] header explains its keys that have none of their own (and
     # those of the sections after it that have none either: [pedestrians.age_groups.*]).
     section_note = ""
+    after_value = False
     for raw in defaults_text.splitlines():
         line = raw.strip()
         if not line:
-            block = []
+            block, after_value = [], False
             continue
         if line.startswith("#"):
+            if after_value:  # a comment after a value starts the next key's block
+                block, after_value = [], False
             block.append(line.lstrip("#").strip())
             continue
         header = re.match(r"^\[([^\]]+)\]", line)
@@ -293,6 +296,7 @@ def parameter_reasons(defaults_text: str) -> dict[str, str]:
             inline = assignment.group(2).split(" #", 1)
             text = inline[1].strip() if len(inline) == 2 else " ".join(block)
             reasons[key] = text or " ".join(block) or section_note
+            after_value = True
     return reasons
 
 

@@ -16,7 +16,7 @@ from batch_cli import batch
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.protocol import VALUES_BEFORE
+from pedsafe_sumo.protocol import VALUES_BEFORE, parameter_reasons
 from pedsafe_sumo.scenarios.specs import get_scenario
 
 #: The newest protocol: the one that runs on this code (older ones lack parameters the code has, and are
@@ -108,3 +108,29 @@ def test_run_json_records_the_protocols_values(tmp_path):
     assert sorted(table["scenario"].unique()) == sorted(header["scenarios"])
     assert set(table["condition"]) == {"sv", "v2i"} and (table["status"] == "ok").all()
     assert set(table["ego_signal"]) == {"green"}
+
+
+def test_each_parameter_gets_the_comment_above_it_not_those_of_the_keys_before():
+    text = (
+        "[walk]\n"
+        "# Arrivals (assumption).\n"
+        "rate = 1.0\n"
+        "# Shares of the types (assumption).\n"
+        "share_a = 0.5\n"
+        "share_b = 0.5\n"
+        "# Reaction (assumption).\n"
+        "reaction_s = 1.0\n"
+        "speed = 1.4                # inline reason\n"
+        "\n"
+        "# About the next table.\n"
+        "[next]\n"
+        "x = 1\n"
+    )
+    assert parameter_reasons(text) == {
+        "walk.rate": "Arrivals (assumption).",
+        "walk.share_a": "Shares of the types (assumption).",
+        "walk.share_b": "Shares of the types (assumption).",
+        "walk.reaction_s": "Reaction (assumption).",
+        "walk.speed": "inline reason",
+        "next.x": "About the next table.",
+    }
