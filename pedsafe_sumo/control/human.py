@@ -39,9 +39,8 @@ from pedsafe_sumo.control.reference import (
     RESUME_ACCEL_MPS2,
     STOP_MARGIN_M,
     TRACK_WINDOW_S,
-    PlannedPath,
+    PlannedPathCache,
     Tracker,
-    planned_path,
     predict_threat,
     predict_threat_on_path,
 )
@@ -99,24 +98,14 @@ class HumanDriverStack(Agent):
         self._last_threat_s: float | None = None
         self._last_gap_m = math.inf
         self._decel_mps2 = 0.0  # deceleration applied in the last step [m/s^2]
-        self._path_key: tuple | None = None
-        self._path: PlannedPath | None = None
+        self._paths = PlannedPathCache()
 
     def sensors(self) -> list[str]:
         """The driver's eyes (the onboard camera) and the route the driver means to drive."""
         return ["onboard_camera", "route"]
 
-    def _planned_path(self, observation: Observation) -> PlannedPath | None:
-        route = observation.route
-        if route is None:
-            return None
-        key = (route.current_lane_id, route.edges)
-        if key != self._path_key:
-            self._path_key, self._path = key, planned_path(route)
-        return self._path
-
     def run_step(self, observation: Observation, time_s: float) -> Command:
-        path = self._planned_path(observation)
+        path = self._paths.of(observation)
         # eyes only: whatever else might arrive is not the driver's
         seen = [p for p in observation.pedestrians if p.source == "onboard_camera"]
         tracked = self.tracker.update(seen, time_s)

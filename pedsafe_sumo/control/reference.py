@@ -269,6 +269,24 @@ def predict_threat_on_path(
     return None
 
 
+class PlannedPathCache:
+    """The planned path of an observation's route, rebuilt only when the ego's lane or route changes."""
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None
+        self._path: PlannedPath | None = None
+
+    def of(self, observation: Observation) -> PlannedPath | None:
+        """None without a route feed (an observation built by hand)."""
+        route = observation.route
+        if route is None:
+            return None
+        key = (route.current_lane_id, route.edges)
+        if key != self._key:
+            self._key, self._path = key, planned_path(route)
+        return self._path
+
+
 class ReferenceStack(Agent):
     """Cruise, brake for pedestrians in the path (after the reaction time), resume once clear."""
 
@@ -285,24 +303,14 @@ class ReferenceStack(Agent):
         self._last_threat_s: float | None = None
         self._last_gap_m = math.inf
         self.tracker = Tracker(float(config.get("track_window_s", TRACK_WINDOW_S)))
-        self._path_key: tuple | None = None
-        self._path: PlannedPath | None = None
+        self._paths = PlannedPathCache()
 
     def sensors(self) -> list[str]:
         """The three detection sources, and the route its corridor follows."""
         return [*KNOWN_SENSORS, "route"]
 
-    def _planned_path(self, observation: Observation) -> PlannedPath | None:
-        route = observation.route
-        if route is None:
-            return None
-        key = (route.current_lane_id, route.edges)
-        if key != self._path_key:
-            self._path_key, self._path = key, planned_path(route)
-        return self._path
-
     def run_step(self, observation: Observation, time_s: float) -> Command:
-        path = self._planned_path(observation)
+        path = self._paths.of(observation)
         tracked = self.tracker.update(observation.pedestrians, time_s)
         if path is None:
             found = [predict_threat(observation, p, self.horizon_s, self.lateral_margin_m) for p in tracked]
