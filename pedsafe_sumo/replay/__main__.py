@@ -338,11 +338,12 @@ def export_xosc(logged: LoggedEpisode, path: Path, say) -> int:
         )
     except (RuntimeError, OSError) as exc:
         return error(str(exc), 1)
-    left_out = recorder.left_out()
+    entered = recorder.entered_later()
     say(
         f"wrote {xosc_path} and {xodr_path}: {len(recorder.times_s)} steps, "
-        f"{len(recorder.exported_vehicles())} vehicles and the pedestrian"
-        + (f" ({len(left_out)} vehicles that entered later left out)" if left_out else "")
+        f"{len(recorder.exported_vehicles())} vehicles, the pedestrian and "
+        f"{len(recorder.persons)} background pedestrians ({len(entered)} road users added when they appear), "
+        f"{len(recorder.signal_changes)} traffic light states"
     )
     return _verdict(logged, check, result, say)
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -69,7 +70,12 @@ def test_an_ncap_cell_exports_as_a_checked_openscenario(tmp_path):
         )
         vertices = list(group.iter("Vertex"))
         assert len(vertices) == len(log)
-        xs = [float(v.find("Position/WorldPosition").get("x")) for v in vertices]
-        ys = [float(v.find("Position/WorldPosition").get("y")) for v in vertices]
+        # The vertex is the reference point; the box centre is the BoundingBox Center ahead of it
+        # along the heading (a vehicle's rear axle; a pedestrian's own centre, Center x = 0).
+        ahead_m = float(root.find(f".//ScenarioObject[@name='{entity}']/*/BoundingBox/Center").get("x"))
+        positions = [v.find("Position/WorldPosition") for v in vertices]
+        headings = [float(p.get("h")) for p in positions]
+        xs = [float(p.get("x")) + ahead_m * math.cos(h) for p, h in zip(positions, headings)]
+        ys = [float(p.get("y")) + ahead_m * math.sin(h) for p, h in zip(positions, headings)]
         assert max(abs(a - b) for a, b in zip(xs, log[x_column])) < 1e-9
         assert max(abs(a - b) for a, b in zip(ys, log[y_column])) < 1e-9

@@ -2,8 +2,9 @@
 
 - ASAM's own checkers (asam-qc-openscenarioxml, asam-qc-opendrive, from PyPI, their CLIs) pass on it;
 - read back (scenariogeneration's parser, then plain XML for the vertices), every trajectory vertex of
-  the ego and the pedestrian is the case log's position at the logged time, and the kerb-lane vehicles
-  stand where the recorded setup put them;
+  the ego is its reference point (the rear axle: the logged centre moved back by the box Center along
+  its heading), every one of the pedestrian the logged position, at the logged time, and the kerb-lane
+  vehicles stand where the recorded setup put them;
 - the OpenDRIVE lines up with the SUMO net: points along the ego's SUMO lane fall on the matching
   driving lane of a road of the .xodr, and the header's offset is the way back to UTM.
 """
@@ -58,6 +59,19 @@ def _vertices(xosc_path, entity: str) -> pd.DataFrame:
     raise AssertionError(f"no maneuver group of {entity} in {xosc_path}")
 
 
+def _centres(xosc_path, entity: str) -> pd.DataFrame:
+    """The vertices moved from the reference point to the box centre: Center.x ahead along the heading
+    (OpenSCENARIO: the BoundingBox Center is given in the entity's frame, whose origin is that point)."""
+    root = ET.parse(xosc_path).getroot()
+    centre = root.find(f".//ScenarioObject[@name='{entity}']/*/BoundingBox/Center")
+    ahead_m, left_m = float(centre.get("x")), float(centre.get("y"))
+    vertices = _vertices(xosc_path, entity)
+    cos_h, sin_h = vertices["h_rad"].map(math.cos), vertices["h_rad"].map(math.sin)
+    vertices["x_m"] = vertices["x_m"] + ahead_m * cos_h - left_m * sin_h
+    vertices["y_m"] = vertices["y_m"] + ahead_m * sin_h + left_m * cos_h
+    return vertices
+
+
 @pytest.mark.slow
 def test_the_collision_case_exists_and_both_files_are_written(exported, replay_run):
     xosc_path, stdout = exported
@@ -101,8 +115,13 @@ def test_read_back_the_trajectories_are_the_case_log(exported, replay_run):
     assert any(name.startswith(("occluder", "queued")) for name in names)
 
     log = pd.read_parquet(case_files(replay_run, EPISODE, CONDITION)[0])
-    ego = _vertices(xosc_path, "ego")
+    ego = _centres(xosc_path, "ego")
     ped = _vertices(xosc_path, "ped")
+    ego_reference = _vertices(xosc_path, "ego")
+    # The reference point is behind the centre: a vehicle's rear axle, not its footprint centre.
+    assert (
+        (ego_reference["x_m"] - log["ego_x_m"]).abs() + (ego_reference["y_m"] - log["ego_y_m"]).abs()
+    ).min() > 1
     assert len(ego) == len(ped) == len(log)
     assert (ego["time_s"] - log["time_s"]).abs().max() < 1e-12
     for column, logged in (("x_m", "ego_x_m"), ("y_m", "ego_y_m"), ("h_rad", "ego_yaw_rad")):
@@ -134,7 +153,7 @@ def test_kerb_lane_vehicles_stand_where_the_recorded_setup_put_them(exported, re
         scale = drawn / lane.getLength()
         length = parked["size"]["length_m"]
         cx, cy = positionAtShapeOffset(shape, (parked["front_pos_m"] - length / 2) * scale)
-        vertices = _vertices(xosc_path, parked["vehicle_id"])
+        vertices = _centres(xosc_path, parked["vehicle_id"])
         # A parked vehicle does not move: every vertex at its place (lane curvature within half a
         # length is what separates the chord from the arc: well under 5 cm on this straight kerb lane).
         assert math.hypot(vertices["x_m"].iloc[0] - cx, vertices["y_m"].iloc[0] - cy) < 0.05
@@ -143,12 +162,12 @@ def test_kerb_lane_vehicles_stand_where_the_recorded_setup_put_them(exported, re
         box = body.find("BoundingBox/Dimensions")
         assert float(box.get("length")) == length and float(box.get("width")) == parked["size"]["width_m"]
         colour = body.find("Properties/Property[@name='color']").get("value")
-        assert colour == ",".join(str(c) for c in parked["colour_rgb"])
+        assert colour == "#{:02X}{:02X}{:02X}".format(*parked["colour_rgb"])
         checked += 1
     assert checked >= 1
     ego = root.find(".//ScenarioObject[@name='ego']/Vehicle")
-    assert ego.find("Properties/Property[@name='color']").get("value") == ",".join(
-        str(c) for c in setup["ego"]["colour_rgb"]
+    assert ego.find("Properties/Property[@name='color']").get("value") == "#{:02X}{:02X}{:02X}".format(
+        *setup["ego"]["colour_rgb"]
     )
 
 
