@@ -35,8 +35,23 @@ if TYPE_CHECKING:
     from pedsafe_sumo.scenarios.specs import ScenarioSpec
 
 #: Approach staging: the queue's head vehicle (the right-turner) stands with its front this far before
-#: the stop line [m], as the crossing scenario's (placements/crosswalk.py).
-HEAD_BEFORE_STOP_LINE_M = 0.5
+#: the stop line [m]: where SUMO stops a vehicle at a red light (its junction model's `jmStoplineGap`,
+#: 1 m by default; measured on Xueqing's kerb lane: 1.001 m), as SUMO forms the queue (sim/queue.py).
+HEAD_BEFORE_STOP_LINE_M = 1.0
+#: SUMO's minGap of the head of a formed queue [m]: unused at the red (the stop line gap applies), the
+#: staged vehicles' usual 0.5 m.
+HEAD_MIN_GAP_M = 0.5
+
+
+def formed_by_sumo(queue: list[VehicleSetup]) -> list[VehicleSetup]:
+    """`queue` (its head first, standing bumper to bumper as staged) marked for SUMO to form before the
+    episode's start (VehicleSetup.formed, sim/queue.py): each follower's minGap is its staged gap to the
+    rear of the vehicle before it, so that SUMO's car-following stops it there."""
+    formed = [dataclasses.replace(queue[0], formed=True, min_gap_m=HEAD_MIN_GAP_M)]
+    for leader, follower in zip(queue[:-1], queue[1:]):
+        gap_m = leader.front_pos_m - leader.size.length_m - follower.front_pos_m
+        formed.append(dataclasses.replace(follower, formed=True, min_gap_m=gap_m))
+    return formed
 
 
 def kerb_wait_offset_m(approach: Approach) -> float:
@@ -124,7 +139,7 @@ class Midblock(StraightPlacement):
         path = inputs.approach.across(
             row.lane, cross_pos, kerb_wait_offset_m(inputs.approach), row.far_offset_m
         )
-        return path, queue, inputs.clothing_rgb
+        return path, formed_by_sumo(queue), inputs.clothing_rgb
 
     def ped_crossing_id(self, approach: Approach) -> str:
         # Mid-block no signal faces the pedestrian.
