@@ -26,10 +26,10 @@ from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, VehicleSetup
 
 #: The formed vehicles enter the kerb lane one this often [s]. Assumption: about the saturation headway
 #: (1900 vehicles an hour per lane, HCM); where they stop does not depend on it (headways of 1.5, 2 and
-#: 3 s gave the same stop positions to 0.1 mm on Xueqing), only how long the queue takes to form.
+#: 3 s gave the same stop positions to 0.001 mm on Xueqing), only how long the queue takes to form.
 ARRIVAL_HEADWAY_S = 2.0
 #: The longest the queue may take to form [s]: 14 vehicles on Xueqing's kerb lane stand still after
-#: 45-52 s; a queue still moving after this is an error.
+#: 45-61 s; a queue still moving after this is an error.
 FORMING_LIMIT_S = 300.0
 #: How far from its staged front a formed vehicle may stop [m]: SUMO stops a follower 1 mm beyond its
 #: minGap (its numerical margin), so a queue of n vehicles ends up to n mm further back; 5 cm holds
@@ -52,7 +52,7 @@ def formed_queue(setup: EpisodeSetup) -> tuple[VehicleSetup, ...]:
 def lane_links(api, lane_id: str) -> tuple[str | None, list[int], dict[str, str]]:
     """(the traffic light controlling `lane_id`'s links or None, their link indices, the edge each of its
     movements leads to by SUMO's direction: "r" right, "s" straight, ...)."""
-    exits = {}
+    exits: dict[str, str] = {}
     for link in api.lane.getLinks(lane_id):
         exits.setdefault(link[6], api.lane.getEdgeID(link[0]))
     for tls in api.trafficlight.getIDList():
@@ -92,6 +92,7 @@ def form_queue(api, queue: tuple[VehicleSetup, ...], add: AddVehicle) -> None:
         add(api, vehicle, "queue_right" if k == 0 else "queue_through", repr(depart_s))
         # Its speed factor not SUMO's draw: the queue arrives the same way whatever SUMO's seed.
         api.vehicle.setSpeedFactor(vehicle.vehicle_id, 1.0)
+        # In its lane: followers free to change would pass the standing queue in the next lane.
         api.vehicle.setLaneChangeMode(vehicle.vehicle_id, 0)
     if tls is None:
         head = queue[0]

@@ -6,11 +6,17 @@ crosswalk while it shows red, so that seen from the ego the vehicle is right beh
 Fixed staging: they stand in the kerb lane right behind its rear bumper, centred on it, closer to it
 than the LiDAR can separate (`blend_gap_min_m`..`max_m`, 0 by default: the body circle touches it).
 
-Approach staging (spec.staging "approach"): they wait where people wait, on the sidewalk at the kerb,
-beside the vehicle's rear, and step off at the kerb to cross behind it, keeping a gap a person keeps from
-a vehicle body (`kerb_gap_min_m`..`kerb_gap_max_m` between their body circle and the rear bumper's line).
-On a one-lane approach the vehicle stands parked at the kerb (the ego drives the only lane) and they
-start on the sidewalk behind it, centred on its rear, at the same gap.
+Approach staging (spec.staging "approach"). What a traffic engineer sees: the approach has green; in the
+kerb lane a right-turner stands at the stop line, waiting for the pedestrians on the crosswalk it turns
+across (its permissive green yields to that crosswalk's walk signal, shown in the same green), while the
+approach's own crosswalk shows red to pedestrians. A pedestrian who means to cross anyway waits where
+people wait, on the sidewalk at the kerb beside the vehicle's rear, and steps off to cross behind it, the
+vehicle shielding them from the kerb lane, keeping a gap a person keeps from a vehicle body
+(`kerb_gap_min_m`..`kerb_gap_max_m` between their body circle and the rear bumper's line). Staged: the
+vehicle drove up the kerb lane before the episode's start and stopped at the red stop line, where SUMO
+stops (VehicleSetup.formed, sim/queue.py: HEAD_BEFORE_STOP_LINE_M before it), and the gap is measured
+from there. On a one-lane approach the vehicle stands parked at the kerb (the ego drives the only lane)
+and they start on the sidewalk behind it, centred on its rear, at the same gap.
 """
 
 from __future__ import annotations
