@@ -58,6 +58,14 @@ class VehicleSetup:
     #: on the lane at `front_pos_m` and parks it in a parking space there (sim/kerb.py). 0: it stands in
     #: its lane.
     kerb_offset_m: float = 0.0
+    #: SUMO forms it (approach staging, sim/queue.py): it enters its lane upstream before the episode's
+    #: start and SUMO's car-following drives it up to a stop at the red stop line, or behind the vehicle
+    #: before it in `parked` at `min_gap_m`; `front_pos_m` is where it must stand when the queue has
+    #: formed (checked). False: SUMO adds it standing at `front_pos_m` at the start.
+    formed: bool = False
+    #: SUMO's minGap of the vehicle [m]: a formed vehicle stops this far behind the rear of the vehicle
+    #: before it. 0.5 m for every staged vehicle that SUMO does not form (the staging's own gaps place it).
+    min_gap_m: float = 0.5
 
 
 @dataclass(frozen=True)

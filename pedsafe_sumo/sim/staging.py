@@ -3,7 +3,8 @@
 Once per runner and approach, `load_site_data` reads the site's files (SITE_FILES_READ) into a SiteData.
 For each episode, `draw_background` draws the background traffic from the demand model and
 `behaviour_params` sets up the drawn pedestrian's behaviour model. `SumoStaging.stage` then loads SUMO
-with the episode's options, parks the kerb cars a step ahead (sim/kerb.py), adds the ego, the staged
+with the episode's options, parks the kerb cars a step ahead (sim/kerb.py) or lets SUMO form the kerb
+lane's queue before the episode's start (approach staging, sim/queue.py), adds the ego, the staged
 vehicles, the background traffic and the pedestrian (`populate`), puts the traffic light at its staged
 point of the cycle (`start_signals`), takes the inserting step and moves the vehicles that start on a
 junction there (`place_on_junction`). `subscribe_vehicles` and `background_arrivals` give the loop SUMO's
@@ -43,6 +44,7 @@ from pedsafe_sumo.scenarios.signals import SignalStagingError, load_junction_sig
 from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.kerb import check_parked, kerb_parked, park_at_kerb, parking_xml, with_additional
+from pedsafe_sumo.sim.queue import form_queue, formed_queue
 
 #: SUMO's ids of the episode's ego vehicle and pedestrian.
 EGO_ID = "ego"
@@ -236,16 +238,19 @@ def sumo_args(site: Site, step_length_s: float, seed: int, gui: GuiView | None =
     return args
 
 
-def add_vehicle(api, vehicle: VehicleSetup, route_id: str, parked: bool, depart: str = "0") -> None:
-    """Add a staged vehicle (the ego unless `parked`) with a vehicle type of its own: its size and
-    colour, no driver imperfection."""
+def add_vehicle(
+    api, vehicle: VehicleSetup, route_id: str, parked: bool, depart: str = "0", upstream: bool = False
+) -> None:
+    """Add a staged vehicle (the ego unless `parked`) with a vehicle type of its own: its size, colour and
+    minGap, no driver imperfection. `upstream`: it enters at the start of its lane at the fastest safe
+    speed, to be driven by SUMO (a vehicle of a formed queue, sim/queue.py), not at `front_pos_m`."""
     lane_index = int(vehicle.lane_id.rsplit("_", 1)[1])  # SUMO's index: the sidewalk is lane 0
     type_id = f"type_{vehicle.vehicle_id}"
     api.vehicletype.copy("DEFAULT_VEHTYPE", type_id)
     api.vehicletype.setLength(type_id, vehicle.size.length_m)
     api.vehicletype.setWidth(type_id, vehicle.size.width_m)
     api.vehicletype.setHeight(type_id, vehicle.size.height_m)
-    api.vehicletype.setMinGap(type_id, 0.5)
+    api.vehicletype.setMinGap(type_id, vehicle.min_gap_m)
     api.vehicletype.setColor(type_id, (*vehicle.colour_rgb, 255))
     api.vehicletype.setImperfection(type_id, 0.0)
     if not parked:
@@ -265,8 +270,8 @@ def add_vehicle(api, vehicle: VehicleSetup, route_id: str, parked: bool, depart:
         typeID=type_id,
         depart=depart,
         departLane=str(lane_index),
-        departPos=repr(float(vehicle.front_pos_m)),
-        departSpeed=repr(float(vehicle.speed_mps)),
+        departPos="0" if upstream else repr(float(vehicle.front_pos_m)),
+        departSpeed="max" if upstream else repr(float(vehicle.speed_mps)),
     )
 
 
@@ -295,7 +300,7 @@ def populate(api, setup: EpisodeSetup, approach: Approach, refuges: bool, start_
     api.route.add("kerb_route", [approach.edge_id])
     add_vehicle(api, setup.ego, "ego_route", parked=False, depart=depart)
     for vehicle in setup.parked:
-        if vehicle.kerb_offset_m > 0:
+        if vehicle.kerb_offset_m > 0 or vehicle.formed:  # in SUMO already (sim/kerb.py, sim/queue.py)
             continue
         route_id = "kerb_route"
         if vehicle.route:  # a vehicle that drives (the turning scenarios' leader)
@@ -469,6 +474,18 @@ class SumoStaging:
         if kerb:
             park_at_kerb(
                 api, kerb, lambda api_, vehicle, route_id: add_vehicle(api_, vehicle, route_id, True)
+            )
+            start_s = api.simulation.getTime()
+        queue = formed_queue(setup)
+        if queue:
+            # Approach staging: SUMO forms the kerb lane's queue first (sim/queue.py); the episode's clock
+            # starts once it stands.
+            form_queue(
+                api,
+                queue,
+                lambda api_, vehicle, route_id, depart: add_vehicle(
+                    api_, vehicle, route_id, True, depart, upstream=True
+                ),
             )
             start_s = api.simulation.getTime()
         self.populate(api, setup, approach, start_s)

@@ -1,8 +1,9 @@
 """Where the occluders of jaywalking and background blending stand (scenarios/placements/midblock.py,
 behind_waiting_vehicle.py), checked on Xueqing with geometry computed here from the network file.
 
-Approach staging: the jaywalking queue starts at the stop line (its head a right-turner waiting there)
-and reaches back past the mid-block crossing, the jaywalker crossing through the gap nearest the drawn
+Approach staging: the jaywalking queue starts at the stop line (its head a right-turner waiting there,
+where SUMO stops a vehicle at the red: SUMO forms the queue, test_occluders_formed.py) and reaches back
+past the mid-block crossing, the jaywalker crossing through the gap nearest the drawn
 distance; the blending pedestrian waits on the sidewalk at the kerb and crosses behind the waiting vehicle
 at a drawn gap, never touching it. Fixed staging: the positions protocol paper-v7 stages."""
 
@@ -38,6 +39,9 @@ QUEUE_GAP_RANGE_M = (1.5, 3.0)
 PARKED_GAP_RANGE_M = (1.2, 2.5)
 QUEUE_BEHIND_FLANK = 3
 PEDESTRIAN_RADIUS_M = 0.3
+#: Where SUMO stops a vehicle's front before a red stop line [m]: its junction model's jmStoplineGap, 1 m
+#: by default (SUMO's documentation, "Junction Model Parameters").
+SUMO_STOPLINE_GAP_M = 1.0
 
 
 @pytest.fixture(scope="module")
@@ -151,10 +155,13 @@ def test_jaywalking_queue_starts_at_the_stop_line_and_the_jaywalker_crosses_thro
     queue = list(setup.parked)
     assert all(v.lane_id == approach.lane_ids[0] for v in queue)
     assert all(v.speed_mps == 0.0 for v in queue)
-    # The head (the right-turner) at the stop line.
-    assert 0.0 <= stop_line_m - queue[0].front_pos_m <= 0.5
+    # The head (the right-turner) where SUMO stops a vehicle at a red stop line.
+    assert stop_line_m - queue[0].front_pos_m == pytest.approx(SUMO_STOPLINE_GAP_M, abs=1e-9)
     # Bumper to bumper from the head back, in SUMO's lane metres.
     gaps = [a.front_pos_m - a.size.length_m - b.front_pos_m for a, b in zip(queue[:-1], queue[1:])]
+    # SUMO forms it: each follower stops its minGap behind the one before it, and that is the staged gap.
+    assert all(v.formed for v in queue)
+    assert [v.min_gap_m for v in queue[1:]] == pytest.approx(gaps, abs=1e-9)
     # The crossing line meets the kerb lane's centreline inside one gap.
     start, end = crossing_segment(setup)
     cross_m = lane_pos(start, kerb_lane)
@@ -194,7 +201,9 @@ def test_blending_pedestrian_waits_at_the_kerb_and_crosses_behind_the_vehicle_at
     setup, inputs = draw("background_blending", seed, approach, "approach")
     (waiting,) = setup.parked
     assert waiting.lane_id == approach.lane_ids[0]
-    assert 0.0 <= kerb_lane[1] - waiting.front_pos_m <= 0.5
+    # It drives up and stops at the red stop line, where SUMO stops it.
+    assert waiting.formed
+    assert kerb_lane[1] - waiting.front_pos_m == pytest.approx(SUMO_STOPLINE_GAP_M, abs=1e-9)
     gap_m = inputs["blend_gap_m"]
     assert KERB_GAP_RANGE_M[0] <= gap_m <= KERB_GAP_RANGE_M[1]
     start, end = crossing_segment(setup)

@@ -6,11 +6,17 @@ crosswalk while it shows red, so that seen from the ego the vehicle is right beh
 Fixed staging: they stand in the kerb lane right behind its rear bumper, centred on it, closer to it
 than the LiDAR can separate (`blend_gap_min_m`..`max_m`, 0 by default: the body circle touches it).
 
-Approach staging (spec.staging "approach"): they wait where people wait, on the sidewalk at the kerb,
-beside the vehicle's rear, and step off at the kerb to cross behind it, keeping a gap a person keeps from
-a vehicle body (`kerb_gap_min_m`..`kerb_gap_max_m` between their body circle and the rear bumper's line).
-On a one-lane approach the vehicle stands parked at the kerb (the ego drives the only lane) and they
-start on the sidewalk behind it, centred on its rear, at the same gap.
+Approach staging (spec.staging "approach"). What a traffic engineer sees: the approach has green; in the
+kerb lane a right-turner stands at the stop line, waiting for the pedestrians on the crosswalk it turns
+across (its permissive green yields to that crosswalk's walk signal, shown in the same green), while the
+approach's own crosswalk shows red to pedestrians. A pedestrian who means to cross anyway waits where
+people wait, on the sidewalk at the kerb beside the vehicle's rear, and steps off to cross behind it, the
+vehicle shielding them from the kerb lane, keeping a gap a person keeps from a vehicle body
+(`kerb_gap_min_m`..`kerb_gap_max_m` between their body circle and the rear bumper's line). Staged: the
+vehicle drove up the kerb lane before the episode's start and stopped at the red stop line, where SUMO
+stops (VehicleSetup.formed, sim/queue.py: HEAD_BEFORE_STOP_LINE_M before it), and the gap is measured
+from there. On a one-lane approach the vehicle stands parked at the kerb (the ego drives the only lane)
+and they start on the sidewalk behind it, centred on its rear, at the same gap.
 """
 
 from __future__ import annotations
@@ -21,7 +27,11 @@ from typing import TYPE_CHECKING
 from pedsafe_sumo.scenarios.episode_setup import VehicleSetup
 from pedsafe_sumo.scenarios.geometry import Approach, Turn, lane_pos_to_offset_m, offset_to_lane_pos_m
 from pedsafe_sumo.scenarios.placements.base import StagingInputs, StagingPoint
-from pedsafe_sumo.scenarios.placements.midblock import kerb_wait_offset_m
+from pedsafe_sumo.scenarios.placements.midblock import (
+    HEAD_BEFORE_STOP_LINE_M,
+    formed_by_sumo,
+    kerb_wait_offset_m,
+)
 from pedsafe_sumo.scenarios.placements.straight import (
     KerbRow,
     StraightPlacement,
@@ -33,6 +43,19 @@ from pedsafe_sumo.scenarios.road_users import PEDESTRIAN_RADIUS_M, VEHICLE_CLASS
 if TYPE_CHECKING:
     # Annotations only: specs.py imports the placement registry to validate a spec's placement.
     from pedsafe_sumo.scenarios.specs import ScenarioSpec
+
+
+#: The fixed staging, and a one-lane approach's car parked at the kerb: the waiting vehicle's front stands
+#: this far before the stop line [m], as the crossing scenario's occluder (placements/crosswalk.py).
+FIXED_BEFORE_STOP_LINE_M = 0.5
+
+
+def head_before_stop_line_m(spec: ScenarioSpec, row: KerbRow) -> float:
+    """How far before the stop line the waiting vehicle's front stands [m]: under approach staging in a
+    kerb lane where SUMO stops it at the red (HEAD_BEFORE_STOP_LINE_M), else where the staging puts it."""
+    if spec.staging == "approach" and not row.one_lane:
+        return HEAD_BEFORE_STOP_LINE_M
+    return FIXED_BEFORE_STOP_LINE_M
 
 
 class BehindWaitingVehicle(StraightPlacement):
@@ -47,9 +70,13 @@ class BehindWaitingVehicle(StraightPlacement):
             else (spec.blend_gap_min_m, spec.blend_gap_max_m)
         )
         gap_m = inputs.draws.uniform("blend_gap_m", low_m, high_m)
-        waiting = row.random_vehicle("waiting_0", row.stop_line_pos_m - 0.5)
+        formed = approach_staging and not row.one_lane
+        waiting = row.random_vehicle("waiting_0", row.stop_line_pos_m - head_before_stop_line_m(spec, row))
         if spec.waiting_vehicle_class:
             waiting = dataclasses.replace(waiting, size=VEHICLE_CLASSES[spec.waiting_vehicle_class])
+        if formed:
+            # It drove up the kerb lane and stopped at the red stop line (sim/queue.py), where SUMO stops.
+            (waiting,) = formed_by_sumo([waiting])
         cross_pos = waiting.front_pos_m - waiting.size.length_m - gap_m - PEDESTRIAN_RADIUS_M
         if approach_staging:
             # The gap as drawn on the road (the sensors' and the body rule's metres, the vehicle's body
@@ -81,8 +108,8 @@ class BehindWaitingVehicle(StraightPlacement):
         return list(VEHICLE_CLASSES.values())
 
     def kerb_row_m(self, spec: ScenarioSpec, queue_m: float) -> float:
-        # One vehicle at the stop line: no queue behind it.
-        return 0.5 + max(size.length_m for size in self.kerb_classes(spec))
+        # One vehicle at the stop line: no queue behind it. (A one-lane approach: parked at the kerb.)
+        return FIXED_BEFORE_STOP_LINE_M + max(size.length_m for size in self.kerb_classes(spec))
 
     def staging_points(self, spec: ScenarioSpec, approach: Approach, turn: Turn | None) -> list[StagingPoint]:
         """Behind a car waiting at the stop line (a car's length, the gap and the body before it), then
@@ -90,7 +117,12 @@ class BehindWaitingVehicle(StraightPlacement):
         offsets = road_offsets_m(approach)
         stop_line_m = approach.lane_lengths_m[0]
         gap_max_m = spec.kerb_gap_max_m if spec.staging == "approach" else spec.blend_gap_max_m
-        behind_m = 0.5 + VEHICLE_CLASSES["car"].length_m + gap_max_m + PEDESTRIAN_RADIUS_M
+        before_m = (
+            HEAD_BEFORE_STOP_LINE_M
+            if spec.staging == "approach" and len(approach.lane_ids) > 1
+            else FIXED_BEFORE_STOP_LINE_M
+        )
+        behind_m = before_m + VEHICLE_CLASSES["car"].length_m + gap_max_m + PEDESTRIAN_RADIUS_M
         if len(approach.lane_ids) == 1:
             # The car stands parked at the kerb beside the one lane (kerb_parking_offset_m): the
             # pedestrian starts behind it, then crosses the lane.

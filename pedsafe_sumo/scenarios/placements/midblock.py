@@ -5,16 +5,24 @@ cruises at a stable speed on green.
 Fixed staging: two vehicles flank the gap at the drawn distance, the queue of `queue_vehicles` behind
 them, the kerb lane empty ahead of them.
 
-Approach staging (spec.staging "approach"), on an approach with two or more lanes: the kerb lane carries
-the right turn, and its head vehicle, a right-turner, waits at the stop line on the ego's green for the
-pedestrians on the crosswalk of the road it turns into (the program gives that crosswalk its walk signal
-with the approach's green: placements/crosswalk.py); the kerb lane's queue, formed during the red, stands
-behind it bumper to bumper (gaps `queue_gap_min_m`..`max_m`) back past the mid-block crossing. Of its
-gaps, the one whose centre lies nearest the drawn mid-block distance is the jaywalker's (drawn
-`parked_gap_min_m`..`max_m`): how many vehicles stand before it follows from the distance; the upstream
-flank and `queue_vehicles` more stand behind it, as in the fixed staging. The pedestrian waits at the kerb
-beside the gap and crosses through it. On a one-lane approach the ego drives the only lane, so nothing
-queues beside it: the vehicles stand parked at the kerb, as in the fixed staging.
+Approach staging (spec.staging "approach"), on an approach with two or more lanes. What a traffic
+engineer sees: the approach's green has just begun, the median lane's queue has driven off and the ego
+comes down it, but the kerb lane stands still: its first vehicle, a right-turner, waits at the stop line
+for the pedestrians walking the crosswalk it turns across (the program gives that crosswalk its walk
+signal with the approach's green, and the right turn is a permissive green that yields to it), and the
+queue that built up behind it during the red cannot get past it. A pedestrian who wants to cross the
+block walks up the sidewalk, stops at the kerb beside a gap in the standing queue and steps through it.
+
+Staged: the queue from the stop line back, bumper to bumper (gaps `queue_gap_min_m`..`max_m`), past the
+mid-block crossing. Of its gaps, the one whose centre lies nearest the drawn mid-block distance is the
+jaywalker's (drawn `parked_gap_min_m`..`max_m`): how many vehicles stand before it follows from the
+distance; the upstream flank and `queue_vehicles` more stand behind it, as in the fixed staging. SUMO forms
+it (VehicleSetup.formed, sim/queue.py): the vehicles drive up the kerb lane before the episode's start and
+stop at the red stop line (the head, HEAD_BEFORE_STOP_LINE_M before it, where SUMO stops) and each behind
+the one before it at its drawn gap (its SUMO minGap); a queue that does not stand where it was staged is
+refused. The pedestrian waits at the kerb beside the gap and crosses through it. On a one-lane approach the
+ego drives the only lane, so nothing queues beside it: the vehicles stand parked at the kerb, as in the
+fixed staging.
 """
 
 from __future__ import annotations
@@ -35,8 +43,23 @@ if TYPE_CHECKING:
     from pedsafe_sumo.scenarios.specs import ScenarioSpec
 
 #: Approach staging: the queue's head vehicle (the right-turner) stands with its front this far before
-#: the stop line [m], as the crossing scenario's (placements/crosswalk.py).
-HEAD_BEFORE_STOP_LINE_M = 0.5
+#: the stop line [m]: where SUMO stops a vehicle at a red light (its junction model's `jmStoplineGap`,
+#: 1 m by default; measured on Xueqing's kerb lane: 1.001 m), as SUMO forms the queue (sim/queue.py).
+HEAD_BEFORE_STOP_LINE_M = 1.0
+#: SUMO's minGap of the head of a formed queue [m]: unused at the red (the stop line gap applies), the
+#: staged vehicles' usual 0.5 m.
+HEAD_MIN_GAP_M = 0.5
+
+
+def formed_by_sumo(queue: list[VehicleSetup]) -> list[VehicleSetup]:
+    """`queue` (its head first, standing bumper to bumper as staged) marked for SUMO to form before the
+    episode's start (VehicleSetup.formed, sim/queue.py): each follower's minGap is its staged gap to the
+    rear of the vehicle before it, so that SUMO's car-following stops it there."""
+    formed = [dataclasses.replace(queue[0], formed=True, min_gap_m=HEAD_MIN_GAP_M)]
+    for leader, follower in zip(queue[:-1], queue[1:]):
+        gap_m = leader.front_pos_m - leader.size.length_m - follower.front_pos_m
+        formed.append(dataclasses.replace(follower, formed=True, min_gap_m=gap_m))
+    return formed
 
 
 def kerb_wait_offset_m(approach: Approach) -> float:
@@ -124,7 +147,7 @@ class Midblock(StraightPlacement):
         path = inputs.approach.across(
             row.lane, cross_pos, kerb_wait_offset_m(inputs.approach), row.far_offset_m
         )
-        return path, queue, inputs.clothing_rgb
+        return path, formed_by_sumo(queue), inputs.clothing_rgb
 
     def ped_crossing_id(self, approach: Approach) -> str:
         # Mid-block no signal faces the pedestrian.
