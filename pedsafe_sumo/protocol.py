@@ -153,6 +153,8 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "walk_on_m": 15.0,
         "kerb_gap_min_m": 0.3,
         "kerb_gap_max_m": 1.0,
+        # The kerb-lane queue and waiting vehicle of the approach staging: placed standing at the start.
+        "queue_staging": "placed",
     },
     "parameters": {
         # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
@@ -169,6 +171,17 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "vehicle.max_accel_mps2": 4.0,
     },
 }
+
+
+#: The scenario fields of VALUES_BEFORE by the change that added them: a protocol that names none of a
+#: group's fields was written before it and gets the group's "before" values.
+SCENARIO_GROUPS_BEFORE: tuple[tuple[str, ...], ...] = (
+    (
+        "staging", "ego_start_min_m", "ego_start_max_m", "ped_appear_min_s", "walk_in_min_s",
+        "walk_in_max_s", "walk_on_m", "kerb_gap_min_m", "kerb_gap_max_m",
+    ),
+    ("queue_staging",),
+)  # fmt: skip
 
 
 def with_values_before(given: dict[str, Any], before: dict[str, Any]) -> dict[str, Any]:
@@ -242,7 +255,9 @@ def load_protocol(path: Path) -> Protocol:
         given = fields.get(name)
         if given is None:
             raise ProtocolError(f"protocol {path}: no [scenarios.{name}] table")
-        given = fields[name] = with_values_before(given, VALUES_BEFORE["scenarios"])
+        for group in SCENARIO_GROUPS_BEFORE:
+            given = with_values_before(given, {key: VALUES_BEFORE["scenarios"][key] for key in group})
+        fields[name] = given
         wanted = set(spec_fields(get_scenario(name)))
         if set(given) != wanted:
             lacks, unknown_fields = sorted(wanted - set(given)), sorted(set(given) - wanted)

@@ -40,10 +40,13 @@ from pedsafe_sumo.scenarios.signals import SIGNAL_STATES
 STRING_FIELDS = (
     "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
     "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class", "approach", "staging",
+    "queue_staging",
 )  # fmt: skip
 
 #: How an episode is staged (ScenarioSpec.staging).
 STAGINGS = ("fixed", "approach")
+#: How the approach staging's kerb-lane queue and waiting vehicle come to stand (ScenarioSpec.queue_staging).
+QUEUE_STAGINGS = ("formed", "placed")
 
 #: Upper bound of every numeric scenario field, with why: above it a value stages no meaningful scene,
 #: or makes an episode (or the drawing of one) run for ever. `--set` beyond one is refused in one line.
@@ -204,6 +207,12 @@ class ScenarioSpec:
     #: it. (The fixed staging draws blend_gap_min_m..max_m instead.)
     kerb_gap_min_m: float = 0.3
     kerb_gap_max_m: float = 1.0
+    #: Approach staging, jaywalking's kerb-lane queue and background_blending's waiting vehicle (on an
+    #: approach of two or more lanes). "formed": SUMO forms them before the episode's start, driving them
+    #: up the kerb lane to a stop at its red (sim/queue.py; the head stops where SUMO stops a vehicle at a
+    #: red, 1 m before the line). "placed": SUMO adds them standing where the staging puts them at the
+    #: start (the head 0.5 m before the line), as protocol approach-v1 ran. (The fixed staging places.)
+    queue_staging: str = "formed"
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -227,6 +236,7 @@ class ScenarioSpec:
             ),
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.staging in STAGINGS, f"staging in {STAGINGS}"),
+            (self.queue_staging in QUEUE_STAGINGS, f"queue_staging in {QUEUE_STAGINGS}"),
             (0 < self.ego_start_min_m <= self.ego_start_max_m, "0 < ego_start_min_m <= ego_start_max_m"),
             (self.ped_appear_min_s >= 0, "ped_appear_min_s >= 0"),
             (0 <= self.walk_in_min_s <= self.walk_in_max_s, "0 <= walk_in_min_s <= walk_in_max_s"),

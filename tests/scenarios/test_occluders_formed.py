@@ -217,3 +217,23 @@ def test_approach_jaywalking_and_blending_run_without_errors_the_same_on_one_and
     assert (one["ped_appear_time_s"] > 0).all()
     two = run_batch(tmp_path / "two", "2")
     pd.testing.assert_frame_equal(one, two)
+
+
+@pytest.mark.parametrize("name", ["jaywalking", "background_blending"])
+def test_queue_staging_placed_adds_them_standing_half_a_metre_before_the_line(runner, name):
+    # queue_staging "placed" (protocol approach-v1's value): SUMO forms nothing; the head's front stands
+    # 0.5 m before the stop line (the kerb lane's length, read from the network file, minus 0.5), every
+    # staged vehicle with SUMO's minGap 0.5 m; the world's draws are those of "formed" but the head's
+    # position.
+    stop_line_m = kerb_lane_length_m()
+    spec = get_scenario(name).with_overrides({"staging": "approach", "queue_staging": "placed"})
+    placed, placed_draws = runner.draw_setup_sampled(spec, 3)
+    formed, formed_draws = runner.draw_setup_sampled(spec.with_overrides({"queue_staging": "formed"}), 3)
+    kerb_placed = [v for v in placed.parked if v.lane_id == KERB_LANE_ID]
+    assert kerb_placed and not any(v.formed for v in kerb_placed)
+    assert {v.min_gap_m for v in kerb_placed} == {0.5}
+    assert max(v.front_pos_m for v in kerb_placed) == pytest.approx(stop_line_m - 0.5, abs=1e-9)
+    kerb_formed = [v for v in formed.parked if v.lane_id == KERB_LANE_ID]
+    assert all(v.formed for v in kerb_formed)
+    assert max(v.front_pos_m for v in kerb_formed) == pytest.approx(stop_line_m - 1.0, abs=1e-9)
+    assert list(placed_draws.inputs) == list(formed_draws.inputs)

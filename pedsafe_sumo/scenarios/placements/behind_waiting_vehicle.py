@@ -31,6 +31,7 @@ from pedsafe_sumo.scenarios.placements.midblock import (
     HEAD_BEFORE_STOP_LINE_M,
     formed_by_sumo,
     kerb_wait_offset_m,
+    queue_formed_by_sumo,
 )
 from pedsafe_sumo.scenarios.placements.straight import (
     KerbRow,
@@ -53,9 +54,15 @@ FIXED_BEFORE_STOP_LINE_M = 0.5
 def head_before_stop_line_m(spec: ScenarioSpec, row: KerbRow) -> float:
     """How far before the stop line the waiting vehicle's front stands [m]: under approach staging in a
     kerb lane where SUMO stops it at the red (HEAD_BEFORE_STOP_LINE_M), else where the staging puts it."""
-    if spec.staging == "approach" and not row.one_lane:
+    if formed_in_kerb_lane(spec, one_lane=row.one_lane):
         return HEAD_BEFORE_STOP_LINE_M
     return FIXED_BEFORE_STOP_LINE_M
+
+
+def formed_in_kerb_lane(spec: ScenarioSpec, one_lane: bool) -> bool:
+    """Whether SUMO forms the waiting vehicle (approach staging, a kerb lane beside the ego's,
+    ScenarioSpec.queue_staging "formed")."""
+    return spec.staging == "approach" and not one_lane and queue_formed_by_sumo(spec)
 
 
 class BehindWaitingVehicle(StraightPlacement):
@@ -70,7 +77,7 @@ class BehindWaitingVehicle(StraightPlacement):
             else (spec.blend_gap_min_m, spec.blend_gap_max_m)
         )
         gap_m = inputs.draws.uniform("blend_gap_m", low_m, high_m)
-        formed = approach_staging and not row.one_lane
+        formed = formed_in_kerb_lane(spec, one_lane=row.one_lane)
         waiting = row.random_vehicle("waiting_0", row.stop_line_pos_m - head_before_stop_line_m(spec, row))
         if spec.waiting_vehicle_class:
             waiting = dataclasses.replace(waiting, size=VEHICLE_CLASSES[spec.waiting_vehicle_class])
@@ -119,7 +126,7 @@ class BehindWaitingVehicle(StraightPlacement):
         gap_max_m = spec.kerb_gap_max_m if spec.staging == "approach" else spec.blend_gap_max_m
         before_m = (
             HEAD_BEFORE_STOP_LINE_M
-            if spec.staging == "approach" and len(approach.lane_ids) > 1
+            if formed_in_kerb_lane(spec, one_lane=len(approach.lane_ids) == 1)
             else FIXED_BEFORE_STOP_LINE_M
         )
         behind_m = before_m + VEHICLE_CLASSES["car"].length_m + gap_max_m + PEDESTRIAN_RADIUS_M

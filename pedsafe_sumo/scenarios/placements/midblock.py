@@ -46,6 +46,9 @@ if TYPE_CHECKING:
 #: the stop line [m]: where SUMO stops a vehicle at a red light (its junction model's `jmStoplineGap`,
 #: 1 m by default; measured on Xueqing's kerb lane: 1.001 m), as SUMO forms the queue (sim/queue.py).
 HEAD_BEFORE_STOP_LINE_M = 1.0
+#: ScenarioSpec.queue_staging "placed": the head is added standing this far before the stop line [m], as
+#: the crossing scenario's occluder (placements/crosswalk.py).
+PLACED_HEAD_BEFORE_STOP_LINE_M = 0.5
 #: SUMO's minGap of the head of a formed queue [m]: unused at the red (the stop line gap applies), the
 #: staged vehicles' usual 0.5 m.
 HEAD_MIN_GAP_M = 0.5
@@ -68,6 +71,16 @@ def kerb_wait_offset_m(approach: Approach) -> float:
     return -(approach.lane_width_m / 2 + PEDESTRIAN_RADIUS_M)
 
 
+def queue_formed_by_sumo(spec: ScenarioSpec) -> bool:
+    """Whether SUMO forms the approach staging's kerb-lane vehicles (ScenarioSpec.queue_staging)."""
+    return spec.queue_staging == "formed"
+
+
+def head_before_stop_line_m(spec: ScenarioSpec) -> float:
+    """How far before the stop line the kerb lane's first vehicle stands under approach staging [m]."""
+    return HEAD_BEFORE_STOP_LINE_M if queue_formed_by_sumo(spec) else PLACED_HEAD_BEFORE_STOP_LINE_M
+
+
 def queued_from_stop_line(spec: ScenarioSpec, approach: Approach) -> bool:
     """Whether the kerb-lane vehicles queue from the stop line (approach staging, two or more lanes)."""
     return spec.staging == "approach" and len(approach.lane_ids) > 1
@@ -80,7 +93,7 @@ def crossing_reach_m(spec: ScenarioSpec) -> tuple[float, float]:
     shortest_m = min(size.length_m for size in VEHICLE_CLASSES.values())
     longest_m = max(size.length_m for size in VEHICLE_CLASSES.values())
     half_spacing_m = (spec.queue_gap_max_m + longest_m) / 2
-    first_gap_m = HEAD_BEFORE_STOP_LINE_M + shortest_m + spec.parked_gap_min_m / 2
+    first_gap_m = head_before_stop_line_m(spec) + shortest_m + spec.parked_gap_min_m / 2
     return (
         max(spec.midblock_distance_min_m - half_spacing_m, first_gap_m),
         max(spec.midblock_distance_max_m + half_spacing_m, first_gap_m),
@@ -121,7 +134,7 @@ class Midblock(StraightPlacement):
         )
         gap_m = draws.uniform("parked_gap_m", spec.parked_gap_min_m, spec.parked_gap_max_m)
         line_pos_m = row.stop_line_pos_m - distance_m
-        queue = [row.random_vehicle("queued_0", row.stop_line_pos_m - HEAD_BEFORE_STOP_LINE_M)]
+        queue = [row.random_vehicle("queued_0", row.stop_line_pos_m - head_before_stop_line_m(spec))]
         while True:
             rear_m = queue[-1].front_pos_m - queue[-1].size.length_m
             # The crossing line if the gap opens behind the last vehicle, and if it opens behind the next.
@@ -147,7 +160,7 @@ class Midblock(StraightPlacement):
         path = inputs.approach.across(
             row.lane, cross_pos, kerb_wait_offset_m(inputs.approach), row.far_offset_m
         )
-        return path, formed_by_sumo(queue), inputs.clothing_rgb
+        return path, formed_by_sumo(queue) if queue_formed_by_sumo(spec) else queue, inputs.clothing_rgb
 
     def ped_crossing_id(self, approach: Approach) -> str:
         # Mid-block no signal faces the pedestrian.
