@@ -58,6 +58,11 @@ class VehicleSetup:
     #: on the lane at `front_pos_m` and parks it in a parking space there (sim/kerb.py). 0: it stands in
     #: its lane.
     kerb_offset_m: float = 0.0
+    #: A vehicle that drives through the junction on its green (left_turn's oncoming vehicle; under
+    #: approach staging right_turn's leader, which comes down the ego's lane): from when that green must
+    #: show [s], the moment its front reaches the stop line (0: from the start; scenarios.staging.
+    #: stage_signals).
+    green_from_s: float = 0.0
 
 
 @dataclass(frozen=True)
