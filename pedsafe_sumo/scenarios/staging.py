@@ -118,10 +118,12 @@ def stage_signals(
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
     (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
-    start (under approach staging from the pedestrian's appearance), and the pedestrian's from the moment
-    they step off, until `signal_hold_after_s` after the staged conflict. Under approach staging, when
-    that is longer than any run of the ego's signal, the pedestrian appears later, part of the way along
-    their walk-in (appear_later). SignalStagingError when the program has no such time (the message says
+    start (under approach staging from the pedestrian's appearance, or from the stop line of a vehicle
+    turning ahead of it on its lane, whichever is earlier), the pedestrian's from the moment they step
+    off, and an oncoming vehicle's green from its stop line (VehicleSetup.green_from_s), until
+    `signal_hold_after_s` after the staged conflict. Under approach staging, when that is longer than any
+    run of the ego's signal, the pedestrian appears later, part of the way along their walk-in
+    (appear_later; _fit_approach). SignalStagingError when the program has no such time (the message says
     which)."""
     if junction is None:
         # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so

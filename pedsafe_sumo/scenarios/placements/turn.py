@@ -2,7 +2,10 @@
 the road it turns into. The pedestrian walks from `ped_start_corner` with the walk signal (the signal
 staging gives it), the ego turns on its green and must yield to them; a vehicle turning ahead of the ego
 (turn_leader) or one coming the other way (oncoming_vehicle) hides them (docs/engine.md, "Turning
-scenarios")."""
+scenarios"). Under approach staging (`TurnPlacement.stage_approach`; docs/engine.md, "The turning
+scenarios under approach staging") the pedestrian walks in along the sidewalk that reaches an end of that
+crosswalk, and the leader and the oncoming vehicle drive from the start so that they pass where the fixed
+staging has them at the same time before the conflict."""
 
 from __future__ import annotations
 
