@@ -327,8 +327,17 @@ def test_a_few_episodes_in_sumo(name):
                 setup = runner.draw_setup(spec, seed)
                 other = setup.parked[0]
 
-                def hook(api, row, seen=seen, setup=setup, other=other):
+                at_kerb_s = _at_kerb_s(setup)
+
+                def hook(api, row, seen=seen, setup=setup, other=other, at_kerb_s=at_kerb_s):
                     time_s = float(row["time_s"])
+                    for key, when_s in (
+                        ("before", at_kerb_s - 0.5),
+                        ("at", at_kerb_s),
+                        ("after", at_kerb_s + 0.5),
+                    ):
+                        if key not in seen and time_s >= when_s:
+                            seen[key] = _body_and_line(api, other, setup, row)
                     if "first" not in seen:
                         seen["first"] = (
                             api.vehicle.getLanePosition("ego"),
@@ -346,5 +355,36 @@ def test_a_few_episodes_in_sumo(name):
                 assert ego_pos == pytest.approx(setup.ego.front_pos_m, abs=0.01)
                 assert other_lane == (other.internal_lane_id or other.lane_id)
                 assert seen["appear"] in "Gg" and seen["step_off"] in "Gg"
+                if other.vehicle_id == "leader_0":
+                    # Across the pedestrian's path just before they reach the kerb, past it just after.
+                    assert seen["before"]["across_path"] and not seen["after"]["across_path"]
+                else:
+                    # Across the line of sight from the ego's centre to them as they reach the kerb.
+                    assert seen["at"]["sight_line_gap_m"] < 0.05
     finally:
         runner.close()
+
+
+def _body_and_line(api, vehicle, setup, row) -> dict:
+    """From SUMO's own position and angle of `vehicle`: whether its body is across the pedestrian's
+    crossing (front and rear on either side of the line through the crosswalk's two ends on their path),
+    and the distance from its footprint to the line of sight from the ego's centre (the log's) to the
+    pedestrian's step-off point."""
+    length_m, width_m = vehicle.size.length_m, vehicle.size.width_m
+    fx, fy = api.vehicle.getPosition(vehicle.vehicle_id)
+    heading = math.radians(90.0 - api.vehicle.getAngle(vehicle.vehicle_id))  # SUMO: clockwise from north
+    rear = (fx - length_m * math.cos(heading), fy - length_m * math.sin(heading))
+    ped = setup.pedestrian
+    (ax, ay), (bx, by) = ped.path_xy[ped.kerb_index], ped.path_xy[ped.kerb_index + 1]
+    side = [np.sign((bx - ax) * (py - ay) - (by - ay) * (px - ax)) for px, py in (rear, (fx, fy))]
+    cx, cy = fx - length_m / 2 * math.cos(heading), fy - length_m / 2 * math.sin(heading)
+    ex, ey = row["ego_x_m"], row["ego_y_m"]
+
+    def outside_m(xy) -> float:
+        dx, dy = xy[0] - cx, xy[1] - cy
+        lon = dx * math.cos(heading) + dy * math.sin(heading)
+        lat = -dx * math.sin(heading) + dy * math.cos(heading)
+        return math.hypot(max(abs(lon) - length_m / 2, 0.0), max(abs(lat) - width_m / 2, 0.0))
+
+    samples = [(ex + k / 400 * (ax - ex), ey + k / 400 * (ay - ey)) for k in range(401)]
+    return {"across_path": side[0] != side[1], "sight_line_gap_m": min(outside_m(xy) for xy in samples)}
