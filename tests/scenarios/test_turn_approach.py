@@ -388,3 +388,34 @@ def _body_and_line(api, vehicle, setup, row) -> dict:
 
     samples = [(ex + k / 400 * (ax - ex), ey + k / 400 * (ay - ey)) for k in range(401)]
     return {"across_path": side[0] != side[1], "sight_line_gap_m": min(outside_m(xy) for xy in samples)}
+
+
+def test_a_slow_ego_s_leader_crosses_on_the_previous_phase_only_when_no_green_holds_it():
+    """right_turn on Xueqing at 2.5 m/s (the spec's floor): every seed is placed in the signal program, and
+    in every one the leader's stop line comes before the ego's green: no cycle time (searched every 0.1 s)
+    gives the ego green from the leader's stop line to signal_hold_after_s after the conflict and the
+    pedestrian walk when they step off (the walk shows in the first 11 s of the 16 s green only)."""
+    site = get_site("xueqing")
+    spec = get_scenario("right_turn").with_overrides({"staging": "approach"})
+    approach = load_approach(site)
+    case = ("right_turn", site, spec, approach, load_turn(site, "right"), None, None)
+    junction = load_junction_signals(site.file("net.xml"), approach.junction_id)
+    program = junction.program
+    dropped = 0
+    for seed in range(20):
+        setup, draws = draw(case, seed, speed=2.5)
+        staged = stage_signals(spec, setup, junction, draws)
+        (leader,) = staged.parked
+        ego_link, ped_link = staged.signals.ego_link_index, staged.signals.ped_link_index
+        cycle_s = (staged.signals.cycle_start_s + leader.green_from_s + 1e-6) % program.cycle_s
+        if program.colour(ego_link, cycle_s) == "green":
+            continue
+        dropped += 1
+        until_s = staged.conflict_time_s + spec.signal_hold_after_s
+        step_off_s = _at_kerb_s(staged) + spec.ped_start_delay_s
+        times = np.arange(leader.green_from_s, until_s, 0.1)
+        for start_s in np.arange(0.0, program.cycle_s, 0.1):
+            holds = all(program.colour(ego_link, (start_s + t) % program.cycle_s) == "green" for t in times)
+            walk = program.colour(ped_link, (start_s + step_off_s) % program.cycle_s) == "green"
+            assert not (holds and walk), f"seed {seed}: cycle start {start_s:.1f} s would hold the leader's"
+    assert dropped == 20
