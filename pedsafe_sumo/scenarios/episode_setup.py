@@ -66,6 +66,11 @@ class VehicleSetup:
     #: SUMO's minGap of the vehicle [m]: a formed vehicle stops this far behind the rear of the vehicle
     #: before it. 0.5 m for every staged vehicle that SUMO does not form (the staging's own gaps place it).
     min_gap_m: float = 0.5
+    #: A vehicle that drives through the junction on its green (left_turn's oncoming vehicle; under
+    #: approach staging right_turn's leader, which comes down the ego's lane): from when that green must
+    #: show [s], the moment its front reaches the stop line (0: from the start; scenarios.staging.
+    #: stage_signals).
+    green_from_s: float = 0.0
 
 
 @dataclass(frozen=True)

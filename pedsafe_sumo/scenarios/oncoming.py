@@ -48,6 +48,24 @@ class OncomingPath:
     arm: str
     lanes: tuple[OncomingLane, ...]
     route: tuple[str, str]
+    #: The road before the approach lane, straight on through the junctions before it (their internal
+    #: lanes included), in driving order, and its edges: approach staging starts the oncoming vehicle
+    #: there when the approach is shorter than its run to the conflict (`extended`).
+    upstream_lanes: tuple[OncomingLane, ...] = ()
+    upstream_edges: tuple[str, ...] = ()
+
+    def extended(self) -> OncomingPath:
+        """The path with the road before the approach lane in front of it (lanes and route)."""
+        return OncomingPath(
+            self.arm,
+            (*self.upstream_lanes, *self.lanes),
+            (*self.upstream_edges, *self.route),  # type: ignore[arg-type]
+        )
+
+    def stop_line_m(self) -> float:
+        """SUMO distance from the start of the `extended` path to the end of the approach lane (where
+        the junction begins)."""
+        return sum(lane.length_m for lane in self.upstream_lanes) + self.lanes[0].length_m
 
 
 class OncomingError(ValueError):
@@ -73,6 +91,7 @@ def load_oncoming(site: Site, arm: str | None = None) -> OncomingPath:
         )
     connection = straight[0]
     lanes = _lanes_of(net, connection)
+    upstream, edges = _upstream(net, lane)
     return OncomingPath(
         arm=opposite,
         lanes=tuple(
@@ -80,7 +99,45 @@ def load_oncoming(site: Site, arm: str | None = None) -> OncomingPath:
             for ln in lanes
         ),
         route=(connection.getFrom().getID(), connection.getTo().getID()),
+        upstream_lanes=tuple(_oncoming_lane(ln) for ln in upstream),
+        upstream_edges=edges,
     )
+
+
+#: How far before the oncoming approach lane `_upstream` follows the road [m]: beyond the longest start
+#: distance approach staging may draw (specs.SPEC_UPPER_BOUNDS, ego_start_max_m 500 m).
+UPSTREAM_MAX_M = 500.0
+
+
+def _oncoming_lane(lane) -> OncomingLane:
+    return OncomingLane(lane.getID(), tuple(tuple(p) for p in lane.getShape()), float(lane.getLength()))
+
+
+def _upstream(net, lane) -> tuple[list, tuple[str, ...]]:
+    """The lanes before sumolib `lane` that lead straight on into it (through the junctions between, their
+    internal lanes included), in driving order, up to UPSTREAM_MAX_M, and their edges."""
+    lanes: list = []
+    edges: list[str] = []
+    done_m = 0.0
+    current = lane
+    while done_m < UPSTREAM_MAX_M:
+        before = [
+            c
+            for ln in current.getIncoming()
+            if ln.getEdge().getFunction() == ""
+            for c in ln.getOutgoing()
+            if c.getToLane() == current and c.getDirection() == "s"
+        ]
+        if not before:
+            break
+        driven = _lanes_of(net, before[0])[:-1]  # its lane and the junction's internal lane(s)
+        if driven[0].getEdge().getID() in edges:
+            break  # a loop
+        lanes[:0] = driven
+        edges.insert(0, driven[0].getEdge().getID())
+        done_m += sum(float(ln.getLength()) for ln in driven)
+        current = driven[0]
+    return lanes, tuple(edges)
 
 
 def _segment_crossing(a, b, p, q) -> float | None:

@@ -118,10 +118,12 @@ def stage_signals(
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
     (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
-    start (under approach staging from the pedestrian's appearance), and the pedestrian's from the moment
-    they step off, until `signal_hold_after_s` after the staged conflict. Under approach staging, when
-    that is longer than any run of the ego's signal, the pedestrian appears later, part of the way along
-    their walk-in (appear_later). SignalStagingError when the program has no such time (the message says
+    start (under approach staging from the pedestrian's appearance, or from the stop line of a vehicle
+    turning ahead of it on its lane, whichever is earlier), the pedestrian's from the moment they step
+    off, and an oncoming vehicle's green from its stop line (VehicleSetup.green_from_s), until
+    `signal_hold_after_s` after the staged conflict. Under approach staging, when that is longer than any
+    run of the ego's signal, the pedestrian appears later, part of the way along their walk-in
+    (appear_later; _fit_approach). SignalStagingError when the program has no such time (the message says
     which)."""
     if junction is None:
         # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so
@@ -138,14 +140,7 @@ def stage_signals(
     until_s = setup.conflict_time_s + spec.signal_hold_after_s
     required = _required_signals(spec, setup, junction, ego_link, ped_link, until_s)
     if spec.staging == "approach" and not cycle_start_windows(junction.program, required, until_s):
-        # From the pedestrian's appearance to after the conflict is longer than any run of the ego's
-        # signal (Xueqing's through green lasts 16 s of its 90 s cycle): they enter the scene later, part
-        # of the way along their walk-in, so that the scene fits in one run.
-        longest_s = max((hi - lo for lo, hi in junction.program.runs(ego_link, spec.ego_signal)), default=0.0)
-        later = appear_later(spec, setup, until_s - longest_s + SIGNAL_FIT_MARGIN_S)
-        if later is not None:
-            setup = later
-            required = _required_signals(spec, setup, junction, ego_link, ped_link, until_s)
+        setup, required = _fit_approach(spec, setup, junction, ego_link, ped_link, until_s)
     oncoming_links = _oncoming_links(setup, junction)
     # The point in the cycle is one uniform draw on [0, 1), recorded (never proposed) as signal_cycle_u.
     source = as_draws(rng).uniform_source("signal_cycle_u")
@@ -167,6 +162,44 @@ def stage_signals(
     return dataclasses.replace(setup, signals=staging)
 
 
+def _fit_approach(
+    spec: ScenarioSpec,
+    setup: EpisodeSetup,
+    junction: JunctionSignals,
+    ego_link: int,
+    ped_link: int,
+    until_s: float,
+) -> tuple[EpisodeSetup, dict]:
+    """Approach staging, when no point of the cycle gives every road user their signal: (the setup, the
+    signals required of it). From the pedestrian's appearance to after the conflict is longer than any
+    run of the ego's signal (Xueqing's through green lasts 16 s of its 90 s cycle): they enter the scene
+    later, part of the way along their walk-in, so that the scene fits in one run (appear_later). A
+    vehicle turning ahead of the ego (right_turn's leader) whose stop line comes too long before the
+    conflict for one green (a slow ego) is then no longer required to cross it on green (it crossed it on
+    the end of the previous phase), so that the ego, the pedestrian and the oncoming vehicle keep theirs."""
+    longest_s = max((hi - lo for lo, hi in junction.program.runs(ego_link, spec.ego_signal)), default=0.0)
+    later = appear_later(spec, setup, until_s - longest_s + SIGNAL_FIT_MARGIN_S)
+    for leaders in (True, False):
+        if leaders is False and not _leaders(setup):
+            break
+        required = _required_signals(spec, setup, junction, ego_link, ped_link, until_s, leaders)
+        if cycle_start_windows(junction.program, required, until_s):
+            return setup, required
+        if later is not None:
+            required = _required_signals(spec, later, junction, ego_link, ped_link, until_s, leaders)
+            if cycle_start_windows(junction.program, required, until_s):
+                return later, required
+    if later is not None:
+        setup = later
+    return setup, _required_signals(spec, setup, junction, ego_link, ped_link, until_s)
+
+
+def _leaders(setup: EpisodeSetup) -> list:
+    """The vehicles that come down the ego's lane ahead of it to turn on its green (approach staging's
+    right_turn leader)."""
+    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.lane_id == setup.ego.lane_id]
+
+
 def step_off_time_s(ped: PedestrianSetup) -> float:
     """When the pedestrian steps off the kerb [s]: their appearance, the walk-in (the points of their path
     before `kerb_index`, at their walking speed), then the wait at the kerb."""
@@ -177,29 +210,46 @@ def step_off_time_s(ped: PedestrianSetup) -> float:
     return ped.appear_time_s + walk_in_m / ped.walking_speed_mps + ped.start_delay_s
 
 
-def _required_signals(spec, setup, junction, ego_link: int, ped_link: int, until_s: float) -> dict:
+def _required_signals(
+    spec, setup, junction, ego_link: int, ped_link: int, until_s: float, leaders: bool = True
+) -> dict:
     """Link -> (colour, from, until) each road user's signal must show (signals.cycle_start_windows)."""
     # The ego from the start (it sees its signal all the way to the stop line; under approach staging
     # from the pedestrian's appearance: before it the ego is on its approach and nothing is staged), the
     # pedestrian from stepping off the kerb, both until after the conflict.
     ego_from_s = min(setup.pedestrian.appear_time_s, until_s) if spec.staging == "approach" else 0.0
+    if spec.staging == "approach" and leaders:
+        # A vehicle ahead of the ego on its lane turns on the same green from its stop line on.
+        ego_from_s = min([ego_from_s, *(v.green_from_s for v in _leaders(setup))])
     required: dict[int, str | tuple[str, float, float]] = {ego_link: (spec.ego_signal, ego_from_s, until_s)}
     if ped_link != NO_LINK:
         step_off_s = min(step_off_time_s(setup.pedestrian), until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
         required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
-    # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too.
-    for link in _oncoming_links(setup, junction):
-        required[link] = ("green", 0.0, until_s)
+    # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too,
+    # from its stop line on (from the start in the fixed staging, which starts it on the junction).
+    for link, from_s in _oncoming_links_from(setup, junction):
+        required[link] = ("green", min(from_s, until_s), until_s)
     return required
 
 
 def _oncoming_links(setup: EpisodeSetup, junction: JunctionSignals) -> list[int]:
-    return [
-        junction.vehicle_link(v.lane_id, v.route[1])
-        for v in setup.parked
-        if v.vehicle_id.startswith("oncoming_") and len(v.route) == 2
-    ]
+    return [link for link, _ in _oncoming_links_from(setup, junction)]
+
+
+def _oncoming_links_from(setup: EpisodeSetup, junction: JunctionSignals) -> list[tuple[int, float]]:
+    """(link, from when its green must show) of each oncoming vehicle that has yet to leave the junction:
+    the link from the last edge of its route before the junction (under approach staging it may start on
+    the road before its approach: that edge's lane with the same index)."""
+    links = []
+    for v in setup.parked:
+        if not v.vehicle_id.startswith("oncoming_") or len(v.route) < 2:
+            continue
+        lane_id = v.lane_id
+        if len(v.route) > 2:
+            lane_id = f"{v.route[-2]}_{v.lane_id.rsplit('_', 1)[1]}"
+        links.append((junction.vehicle_link(lane_id, v.route[-1]), v.green_from_s))
+    return links
 
 
 def appear_later(spec: ScenarioSpec, setup: EpisodeSetup, appear_s: float) -> EpisodeSetup | None:

@@ -12,10 +12,8 @@ import sumolib
 
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.sampling.draws import Draws
-from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.hosting import staging_problem
-from pedsafe_sumo.scenarios.placements import placement_of
 from pedsafe_sumo.scenarios.signals import load_junction_signals
 from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.scenarios.staging import draw_episode, stage_signals, step_off_time_s
@@ -280,14 +278,17 @@ def test_signals_hold_from_the_appearance(site, approach):
             assert program.colour(staging.ped_link_index, cycle_s) == "red"
 
 
-def test_a_turn_under_approach_staging_is_refused_in_one_line(site, approach):
+def test_a_turn_under_approach_staging_is_staged(site, approach):
+    """right_turn is hosted under approach staging and staged as the straight scenarios are (its own
+    checks: tests/scenarios/test_turn_approach.py): the pedestrian appears after the minimum, walks in to
+    their step-off point and leaves the scene."""
     spec = approach_spec("right_turn")
-    placement = placement_of(spec)
     turn = load_turn(site, "right")
-    problem = placement.staging_problem(site, spec, approach, turn, "N")
-    assert problem is not None and "\n" not in problem and "staging=fixed" in problem
-    with pytest.raises(ScenarioError, match="fixed staging only"):
-        draw_episode(spec, approach, 0, TRAITS, 5.0, np.random.default_rng(0), turn)
+    assert staging_problem(site, spec, approach, turn, "N") is None
+    setup = draw_episode(spec, approach, 0, TRAITS, 5.0, np.random.default_rng(0), turn)
+    ped = setup.pedestrian
+    assert ped.appear_time_s >= spec.ped_appear_min_s and ped.kerb_index >= 1 and ped.leaves_scene
+    assert spec.ego_start_min_m <= setup.ego_start_distance_m <= spec.ego_start_max_m
 
 
 def test_hosting_refuses_a_road_too_short_for_any_start(site, approach):

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pedsafe_sumo.scenarios.placements.base import StagingInputs
 from pedsafe_sumo.scenarios.walkways import (
     ON_CENTRELINE_M,
+    Walkway,
     point_at,
     polyline_length_m,
     shape_between,
@@ -36,6 +37,8 @@ FALLBACKS = {
     "start_lengthened": "still before ped_appear_min_s: the ego starts farther back, within the road",
     "appears_early": "still before ped_appear_min_s: the pedestrian appears when the timing says",
     "on_way_at_start": "the timing says before t = 0: at t = 0 the pedestrian is already on their way",
+    # The turning scenarios' (placements/turn.py):
+    "oncoming_late": "the road before the oncoming vehicle is shorter than its run: it starts at its start",
 }
 
 
@@ -60,12 +63,17 @@ def stage_approach(
     conflict_pos_m: float,
     walk_to_conflict_s: float,
     start_range_m: tuple[float, float],
+    walkway: Walkway | None = None,
 ) -> ApproachTiming:
     """The approach staging of a scene whose pedestrian crosses along `crossing` (its first point the
     step-off point, its last the far end) and meets the ego at SUMO distance `conflict_pos_m` from the
     start of the ego's lane, `walk_to_conflict_s` after stepping off. `start_range_m`: the shortest and
-    the longest start distance the road holds (the ego's front on its lane, its whole body behind it)."""
+    the longest start distance the road holds (the ego's front on its lane, its whole body behind it).
+    `walkway`: the sidewalk the pedestrian walks in along, its shape running towards the step-off point (None:
+    the approach's own)."""
     spec, draws, approach = inputs.spec, inputs.draws, inputs.approach
+    if walkway is None:
+        walkway = Walkway(approach.sidewalk_lane_id, approach.sidewalk_shape, approach.sidewalk_width_m)
     ego_mps, walk_mps = inputs.ego_speed_mps, float(inputs.traits["walking_speed_mps"])
     fewest_m, most_m = start_range_m
     fallbacks: list[str] = []
@@ -77,7 +85,7 @@ def stage_approach(
     start_m = max(start_m, fewest_m)
 
     step_off = (float(crossing[0][0]), float(crossing[0][1]))
-    sidewalk = approach.sidewalk_shape
+    sidewalk_lane_id, sidewalk = walkway.lane_id, walkway.shape
     # From the sidewalk's centreline to the step-off point (the kerb end of a crosswalk, behind a waiting
     # car): walked whatever the walk-in; the drawn walk-in is the whole walk to the step-off point.
     beside = point_at(sidewalk, sidewalk_offset_m(sidewalk, step_off))
@@ -126,7 +134,7 @@ def stage_approach(
         spec.walk_on_m,
         approach.walkways,
         approach.junction_xy,
-        exclude=approach.sidewalk_lane_id,
+        exclude=sidewalk_lane_id,
     )
     crossing_on = [step_off, *((float(x), float(y)) for x, y in crossing[1:]), *onward]
     delay_s = spec.ped_start_delay_s
