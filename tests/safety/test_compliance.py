@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 
-from pedsafe_sumo.safety.compliance import episode_compliance, false_brake, stop_line_of
+from pedsafe_sumo.safety.compliance import episode_compliance, false_brake, standing_duration_s, stop_line_of
 
 STEP_S = 0.05
 # A 4 m x 1.8 m ego driving east along y = 0 at 10 m/s from x = 0 (0.5 m a step); its front is 2 m
@@ -103,7 +104,7 @@ def fb(log, ego_colours=None, ped_colours=None):
 
 def test_braking_for_someone_standing_beside_the_path_is_a_false_brake():
     # Standing 5 m left of the heading line: beyond 0.9 + 0.3 + 0.5 = 1.7 m.
-    assert fb(drive(n=20, ped=(30.0, 5.0), braking=True)) is True
+    assert fb(drive(n=40, ped=(30.0, 5.0), braking=True)) is True
     # 1.6 m to the left: inside the corridor, braking is right.
     assert fb(drive(n=20, ped=(30.0, 1.6), braking=True)) is False
     # Walking (1.4 m/s): not standing.
@@ -111,12 +112,12 @@ def test_braking_for_someone_standing_beside_the_path_is_a_false_brake():
     # Not braking.
     assert fb(drive(n=20, ped=(30.0, 5.0))) is False
     # Standing in its lane 10 m behind the ego's start (behind its rear at every step): outside its path.
-    assert fb(drive(n=20, ped=(-10.0, 0.0), braking=True)) is True
+    assert fb(drive(n=40, ped=(-10.0, 0.0), braking=True)) is True
 
 
 def test_a_command_below_the_speed_is_braking_even_unflagged():
     # 1 m/s2 x 0.05 s = 0.05 m/s below the speed is braking; 0.04 is not.
-    assert fb(drive(n=20, ped=(30.0, 5.0), command=10.0 - 0.06)) is True
+    assert fb(drive(n=40, ped=(30.0, 5.0), command=10.0 - 0.06)) is True
     assert fb(drive(n=20, ped=(30.0, 5.0), command=10.0 - 0.04)) is False
 
 
@@ -138,3 +139,50 @@ def test_an_empty_log_has_no_false_brake_and_no_crossing():
     assert false_brake(empty, [], [], empty["time_s"].to_numpy() > 0) is False
     result = episode_compliance(empty, [], [], LINE)
     assert result == {"false_brake": False, "stopline_signal": "none", "could_stop_at_yellow": None}
+
+
+def walks_then_stands(n, stop_step, brake_steps, ped_y_at_stop=5.0):
+    """A pedestrian 30 m ahead walks towards the ego's path (south, 1.4 m/s) until step `stop_step - 1`
+    and stands 5 m left of its heading line from `stop_step` on; the ego brakes at `brake_steps` only."""
+    log = drive(n=n, ped=(30.0, ped_y_at_stop))
+    walking = log.index < stop_step
+    log.loc[walking, "ped_vy_mps"] = -1.4
+    log.loc[walking, "ped_y_m"] = ped_y_at_stop + 1.4 * STEP_S * (stop_step - log.index[walking])
+    log["braking"] = log.index.isin(brake_steps)
+    return log
+
+
+def test_standing_duration_counts_from_the_last_moving_step():
+    time_s = np.arange(6) * STEP_S
+    # Moves at steps 0 and 1, stands from step 2: 0, 0, 0.05, 0.10, 0.15, 0.20.
+    standing = np.array([False, False, True, True, True, True])
+    present = np.ones(6, dtype=bool)
+    assert standing_duration_s(time_s, standing, present) == pytest.approx([0, 0, 0.05, 0.10, 0.15, 0.20])
+    # Standing from the first step: one step at step 0, 0.30 s at step 5.
+    assert standing_duration_s(time_s, np.ones(6, dtype=bool), present)[[0, 5]] == pytest.approx([0.05, 0.30])
+    # Not in the scene at steps 0-2 (appears at 0.15 s), standing from then on: 0.05 s at step 3.
+    absent_first = np.array([False, False, False, True, True, True])
+    assert standing_duration_s(time_s, np.ones(6, dtype=bool), absent_first) == pytest.approx(
+        [0, 0, 0, 0.05, 0.10, 0.15]
+    )
+
+
+def test_braking_just_after_a_pedestrian_stopped_is_not_false():
+    # Walked until step 39 (1.95 s), stands from step 40 (2.00 s). Braking at step 43 (2.15 s): they had
+    # stood 2.15 - 1.95 = 0.20 s, under the 1 s a stop takes to be told: not a false brake.
+    assert fb(walks_then_stands(n=120, stop_step=40, brake_steps=[43])) is False
+    # Braking through steps 40-58 (up to 2.90 s: stood 0.95 s at most): still not.
+    assert fb(walks_then_stands(n=120, stop_step=40, brake_steps=range(40, 59))) is False
+    # Braking on at step 59 (2.95 s: stood 2.95 - 1.95 = 1.00 s): a false brake.
+    assert fb(walks_then_stands(n=120, stop_step=40, brake_steps=range(40, 60))) is True
+
+
+def test_braking_for_someone_who_stood_throughout_is_false():
+    # Standing 5 m left of the heading line from the first step (t = 0); the ego brakes from step 30
+    # (1.50 s): they had stood 1.50 + 0.05 = 1.55 s.
+    log = drive(n=60, ped=(30.0, 5.0))
+    log["braking"] = log.index >= 30
+    assert fb(log) is True
+    # Braking only at steps 0-18 (up to 0.90 s: stood at most 0.95 s): not charged.
+    log["braking"] = log.index <= 18
+    assert fb(log) is False
