@@ -1,6 +1,6 @@
 """How the ego kept to the rules of the road in one episode, from its per-step log and the signal it had
-at every step: braking for a pedestrian who had stood still outside its path for at least a second, the
-signal when it crossed
+at every step: braking for a pedestrian who stood still outside its path (for at least a second if they
+had walked before), the signal when it crossed
 the stop line, and whether it could have stopped at the yellow's onset. Columns of episodes.parquet
 (docs/columns.md): false_brake, stopline_signal, could_stop_at_yellow.
 """
@@ -19,13 +19,14 @@ COMPLIANCE_COLUMNS = ("false_brake", "stopline_signal", "could_stop_at_yellow")
 #: A pedestrian slower than this stands still [m/s] (the logged, true speed): a tenth of a slow walk
 #: (older pedestrians' 1.03 m/s mean); V2I's 0.2 m position noise is not in it.
 STANDING_SPEED_MPS = 0.2
-#: How long the pedestrian must have stood still before a braking step counts as a false brake [s].
-#: A stop must be observable before a stack can release brakes it applied while they walked towards
-#: its path: a least-squares velocity through 20 Hz positions with V2I's 0.2 m noise over a window T has
-#: a standard deviation of 0.2 x sqrt(12 / (20 T^3)) = 0.155 / T^1.5 m/s, below the 0.2 m/s standing
-#: threshold only from T = 0.84 s; exact onboard positions need the estimator's window to pass the stop
-#: (0.5 s for the paper-v7 stack's least squares); the reference stack's Kalman filter takes about 1 s
-#: on V2I alone (docs/baseline_stack.md). 1 s covers all three; braking later than that is charged.
+#: How long a pedestrian who moved must have stood still before a braking step counts as a false brake
+#: [s] (one who has stood ever since entering the scene counts at once). A stop must be observable
+#: before a stack can release brakes it applied while they walked towards its path: a least-squares
+#: velocity through 20 Hz positions with V2I's 0.2 m noise over a window T has a standard deviation of
+#: 0.2 x sqrt(12 / (20 T^3)) = 0.155 / T^1.5 m/s, below the 0.2 m/s standing threshold only from
+#: T = 0.84 s; exact onboard positions need the estimator's window to pass the stop (0.5 s for the
+#: paper-v7 stack's least squares); the reference stack's Kalman filter takes about 1 s on V2I alone
+#: (docs/baseline_stack.md). 1 s covers all three; braking later than that is charged.
 #: Measurement: docs/decisions/2026-11-27-false-brake-definition.md.
 MIN_STANDING_S = 1.0
 #: The ego's corridor: its half width plus the pedestrian's radius plus this margin on each side of its
@@ -66,19 +67,19 @@ def stop_line_of(
 
 
 def standing_duration_s(time_s: np.ndarray, standing: np.ndarray, present: np.ndarray) -> np.ndarray:
-    """Per step, how long the pedestrian has stood still up to and including it [s]: the time since the
-    last step at which they moved or were not in the scene, or, standing since the log's first step, since
-    one step before it (one standing step has stood one step). 0 at a step where they move or are absent."""
+    """Per step, how long the pedestrian has stood still since they last moved in the scene [s]: the
+    time since the last step at which they were present and not standing; infinite while they have
+    stood ever since they entered the scene (nothing they did suggested motion); 0 at a step where they
+    move or are absent."""
     n = len(time_s)
     if n == 0:
         return np.zeros(0)
-    step_s = time_s[1] - time_s[0] if n > 1 else 0.05
-    not_standing = ~(standing & present)
+    moving = present & ~standing
     index = np.arange(n)
-    # Index of the last not-standing step at or before each step (-1: none yet).
-    last = np.maximum.accumulate(np.where(not_standing, index, -1))
-    reference_s = np.where(last >= 0, time_s[np.maximum(last, 0)], time_s[0] - step_s)
-    return np.where(not_standing, 0.0, time_s - reference_s)
+    # Index of the last moving step at or before each step (-1: none yet).
+    last = np.maximum.accumulate(np.where(moving, index, -1))
+    since = np.where(last >= 0, time_s - time_s[np.maximum(last, 0)], np.inf)
+    return np.where(standing & present, since, 0.0)
 
 
 def false_brake(
@@ -89,8 +90,9 @@ def false_brake(
     min_standing_s: float = MIN_STANDING_S,
 ) -> bool:
     """Whether the ego braked (its `braking` flag, or a command BRAKE_DECEL_MPS2 x the step below its
-    speed) at a step where it perceived the pedestrian, who had stood still (true speed below
-    STANDING_SPEED_MPS) for at least `min_standing_s` (standing_duration_s) outside its corridor (lateral
+    speed) at a step where it perceived the pedestrian, who stood still (true speed below
+    STANDING_SPEED_MPS) since entering the scene or for at least `min_standing_s` since they last moved
+    (standing_duration_s), outside its corridor (lateral
     offset from its heading line beyond half its width, the pedestrian's radius and CORRIDOR_MARGIN_M, or
     behind its rear), with neither a yellow or red ahead of it (front before the stop line) nor a walk
     signal for the pedestrian (yielding to someone about to cross on walk is no false brake)."""
