@@ -1,8 +1,8 @@
 """How the ego kept to the rules of the road in one episode, from its per-step log and the signal it had
 at every step: braking for a pedestrian who stood still outside its path (for at least a second if they
-had walked before), the signal when it crossed
-the stop line, and whether it could have stopped at the yellow's onset. Columns of episodes.parquet
-(docs/columns.md): false_brake, stopline_signal, could_stop_at_yellow.
+had walked before), the signal when it crossed the stop line, and whether it could have stopped at the
+yellow's onset. Columns of episodes.parquet (docs/columns.md): false_brake, stopline_signal,
+could_stop_at_yellow.
 """
 
 from __future__ import annotations
@@ -92,10 +92,10 @@ def false_brake(
     """Whether the ego braked (its `braking` flag, or a command BRAKE_DECEL_MPS2 x the step below its
     speed) at a step where it perceived the pedestrian, who stood still (true speed below
     STANDING_SPEED_MPS) since entering the scene or for at least `min_standing_s` since they last moved
-    (standing_duration_s), outside its corridor (lateral
-    offset from its heading line beyond half its width, the pedestrian's radius and CORRIDOR_MARGIN_M, or
-    behind its rear), with neither a yellow or red ahead of it (front before the stop line) nor a walk
-    signal for the pedestrian (yielding to someone about to cross on walk is no false brake)."""
+    (standing_duration_s), outside its corridor (lateral offset from its heading line beyond half its
+    width, the pedestrian's radius and CORRIDOR_MARGIN_M, or behind its rear), with neither a yellow or
+    red ahead of it (front before the stop line) nor a walk signal for the pedestrian (yielding to
+    someone about to cross on walk is no false brake)."""
     if not len(log):
         return False
     time_s = log["time_s"].to_numpy(float)
