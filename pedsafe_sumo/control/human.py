@@ -49,7 +49,9 @@ from pedsafe_sumo.control.reference import (
 #: surprise condition); sigma of ln RT = ln(1.2 / 0.9) / 0.6745 = 0.28768 / 0.67449 = 0.42652.
 REACTION_MEDIAN_S = 0.9
 REACTION_SIGMA_LN = math.log(1.2 / 0.9) / 0.6744897501960817
-#: Emergency braking of UN R157 Annex 4 Appendix 3's careful driver: 0.774 g reached in 0.6 s.
+#: Emergency braking of UN R157 Annex 4 Appendix 3's careful driver: 0.774 g reached in 0.6 s (its own
+#: delay, 0.4 s risk perception + 0.75 s brake reaction, is replaced by the drawn reaction time; where
+#: the figures were checked: docs/human_driver.md).
 STANDARD_GRAVITY_MPS2 = 9.80665
 MAX_DECEL_MPS2 = 0.774 * STANDARD_GRAVITY_MPS2
 BRAKE_RAMP_S = 0.6

@@ -1,7 +1,8 @@
 """How the ego kept to the rules of the road in one episode, from its per-step log and the signal it had
-at every step: braking for a pedestrian who stood still outside its path, the signal when it crossed
-the stop line, and whether it could have stopped at the yellow's onset. Columns of episodes.parquet
-(docs/columns.md): false_brake, stopline_signal, could_stop_at_yellow.
+at every step: braking for a pedestrian who stood still outside its path (for at least a second if they
+had walked before), the signal when it crossed the stop line, and whether it could have stopped at the
+yellow's onset. Columns of episodes.parquet (docs/columns.md): false_brake, stopline_signal,
+could_stop_at_yellow.
 """
 
 from __future__ import annotations
@@ -18,6 +19,16 @@ COMPLIANCE_COLUMNS = ("false_brake", "stopline_signal", "could_stop_at_yellow")
 #: A pedestrian slower than this stands still [m/s] (the logged, true speed): a tenth of a slow walk
 #: (older pedestrians' 1.03 m/s mean); V2I's 0.2 m position noise is not in it.
 STANDING_SPEED_MPS = 0.2
+#: How long a pedestrian who moved must have stood still before a braking step counts as a false brake
+#: [s] (one who has stood ever since entering the scene counts at once). A stop must be observable
+#: before a stack can release brakes it applied while they walked towards its path: a least-squares
+#: velocity through 20 Hz positions with V2I's 0.2 m noise over a window T has a standard deviation of
+#: 0.2 x sqrt(12 / (20 T^3)) = 0.155 / T^1.5 m/s, below the 0.2 m/s standing threshold only from
+#: T = 0.84 s; exact onboard positions need the estimator's window to pass the stop (0.5 s for the
+#: paper-v7 stack's least squares); the reference stack's Kalman filter takes about 1 s on V2I alone
+#: (docs/baseline_stack.md). 1 s covers all three; braking later than that is charged.
+#: Measurement: docs/decisions/2026-11-27-false-brake-definition.md.
+MIN_STANDING_S = 1.0
 #: The ego's corridor: its half width plus the pedestrian's radius plus this margin on each side of its
 #: heading line [m] (the margin of the shipped stacks' corridor, control/reference.py LATERAL_MARGIN_M).
 CORRIDOR_MARGIN_M = 0.5
@@ -55,15 +66,36 @@ def stop_line_of(
     return (bx, by), ((bx - ax) / length, (by - ay) / length)
 
 
+def standing_duration_s(time_s: np.ndarray, standing: np.ndarray, present: np.ndarray) -> np.ndarray:
+    """Per step, how long the pedestrian has stood still since they last moved in the scene [s]: the
+    time since the last step at which they were present and not standing; infinite while they have
+    stood ever since they entered the scene (nothing they did suggested motion); 0 at a step where they
+    move or are absent."""
+    n = len(time_s)
+    if n == 0:
+        return np.zeros(0)
+    moving = present & ~standing
+    index = np.arange(n)
+    # Index of the last moving step at or before each step (-1: none yet).
+    last = np.maximum.accumulate(np.where(moving, index, -1))
+    since = np.where(last >= 0, time_s - time_s[np.maximum(last, 0)], np.inf)
+    return np.where(standing & present, since, 0.0)
+
+
 def false_brake(
-    log: pd.DataFrame, ego_colours: Sequence[str], ped_colours: Sequence[str], before_line: np.ndarray
+    log: pd.DataFrame,
+    ego_colours: Sequence[str],
+    ped_colours: Sequence[str],
+    before_line: np.ndarray,
+    min_standing_s: float = MIN_STANDING_S,
 ) -> bool:
     """Whether the ego braked (its `braking` flag, or a command BRAKE_DECEL_MPS2 x the step below its
     speed) at a step where it perceived the pedestrian, who stood still (true speed below
-    STANDING_SPEED_MPS) outside its corridor (lateral offset from its heading line beyond half its width,
-    the pedestrian's radius and CORRIDOR_MARGIN_M, or behind its rear), with neither a yellow or red
-    ahead of it (front before the stop line) nor a walk signal for the pedestrian (yielding to someone
-    about to cross on walk is no false brake)."""
+    STANDING_SPEED_MPS) since entering the scene or for at least `min_standing_s` since they last moved
+    (standing_duration_s), outside its corridor (lateral offset from its heading line beyond half its
+    width, the pedestrian's radius and CORRIDOR_MARGIN_M, or behind its rear), with neither a yellow or
+    red ahead of it (front before the stop line) nor a walk signal for the pedestrian (yielding to
+    someone about to cross on walk is no false brake)."""
     if not len(log):
         return False
     time_s = log["time_s"].to_numpy(float)
@@ -84,9 +116,11 @@ def false_brake(
     standing = (
         np.hypot(log["ped_vx_mps"].to_numpy(float), log["ped_vy_mps"].to_numpy(float)) < STANDING_SPEED_MPS
     )
+    present = np.isfinite(log["ped_x_m"].to_numpy(float))
+    stood = standing_duration_s(time_s, standing, present) >= min_standing_s - 1e-9
     signal_stop = np.isin(np.asarray(ego_colours), _STOP_COLOURS) & before_line
     walk = np.asarray(ped_colours) == "green"
-    found = braked & log["perceived"].to_numpy(bool) & standing & outside & ~signal_stop & ~walk
+    found = braked & log["perceived"].to_numpy(bool) & stood & outside & ~signal_stop & ~walk
     return bool(found.any())
 
 

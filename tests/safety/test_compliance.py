@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 
-from pedsafe_sumo.safety.compliance import episode_compliance, false_brake, stop_line_of
+from pedsafe_sumo.safety.compliance import episode_compliance, false_brake, standing_duration_s, stop_line_of
 
 STEP_S = 0.05
 # A 4 m x 1.8 m ego driving east along y = 0 at 10 m/s from x = 0 (0.5 m a step); its front is 2 m
@@ -138,3 +139,51 @@ def test_an_empty_log_has_no_false_brake_and_no_crossing():
     assert false_brake(empty, [], [], empty["time_s"].to_numpy() > 0) is False
     result = episode_compliance(empty, [], [], LINE)
     assert result == {"false_brake": False, "stopline_signal": "none", "could_stop_at_yellow": None}
+
+
+def walks_then_stands(n, stop_step, brake_steps, ped_y_at_stop=5.0):
+    """A pedestrian 30 m ahead walks towards the ego's path (south, 1.4 m/s) until step `stop_step - 1`
+    and stands 5 m left of its heading line from `stop_step` on; the ego brakes at `brake_steps` only."""
+    log = drive(n=n, ped=(30.0, ped_y_at_stop))
+    walking = log.index < stop_step
+    log.loc[walking, "ped_vy_mps"] = -1.4
+    log.loc[walking, "ped_y_m"] = ped_y_at_stop + 1.4 * STEP_S * (stop_step - log.index[walking])
+    log["braking"] = log.index.isin(brake_steps)
+    return log
+
+
+def test_standing_duration_counts_from_the_last_moving_step():
+    time_s = np.arange(6) * STEP_S
+    # Moves at steps 0 and 1, stands from step 2: 0, 0, 0.05, 0.10, 0.15, 0.20 (since step 1, 0.05 s).
+    standing = np.array([False, False, True, True, True, True])
+    present = np.ones(6, dtype=bool)
+    assert standing_duration_s(time_s, standing, present) == pytest.approx([0, 0, 0.05, 0.10, 0.15, 0.20])
+    # Standing from the first step: never seen moving, so stood "forever" at every step.
+    assert np.all(np.isinf(standing_duration_s(time_s, np.ones(6, dtype=bool), present)))
+    # Not in the scene at steps 0-2, standing once there: 0 while absent, then infinite.
+    absent_first = np.array([False, False, False, True, True, True])
+    got = standing_duration_s(time_s, np.ones(6, dtype=bool), absent_first)
+    assert list(got[:3]) == [0, 0, 0] and np.all(np.isinf(got[3:]))
+    # Walks at step 3 only (stands before and after it): 0 at step 3, then 0.05 and 0.10.
+    walk_once = np.array([True, True, True, False, True, True])
+    got = standing_duration_s(time_s, walk_once, present)
+    assert np.all(np.isinf(got[:3])) and got[3:] == pytest.approx([0, 0.05, 0.10])
+
+
+def test_braking_just_after_a_pedestrian_stopped_is_not_false():
+    # Walked until step 39 (1.95 s), stands from step 40 (2.00 s). Braking at step 43 (2.15 s): they had
+    # stood 2.15 - 1.95 = 0.20 s, under the 1 s a stop takes to be told: not a false brake.
+    assert fb(walks_then_stands(n=120, stop_step=40, brake_steps=[43])) is False
+    # Braking through steps 40-58 (up to 2.90 s: stood 0.95 s at most): still not.
+    assert fb(walks_then_stands(n=120, stop_step=40, brake_steps=range(40, 59))) is False
+    # Braking on at step 59 (2.95 s: stood 2.95 - 1.95 = 1.00 s): a false brake.
+    assert fb(walks_then_stands(n=120, stop_step=40, brake_steps=range(40, 60))) is True
+
+
+def test_braking_for_someone_who_stood_throughout_is_false():
+    # Standing 5 m left of the heading line from the first step (t = 0), never seen moving: braking at
+    # any step is a false brake, even the first (no stop to be told).
+    log = drive(n=60, ped=(30.0, 5.0))
+    for step in (0, 5, 30):
+        log["braking"] = log.index == step
+        assert fb(log) is True

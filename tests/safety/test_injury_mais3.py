@@ -6,9 +6,11 @@ import math
 
 import pandas as pd
 import pytest
+from scipy.special import expit
 
 from pedsafe_sumo.safety import episode_indexes
 from pedsafe_sumo.safety.injury import SEVERE_INJURY_MODEL, injury_probability
+from pedsafe_sumo.safety.injury_mais3 import mais3f_logit_full
 from pedsafe_sumo.safety.stats import table_one
 
 MODEL = "monfort_mueller2025_mais3f"
@@ -107,3 +109,31 @@ def test_table_one_without_the_column_or_with_gaps():
     # a scenario whose rows lack values gets NaN, not a mean over the rows that have them
     table = table_one(_episodes([0.2, math.nan, 0.0, 0.0, 0.0, 0.1]))
     assert math.isnan(table.iloc[0]["mais3f_mean"]) and table.iloc[1]["mais3f_mean"] == pytest.approx(0.05)
+
+
+MPH_TO_KMH = 1.609344
+
+
+def full_risk(speed_kmh, hle_cm, age=42.42, male=0.59):
+    return float(expit(mais3f_logit_full(speed_kmh, age, hle_cm, male)))
+
+
+def test_the_full_row_at_the_sample_means_is_the_column():
+    # HLE 85.25 cm and a male share of 0.59: the HLE, sex and interaction terms are 0.
+    assert full_risk(40.0, 85.25, age=30.0) == pytest.approx(0.254630, abs=2e-6)
+
+
+def test_the_full_row_reproduces_the_published_serious_injury_risks():
+    # IIHS news release, 10 December 2024: "18% chance of a serious injury" at 20 mph (32.19 km/h);
+    # at 27 mph (43.45 km/h) 30% for a median-height car, 62% for a median-height pickup whose front end
+    # is 13 in (33.0 cm) higher. The release rounds to whole per cent and does not give the car's HLE:
+    # 75 cm assumed, so the pickup is at 108 cm; age and sex at the sample means.
+    # By hand, 20 mph: -0.460 + 0.091 * (32.18688 - 42.79) = -1.424884; P = 1 / (1 + e^1.424884) = 0.193897.
+    # 27 mph, car: dv = 0.662288, dh = -10.25:
+    #   -0.460 + 0.060268 - 0.39975 - 0.013577 = -0.813059; P = 0.307239.
+    # 27 mph, pickup: dh = 22.77: -0.460 + 0.060268 + 0.88803 + 0.030161 = 0.518459; P = 0.626787.
+    assert full_risk(20 * MPH_TO_KMH, 85.25) == pytest.approx(0.193897, abs=1e-6)
+    assert full_risk(27 * MPH_TO_KMH, 75.0) == pytest.approx(0.307239, abs=1e-6)
+    assert full_risk(27 * MPH_TO_KMH, 75.0 + 33.02) == pytest.approx(0.626787, abs=1e-5)
+    for speed_mph, hle_cm, published in ((20, 85.25, 0.18), (27, 75.0, 0.30), (27, 108.02, 0.62)):
+        assert full_risk(speed_mph * MPH_TO_KMH, hle_cm) == pytest.approx(published, abs=0.015)
