@@ -219,7 +219,7 @@ def test_approach_jaywalking_and_blending_run_without_errors_the_same_on_one_and
     pd.testing.assert_frame_equal(one, two)
 
 
-@pytest.mark.parametrize("name", ["jaywalking", "background_blending"])
+@pytest.mark.parametrize("name", ["crossing", "jaywalking", "background_blending"])
 def test_queue_staging_placed_adds_them_standing_half_a_metre_before_the_line(runner, name):
     # queue_staging "placed" (protocol approach-v1's value): SUMO forms nothing; the head's front stands
     # 0.5 m before the stop line (the kerb lane's length, read from the network file, minus 0.5), every

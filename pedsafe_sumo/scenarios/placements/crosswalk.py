@@ -4,6 +4,11 @@ stopped at the stop line in the kerb lane (the head of a short queue), which hid
 "multiple threat" crosswalk crash). The kerb lane carries the right turn: its head vehicle waits at the
 stop line on green, as right-turners do, for the pedestrians on the crosswalk of the road it turns into
 (the program gives that crosswalk its walk signal with the approach's green); the queue waits behind it.
+
+Under approach staging (ScenarioSpec.queue_staging "formed", two or more lanes) SUMO forms that queue
+before the episode's start: the vehicles drive up the kerb lane and stop at its red (sim/queue.py), the
+head where SUMO stops a vehicle at a red stop line (HEAD_BEFORE_STOP_LINE_M before it), each follower
+behind it at its drawn gap. Otherwise the head is added standing 0.5 m before the line.
 """
 
 from __future__ import annotations
@@ -16,6 +21,8 @@ import numpy as np
 from pedsafe_sumo.scenarios.episode_setup import VehicleSetup
 from pedsafe_sumo.scenarios.geometry import Approach, Turn
 from pedsafe_sumo.scenarios.placements.base import StagingInputs, StagingPoint
+from pedsafe_sumo.scenarios.placements.behind_waiting_vehicle import formed_in_kerb_lane
+from pedsafe_sumo.scenarios.placements.midblock import HEAD_BEFORE_STOP_LINE_M, formed_by_sumo
 from pedsafe_sumo.scenarios.placements.straight import KerbRow, StraightPlacement
 from pedsafe_sumo.scenarios.road_users import OCCLUDER_BLACK_RGB, VEHICLE_CLASSES, VehicleSize
 
@@ -33,21 +40,25 @@ class Crosswalk(StraightPlacement):
         (ax, ay), (bx, by) = path
         ux, uy = (bx - ax) / math.dist(path[0], path[1]), (by - ay) / math.dist(path[0], path[1])
         path = ((ax - ux * 1.0, ay - uy * 1.0), (bx + ux * 1.0, by + uy * 1.0))
+        formed = formed_in_kerb_lane(inputs.spec, one_lane=row.one_lane)
         occluder = VehicleSetup(
             "occluder_0",
             row.lane_id,
-            row.stop_line_pos_m - 0.5,
+            row.stop_line_pos_m - (HEAD_BEFORE_STOP_LINE_M if formed else 0.5),
             0.0,
             OCCLUDER_BLACK_RGB,
             VEHICLE_CLASSES[inputs.spec.occluder_class],
         )
-        return path, [occluder, *row.queue_behind(occluder, 1)], inputs.clothing_rgb
+        queue = [occluder, *row.queue_behind(occluder, 1)]
+        return path, formed_by_sumo(queue) if formed else queue, inputs.clothing_rgb
 
     def kerb_classes(self, spec: ScenarioSpec) -> list[VehicleSize]:
         return [*VEHICLE_CLASSES.values(), VEHICLE_CLASSES[spec.occluder_class]]
 
     def kerb_row_m(self, spec: ScenarioSpec, queue_m: float) -> float:
-        return 0.5 + VEHICLE_CLASSES[spec.occluder_class].length_m + queue_m
+        formed = spec.staging == "approach" and spec.queue_staging == "formed"
+        head_m = HEAD_BEFORE_STOP_LINE_M if formed else 0.5
+        return head_m + VEHICLE_CLASSES[spec.occluder_class].length_m + queue_m
 
     def staging_points(self, spec: ScenarioSpec, approach: Approach, turn: Turn | None) -> list[StagingPoint]:
         """Along the crosswalk, from its kerb end to the middle of the approach's farthest lane."""
