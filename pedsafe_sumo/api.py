@@ -401,8 +401,9 @@ def run_episode(
 
     Raises:
         UsageError: bad input, with the command's one-line message; nothing runs.
-        pedsafe_sumo.sim.connection.SimulatorError, pedsafe_sumo.control.timeout.AgentTimeoutError,
-            pedsafe_sumo.control.stack_calls.StackError: SUMO or the stack failed while it ran.
+        pedsafe_sumo.sim.connection.SimulatorError: SUMO failed while the episode ran.
+        pedsafe_sumo.control.timeout.AgentTimeoutError: a run_step call of the stack took too long.
+        pedsafe_sumo.control.stack_calls.StackError: the stack misbehaved (an invalid command, sys.exit).
     """
     options = {
         "scenario": scenario,
