@@ -28,3 +28,28 @@ OSM_ATTRIBUTION = (
     "Map data (c) OpenStreetMap contributors, licensed under the Open Database License (ODbL) 1.0, "
     "https://www.openstreetmap.org/copyright"
 )
+
+#: The Python API (pedsafe_sumo.api), whose names the package also answers to: `pedsafe_sumo.load_run`.
+API_NAMES = (
+    "BatchError",
+    "EpisodeRun",
+    "FIGURES",
+    "ReportError",
+    "Run",
+    "UsageError",
+    "figure",
+    "load_run",
+    "paired_comparison",
+    "run_batch",
+    "run_episode",
+    "table_one",
+)
+
+
+def __getattr__(name: str) -> object:
+    """The API's names, imported on first use: `import pedsafe_sumo` stays cheap (no pandas, no SUMO)."""
+    if name in API_NAMES:
+        from pedsafe_sumo import api  # here, not at the top: it imports pandas, SUMO and matplotlib
+
+        return getattr(api, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

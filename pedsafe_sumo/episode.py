@@ -12,9 +12,13 @@ on stderr and exit code 2.
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from pedsafe_sumo.cli import OneLineParser, check_seed
 from pedsafe_sumo.compiled_kernels import prepare_compiled_kernels
@@ -24,13 +28,13 @@ from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, AgentTimeoutEr
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.approaches import leg_argument
-from pedsafe_sumo.network.sites import SITE_HELP, UnknownSiteError, resolve_site
+from pedsafe_sumo.network.sites import SITE_HELP, Site, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.sumo_inputs import check_gui_site
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.hosting import check_hosting, site_hosting
 from pedsafe_sumo.scenarios.signals import NO_LINK, colour_of_link
-from pedsafe_sumo.scenarios.specs import SCENARIOS
+from pedsafe_sumo.scenarios.specs import SCENARIOS, ScenarioSpec
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM, EpisodeRunner
@@ -127,8 +131,17 @@ def describe_signals(result: EpisodeResult) -> list[str]:
     ]
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = OneLineParser(prog="python -m pedsafe_sumo.episode", description=__doc__.splitlines()[0])
+#: Bad input: one line on stderr, exit code 2 (ValueError: --agent-timeout out of range).
+INPUT_ERRORS = (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError, ValueError)
+#: The stack's fault, or SUMO's, while an episode runs: one line, exit code 1.
+RUN_ERRORS = (SimulatorError, AgentTimeoutError, StackError)
+
+
+def parse_args(
+    argv: list[str] | None, parser_class: type[argparse.ArgumentParser] = OneLineParser
+) -> argparse.Namespace:
+    """The command's options; `parser_class` decides what a bad one does (OneLineParser: one line, exit 2)."""
+    parser = parser_class(prog="python -m pedsafe_sumo.episode", description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", required=True, help=f"one of: {', '.join(SCENARIOS)}")
     parser.add_argument("--condition", default="both", help="sv, v2i or both (default: both, same seed)")
     parser.add_argument("--seed", type=int, default=1, help="episode seed, 0 to 2**63 - 1 (default 1)")
@@ -157,61 +170,94 @@ def main(argv: list[str] | None = None) -> int:
         help="time limit of each run_step call of the AD stack, above 0 and at most 3600 "
         f"(default {DEFAULT_AGENT_TIMEOUT_S:g})",
     )
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
 
+
+@dataclass(frozen=True)
+class EpisodePlan:
+    """A checked command: the site, parameters and scenario, the conditions, and the stack to load."""
+
+    site: Site
+    params: dict[str, Any]
+    spec: ScenarioSpec
+    conditions: list[str]
+    agent_class: type
+    #: The stack as package.module:Class (with its --perception detector, if any).
+    algorithm: str
+    agent_timeout_s: float
+
+
+def plan_episode(args: argparse.Namespace) -> EpisodePlan:
+    """Check every option and input file; raises one of INPUT_ERRORS (one line) and runs nothing."""
     conditions = list(CONDITIONS) if args.condition == "both" else [args.condition]
-    try:
-        if any(c not in CONDITIONS for c in conditions):
-            raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
-        site = resolve_site(args.site)
-        if args.gui:  # sumo-gui loads the site's additionals and view settings (docs/trust.md)
-            check_gui_site(site, site.file("view.xml"))
-        # --approach is the scenario field `approach` (as in batch).
-        set_pairs = [*(args.set or []), *([f"approach={args.approach}"] if args.approach else [])]
-        specs, params = configure([args.scenario], args.params, set_pairs)
-        check_roadside_units(specs, site)
-        check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
-        spec = specs[args.scenario]
-        if args.approach:  # can it be staged there at all (also without V2I)?
-            problem = site_hosting(site, specs, params)[args.scenario] or ""
-            if problem.startswith("cannot be staged"):
-                raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")
-        args.algorithm = stack_spec(args.algorithm, args.perception)
-        agent_class = load_agent_class(args.algorithm)
-        check_seed(args.seed)
-        agent_timeout_s = check_timeout_s(args.agent_timeout)
-        if args.log is not None:
-            check_output_file(args.log, "--log", UsageError)
-        if args.case_dir is not None:
-            check_output_dir(args.case_dir, "--case-dir", UsageError)
-    except (UsageError, ParameterError, ScenarioError, AlgorithmLoadError, UnknownSiteError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except ValueError as exc:  # --agent-timeout out of range
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if any(c not in CONDITIONS for c in conditions):
+        raise UsageError(f"unknown condition '{args.condition}' (known: sv, v2i, both)")
+    site = resolve_site(args.site)
+    if args.gui:  # sumo-gui loads the site's additionals and view settings (docs/trust.md)
+        check_gui_site(site, site.file("view.xml"))
+    # --approach is the scenario field `approach` (as in batch).
+    set_pairs = [*(args.set or []), *([f"approach={args.approach}"] if args.approach else [])]
+    specs, params = configure([args.scenario], args.params, set_pairs)
+    check_roadside_units(specs, site)
+    check_hosting(site, specs, params, conditions)  # the site's poles see the scenario's staging area
+    spec = specs[args.scenario]
+    if args.approach:  # can it be staged there at all (also without V2I)?
+        problem = site_hosting(site, specs, params)[args.scenario] or ""
+        if problem.startswith("cannot be staged"):
+            raise UsageError(f"site {site.name} cannot host scenario '{args.scenario}': {problem}")
+    algorithm = stack_spec(args.algorithm, args.perception)
+    agent_class = load_agent_class(algorithm)
+    check_seed(args.seed)
+    agent_timeout_s = check_timeout_s(args.agent_timeout)
+    if args.log is not None:
+        check_output_file(args.log, "--log", UsageError)
+    if args.case_dir is not None:
+        check_output_dir(args.case_dir, "--case-dir", UsageError)
+    return EpisodePlan(site, params, spec, conditions, agent_class, algorithm, agent_timeout_s)
 
+
+def run_episode(
+    plan: EpisodePlan, args: argparse.Namespace, say: Callable[[str], None] = print
+) -> list[EpisodeResult]:
+    """Run the episode under each condition of the plan (same seed), tell `say` what happened, write
+    --log and --case-dir; raises one of RUN_ERRORS when the stack or SUMO fails."""
     prepare_compiled_kernels()
-    runner = EpisodeRunner(site, params, agent_class, gui=args.gui, agent_timeout_s=agent_timeout_s)
+    runner = EpisodeRunner(
+        plan.site, plan.params, plan.agent_class, gui=args.gui, agent_timeout_s=plan.agent_timeout_s
+    )
+    results = []
     try:
-        for condition in conditions:
-            result = runner.run(spec, condition, args.seed)
-            print("\n".join(describe(result, args.algorithm)))
+        for condition in plan.conditions:
+            result = runner.run(plan.spec, condition, args.seed)
+            results.append(result)
+            say("\n".join(describe(result, plan.algorithm)))
             if args.log:
                 path = (
                     args.log
-                    if len(conditions) == 1
+                    if len(plan.conditions) == 1
                     else args.log.with_name(f"{args.log.stem}_{condition}{args.log.suffix or '.csv'}")
                 )
                 result.log.to_csv(path, index=False)
-                print(f"  per-step log: {path}")
+                say(f"  per-step log: {path}")
             if args.case_dir:
-                print(f"  case: {write_case(args.case_dir, result)}")
-    except (SimulatorError, AgentTimeoutError, StackError) as exc:  # the stack's fault, in one line
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+                say(f"  case: {write_case(args.case_dir, result)}")
     finally:
         runner.close()
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        plan = plan_episode(args)
+    except INPUT_ERRORS as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        run_episode(plan, args)
+    except RUN_ERRORS as exc:  # the stack's fault, in one line
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

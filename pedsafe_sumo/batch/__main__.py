@@ -15,7 +15,8 @@ run with the configuration recorded in its run.json. Bad input ends in one line 
 code 2, and nothing is written.
 
 The command line only: batch/plan.py checks the command and builds the run (`prepare`), batch/execute.py
-carries it out (`run_batch`), batch/summary.py prints its Table I.
+carries it out (`run_batch`), batch/summary.py prints its Table I. `parse_args`, `plan_batch` and
+`execute` are the steps of `main`; pedsafe_sumo.api.run_batch takes the same steps from Python.
 """
 
 from __future__ import annotations
@@ -26,9 +27,9 @@ import sys
 from pathlib import Path
 
 from pedsafe_sumo.batch.arguments import DEFAULT_EPISODES
-from pedsafe_sumo.batch.execute import run_batch
+from pedsafe_sumo.batch.execute import Backend, run_batch
 from pedsafe_sumo.batch.executors import DEFAULT_RECYCLE_CHUNKS, MAX_RECYCLE_CHUNKS, BatchError, make_backend
-from pedsafe_sumo.batch.plan import INPUT_ERRORS, MAX_CHUNK_PAIRS, MAX_WORKERS, prepare
+from pedsafe_sumo.batch.plan import INPUT_ERRORS, MAX_CHUNK_PAIRS, MAX_WORKERS, Plan, prepare
 from pedsafe_sumo.batch.sampled import (
     FAMILIES,
     FAMILY_JOINT,
@@ -62,8 +63,11 @@ from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
 
 
-def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = OneLineParser(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
+def parse_args(
+    argv: list[str] | None, parser_class: type[argparse.ArgumentParser] = OneLineParser
+) -> argparse.Namespace:
+    """The command's options; `parser_class` decides what a bad one does (OneLineParser: one line, exit 2)."""
+    parser = parser_class(prog="python -m pedsafe_sumo.batch", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--scenario",
         help=f"{', '.join(SCENARIOS)}, a comma-separated list, or all (required unless --resume)",
@@ -253,31 +257,53 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def plan_batch(args: argparse.Namespace) -> tuple[Plan, Backend]:
+    """The checked run and the backend that will carry it out (not started); raises one of INPUT_ERRORS
+    (or OSError) on bad input, and writes nothing."""
+    plan = prepare(args)
+    backend = make_backend(
+        args.cluster,
+        args.workers or min(2, os.cpu_count() or 1),
+        DEFAULT_RECYCLE_CHUNKS if args.recycle_chunks is None else args.recycle_chunks,
+    )
+    return plan, backend
+
+
+def is_complete(plan: Plan) -> bool:
+    """--resume of a run that has finished: nothing left to do."""
+    return plan.recorded is not None and plan.recorded.get("state") == STATE_COMPLETE
+
+
+def execute(plan: Plan, backend: Backend, argv: list[str], progress: bool = True) -> int:
+    """Start the backend, run the plan with Ctrl-C and SIGTERM stopping it cleanly, close the backend;
+    returns the exit code. Raises what the run raises (INPUT_ERRORS, BatchError, OSError,
+    KeyboardInterrupt); the finished chunks are kept for --resume."""
+    restore_signals = stop_on_signals()  # SIGINT, SIGTERM: workers stopped, run kept for --resume
+    try:
+        backend.start()
+        return run_batch(plan, backend, argv, progress=progress)
+    finally:
+        backend.close()
+        restore_signals()
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command. Exit code 0: done, or nothing left to resume; 1: the batch failed (the finished chunks
     are kept for --resume); 2: bad input (one line on stderr, nothing written); 130: interrupted."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     try:
-        plan = prepare(args)
-        backend = make_backend(
-            args.cluster,
-            args.workers or min(2, os.cpu_count() or 1),
-            DEFAULT_RECYCLE_CHUNKS if args.recycle_chunks is None else args.recycle_chunks,
-        )
+        plan, backend = plan_batch(args)
     except (*INPUT_ERRORS, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"{plan.count_text} = {plan.total_episodes:,} episodes (--max-runs {args.max_runs:,})")
-    if plan.recorded is not None and plan.recorded.get("state") == STATE_COMPLETE:
-        print(
-            f"{plan.out} is complete ({plan.recorded.get('episodes_total', '?')} episodes): nothing to resume"
-        )
+    if is_complete(plan):
+        total = (plan.recorded or {}).get("episodes_total", "?")
+        print(f"{plan.out} is complete ({total} episodes): nothing to resume")
         return 0
-    restore_signals = stop_on_signals()  # SIGINT, SIGTERM: workers stopped, run kept for --resume
     try:
-        backend.start()
-        return run_batch(plan, backend, argv)
+        return execute(plan, backend, argv)
     except INPUT_ERRORS as exc:  # an unreachable cluster, a run directory another batch holds
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -287,9 +313,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; the chunks finished so far are kept: continue with --resume", file=sys.stderr)
         return 130
-    finally:
-        backend.close()
-        restore_signals()
 
 
 if __name__ == "__main__":

@@ -80,9 +80,10 @@ def new_run_info(plan: Plan, backend: Backend, argv: list[str]) -> dict[str, Any
     }
 
 
-def run_batch(plan: Plan, backend: Backend, argv: list[str]) -> int:
+def run_batch(plan: Plan, backend: Backend, argv: list[str], progress: bool = True) -> int:
     """Run the planned batch on `backend` (already started): a new run directory, or the resumed one's
-    missing chunks; then the table, run.json completed, and Table I printed. Returns the exit code."""
+    missing chunks; then the table, run.json completed, and Table I printed. Returns the exit code.
+    `progress` False: no progress bar."""
     run_dir = BatchRunDirectory(plan.out, plan.arguments["keep_logs"])
     if plan.recorded is None:
         if plan.identity["chunk_size_pairs"] is None:
@@ -140,7 +141,13 @@ def run_batch(plan: Plan, backend: Backend, argv: list[str]) -> int:
     prepare_compiled_kernels()  # here, once: the workers then load them from numba's cache
     started = time.perf_counter()
     with tqdm(
-        total=total, initial=done_rows, unit="episode", smoothing=0.1, mininterval=1.0, file=sys.stderr
+        total=total,
+        initial=done_rows,
+        unit="episode",
+        smoothing=0.1,
+        mininterval=1.0,
+        file=sys.stderr,
+        disable=not progress,
     ) as bar:
 
         def on_chunk_done(chunk: Chunk, output: ChunkOutput) -> None:

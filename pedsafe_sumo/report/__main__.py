@@ -21,6 +21,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+from matplotlib.figure import Figure
+
 from pedsafe_sumo.confine import ConfinementError, check_tree
 from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.approaches import leg_argument
@@ -63,29 +66,41 @@ def _fmt_time(value: float) -> str:
     return "never" if math.isnan(value) else f"{value:.2f} s"
 
 
-def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
-    """Every figure the run's data allow; `say` gets one line per figure written or skipped."""
-    written: list[Path] = []
+#: The report's figures, in the order it draws them, and their files under DIR/figures/.
+FIGURE_FILES = {
+    "injury_vs_age": figures.FIGURE_FILES["injury_vs_age"],
+    "injury_vs_speed": figures.FIGURE_FILES["injury_vs_speed"],
+    "impact_speed": impact.FIGURE_FILE,
+    "first_detection_distance": figures.FIGURE_FILES["first_detection_distance"],
+    "case_speed_vs_frame": figures.FIGURE_FILES["case_speed_vs_frame"],
+}
+
+
+def _quiet(line: str) -> None:
+    """A `say` that says nothing."""
+
+
+def draw_figure(run: RunDirectory, name: str, path: Path | None = None, say=_quiet) -> Figure | None:
+    """One of the report's figures (a key of FIGURE_FILES), written as a PNG at `path` when given; None
+    when the run's data do not allow it, `say` getting the line that says why (and the figure's notes)."""
+    if name not in FIGURE_FILES:
+        raise ReportError(f"unknown figure '{name}' (known: {', '.join(FIGURE_FILES)})")
     ok = ok_episodes(run.episodes)
-
-    jaywalking = ok[ok["scenario"] == CASE_SCENARIO]
-    if jaywalking.empty:
-        say(f"note: no {CASE_SCENARIO} episodes (status ok) in this run: injury figures skipped")
-    else:
-        written.append(
-            figures.injury_vs_age(jaywalking, CASE_SCENARIO, out_dir / figures.FIGURE_FILES["injury_vs_age"])
-        )
-        written.append(
-            figures.injury_vs_speed(
-                jaywalking, CASE_SCENARIO, out_dir / figures.FIGURE_FILES["injury_vs_speed"]
-            )
-        )
-
-    say(impact.intercept_note(ok))
-    written.append(impact.impact_speed_histogram(ok, out_dir / impact.FIGURE_FILE))
-
-    summaries = detection_summaries(run.episodes)
-    if summaries:
+    if name in ("injury_vs_age", "injury_vs_speed"):
+        jaywalking = ok[ok["scenario"] == CASE_SCENARIO]
+        if jaywalking.empty:
+            say(f"note: no {CASE_SCENARIO} episodes (status ok) in this run: injury figures skipped")
+            return None
+        draw = figures.injury_vs_age if name == "injury_vs_age" else figures.injury_vs_speed
+        return draw(jaywalking, CASE_SCENARIO, path)
+    if name == "impact_speed":
+        say(impact.intercept_note(ok))
+        return impact.impact_speed_histogram(ok, path)
+    if name == "first_detection_distance":
+        summaries = detection_summaries(run.episodes)
+        if not summaries:
+            say("note: no episode with status ok: first-detection figure skipped")
+            return None
         for s in summaries:
             where = (
                 f"90% of episodes detect beyond {s.distance_90_m:.1f} m"
@@ -96,38 +111,42 @@ def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
                 f"first detection, {s.scenario} {condition_label(s.condition)}: {where} "
                 f"({s.n_never} of {s.n} never)"
             )
-        written.append(
-            figures.first_detection_distance(
-                summaries, out_dir / figures.FIGURE_FILES["first_detection_distance"]
-            )
-        )
-    else:
-        say("note: no episode with status ok: first-detection figure skipped")
-
+        return figures.first_detection_distance(summaries, path)
     pair = choose_case_pair(run)
     if pair is None:
         say(
             f"note: no case pair (SV and V2I case logs of the same seed) in {run.cases_dir}: "
             "case figure skipped"
         )
-    else:
-        try:
-            traces = load_case_traces(run, pair)
-        except Exception as exc:  # a broken case file should not cost the rest of the report
-            say(
-                f"note: cannot read the case logs of {pair.scenario} seed {pair.seed} ({exc}): "
-                "case figure skipped"
-            )
-        else:
-            say(
-                f"case figure: {pair.scenario} episode {pair.episode} (seed {pair.seed}), first perceived "
-                f"SV {_fmt_time(pair.sv_first_detection_s)}, V2I {_fmt_time(pair.v2i_first_detection_s)}"
-            )
-            written.append(
-                figures.case_speed_vs_frame(
-                    pair, traces, out_dir / figures.FIGURE_FILES["case_speed_vs_frame"]
-                )
-            )
+        return None
+    try:
+        traces = load_case_traces(run, pair)
+    except Exception as exc:  # a broken case file should not cost the rest of the report
+        say(
+            f"note: cannot read the case logs of {pair.scenario} seed {pair.seed} ({exc}): "
+            "case figure skipped"
+        )
+        return None
+    say(
+        f"case figure: {pair.scenario} episode {pair.episode} (seed {pair.seed}), first perceived "
+        f"SV {_fmt_time(pair.sv_first_detection_s)}, V2I {_fmt_time(pair.v2i_first_detection_s)}"
+    )
+    return figures.case_speed_vs_frame(pair, traces, path)
+
+
+def write_figures(run: RunDirectory, out_dir: Path, say) -> list[Path]:
+    """Every figure the run's data allow; `say` gets one line per figure written or skipped."""
+    written: list[Path] = []
+    said: list[str] = [""]
+
+    def say_once(line: str) -> None:  # the two injury figures share their note: said once
+        if line != said[-1]:
+            said.append(line)
+            say(line)
+
+    for name, file_name in FIGURE_FILES.items():
+        if draw_figure(run, name, out_dir / file_name, say_once) is not None:
+            written.append(out_dir / file_name)
     return written
 
 
@@ -212,8 +231,9 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
     return written
 
 
-def report(run: RunDirectory, say=print) -> list[Path]:
-    """Print the tables, write tables and figures under the run directory; returns the files written."""
+def report_tables(run: RunDirectory) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Table I (with the collisions by type) and the paired SV-vs-V2I comparison, as the report prints and
+    writes them; ReportError (one line) when the rows do not allow them."""
     try:
         first_stage = first_estimated_stage(run.run_info)
         table = table_one_of_run(
@@ -223,6 +243,12 @@ def report(run: RunDirectory, say=print) -> list[Path]:
         table = collision_type_columns(table, run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
+    return table, paired
+
+
+def report(run: RunDirectory, say=print) -> list[Path]:
+    """Print the tables, write tables and figures under the run directory; returns the files written."""
+    table, paired = report_tables(run)
     if run.incomplete:
         say(run.incomplete)
     if run.run_info is not None:

@@ -1,7 +1,8 @@
 """The report's figures, drawn with matplotlib's Agg canvas (no pyplot, no display, no global state).
 
-Every figure is a PNG at 150 dpi with labelled axes (units in brackets), a title and a legend;
-SV is always orange-red and V2I always blue. The numbers come from `summaries`; nothing is computed
+Every figure has labelled axes (units in brackets), a title and a legend; SV is always orange-red and
+V2I always blue. Each function returns the matplotlib Figure, and writes it as a PNG at 150 dpi when given
+a path. The numbers come from `summaries`; nothing is computed
 here beyond laying them out.
 """
 
@@ -51,10 +52,12 @@ def _new_figure(width_in: float, height_in: float) -> Figure:
     return figure
 
 
-def _save(figure: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=DPI, format="png")
-    return path
+def _save(figure: Figure, path: Path | None) -> Figure:
+    """The figure, also written as a PNG at `path` when given."""
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        figure.savefig(path, dpi=DPI, format="png")
+    return figure
 
 
 def _conditions(episodes: pd.DataFrame) -> list[str]:
@@ -62,7 +65,9 @@ def _conditions(episodes: pd.DataFrame) -> list[str]:
     return [c for c in COLOURS if c in present] + [c for c in present if c not in COLOURS]
 
 
-def _injury_figure(episodes: pd.DataFrame, x: np.ndarray, n_bins: int, xlabel: str, title: str, path: Path):
+def _injury_figure(
+    episodes: pd.DataFrame, x: np.ndarray, n_bins: int, xlabel: str, title: str, path: Path | None
+) -> Figure:
     """P_I of each episode against x (scatter) and its mean over equal-count bins of x (line, drawn at
     each bin's mean x); the bins are shared by SV and V2I."""
     figure = _new_figure(6.4, 4.2)
@@ -96,7 +101,7 @@ def _injury_figure(episodes: pd.DataFrame, x: np.ndarray, n_bins: int, xlabel: s
     return _save(figure, path)
 
 
-def injury_vs_age(episodes: pd.DataFrame, scenario: str, path: Path) -> Path:
+def injury_vs_age(episodes: pd.DataFrame, scenario: str, path: Path | None = None) -> Figure:
     """P_I against pedestrian age, SV and V2I (the paper's S-curve figure, age panel)."""
     return _injury_figure(
         episodes,
@@ -108,7 +113,7 @@ def injury_vs_age(episodes: pd.DataFrame, scenario: str, path: Path) -> Path:
     )
 
 
-def injury_vs_speed(episodes: pd.DataFrame, scenario: str, path: Path) -> Path:
+def injury_vs_speed(episodes: pd.DataFrame, scenario: str, path: Path | None = None) -> Figure:
     """P_I against the ego's initial speed in km/h, SV and V2I (the S-curve figure, speed panel)."""
     return _injury_figure(
         episodes,
@@ -120,7 +125,7 @@ def injury_vs_speed(episodes: pd.DataFrame, scenario: str, path: Path) -> Path:
     )
 
 
-def first_detection_distance(summaries: list[DetectionSummary], path: Path) -> Path:
+def first_detection_distance(summaries: list[DetectionSummary], path: Path | None = None) -> Figure:
     """Histogram of the first-detection distance, one panel per scenario, SV and V2I overlaid.
 
     Per-scenario panels rather than one pooled distribution: where the pedestrian can first be seen
@@ -169,7 +174,7 @@ def first_detection_distance(summaries: list[DetectionSummary], path: Path) -> P
     return _save(figure, path)
 
 
-def case_speed_vs_frame(pair: CasePair, traces: list[CaseTrace], path: Path) -> Path:
+def case_speed_vs_frame(pair: CasePair, traces: list[CaseTrace], path: Path | None = None) -> Figure:
     """Speed against frame of one paired episode, SV and V2I, with the first onboard detection and the
     first roadside (V2I) detection as vertical dashed lines (the paper's case figure)."""
     figure = _new_figure(7.0, 4.2)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from pedsafe_sumo.report.figures import _conditions, _new_figure, _save, colour
 from pedsafe_sumo.report.summaries import MPS_TO_KMH
@@ -73,7 +74,7 @@ def intercept_note(episodes: pd.DataFrame) -> str:
     )
 
 
-def impact_speed_histogram(episodes: pd.DataFrame, path: Path) -> Path:
+def impact_speed_histogram(episodes: pd.DataFrame, path: Path | None = None) -> Figure:
     """Histogram of the collisions' impact speeds [km/h], one step line per condition, 5 km/h bins."""
     hits = episodes[episodes["collision"].astype(bool)]
     speeds_kmh = hits["impact_speed_mps"].to_numpy(dtype=float) * MPS_TO_KMH

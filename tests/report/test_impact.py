@@ -48,8 +48,11 @@ def test_intercept_share_by_hand():
 
 
 def test_figure_is_written(tmp_path):
-    path = impact_speed_histogram(episodes(), tmp_path / "impact_speed.png")
+    path = tmp_path / "impact_speed.png"
+    figure = impact_speed_histogram(episodes(), path)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert figure.axes[0].get_xlabel() == "impact speed [km/h]"
     empty = episodes().assign(collision=False)
-    assert impact_speed_histogram(empty, tmp_path / "none.png").stat().st_size > 0
+    impact_speed_histogram(empty, tmp_path / "none.png")
+    assert (tmp_path / "none.png").stat().st_size > 0
     assert intercept_note(empty).endswith("no collision in this run")
