@@ -126,6 +126,8 @@ class Protocol:
     obstruction: dict[str, Any]
     robustness: tuple[Variation, ...]
     raw: dict[str, Any]
+    #: Brake onset: the commanded deceleration [m/s2] whose first step marks it (metrics.cell_metrics).
+    brake_onset_decel_mps2: float = 1.0
 
 
 def _num(value: float) -> str:
@@ -196,6 +198,7 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
         obstruction=dict(raw["obstruction"]),
         robustness=variations,
         raw=raw,
+        brake_onset_decel_mps2=float(raw["metrics"]["brake_onset_decel_mps2"]),
     )
 
 
