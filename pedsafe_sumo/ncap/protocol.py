@@ -25,6 +25,7 @@ APPROACHES = ("nearside", "farside", "longitudinal", "turning")
 CRITERIA = ("mitigation_or_avoidance", "avoidance")
 PLACEMENTS = ("crosswalk", "midblock")
 KMH_PER_MPS = 3.6
+LIGHTINGS = ("day", "night")
 
 
 class NcapError(ValueError):
@@ -69,6 +70,9 @@ class NcapTest:
     #: Turning tests: the dummy walks the exit's crosswalk in the "same" direction as the ego's initial
     #: heading or the "opposite" one.
     direction: str = ""
+    #: The lightings the calculator has a load case of this test in ("day"; "night" too for CPNA, CPFA,
+    #: CPNCO, CPLA: "CPNA day" and "CPNA night"), each with the same grid and points.
+    lightings: tuple[str, ...] = ("day",)
 
     @property
     def speeds_kmh(self) -> tuple[float, ...]:
@@ -101,6 +105,8 @@ class Cell:
     impact_point_pct: float
     variation: Variation = NOMINAL
     turn: str = ""
+    #: "day" or "night" (the onboard camera's night model, ncap/night.py).
+    lighting: str = "day"
 
     @property
     def test_range(self) -> str:
@@ -111,6 +117,8 @@ class Cell:
         """Unique, file-name safe: CPNA-25_30kmh, CPTAsame-50_farside10kmh (and _speed+3 etc. for a
         robustness run)."""
         base = f"{self.test.name}-{_num(self.impact_point_pct)}_{self.turn}{_num(self.ego_speed_kmh)}kmh"
+        if self.lighting != "day":
+            base = f"{base}_{self.lighting}"
         return base if self.variation is NOMINAL else f"{base}_{self.variation.name}"
 
 
@@ -161,6 +169,7 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
             points_extended=float(t["points_extended"]),
             criterion=t.get("criterion", "mitigation_or_avoidance"),
             direction=t.get("direction", ""),
+            lightings=tuple(t.get("lightings", ("day",))),
         )
         if test.approach not in APPROACHES or test.placement not in PLACEMENTS:
             raise NcapError(f"protocol test {name}: unknown approach or placement")
@@ -172,6 +181,8 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
             raise NcapError(
                 f"protocol test {name}: a turning test, and only one, has direction same|opposite"
             )
+        if not test.lightings or not set(test.lightings) <= set(LIGHTINGS) or test.lightings[0] != "day":
+            raise NcapError(f"protocol test {name}: lightings must start with day and be among {LIGHTINGS}")
         tests[name] = test
     bands = {
         float(vut): tuple((str(colour), float(upper)) for colour, upper in edges)
@@ -202,6 +213,11 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
     )
 
 
+def robustness_of(protocol: Protocol, test: NcapTest) -> tuple[Variation, ...]:
+    """The robustness variations that apply to a test (all of protocol.robustness here)."""
+    return protocol.robustness
+
+
 def parse_speeds(text: str | None) -> tuple[float, ...] | None:
     """'10,20,30' -> (10.0, 20.0, 30.0); None keeps every speed of each test's grid."""
     if text is None:
@@ -223,11 +239,16 @@ def select_cells(
     tests: str | None = None,
     speeds_kmh: tuple[float, ...] | None = None,
     robustness: bool = False,
+    lightings: tuple[str, ...] = ("day",),
 ) -> list[Cell]:
-    """The cells of `tests` ('CPNA,CPFA-50'; None: every test) at `speeds_kmh` (None: each grid's).
+    """The cells of `tests` ('CPNA,CPFA-50'; None: every test) at `speeds_kmh` (None: each grid's), in
+    each of `lightings` the test has a load case in (a night-only selection skips the day-only tests).
 
     A speed outside a selected test's grid is an error: the protocol has no such cell.
     """
+    unknown = [lighting for lighting in lightings if lighting not in LIGHTINGS]
+    if unknown or not lightings:
+        raise NcapError(f"--lighting must be day, night or both, got '{','.join(lightings)}'")
     wanted: dict[str, set[float] | None] = {}
     names = [t.strip() for t in tests.split(",")] if tests else list(protocol.tests)
     for token in names:
@@ -255,13 +276,15 @@ def select_cells(
         if outside:
             grid = ", ".join(_num(s) for s in test.speeds_kmh)
             raise NcapError(f"--speeds: {name} has no {_num(outside[0])} km/h row (its grid: {grid})")
-        for turn, speed in test.rows:
-            if speed not in speeds:
-                continue
-            for pct in test.impact_points_pct:
-                if columns is not None and pct not in columns:
+        for lighting in (lighting for lighting in lightings if lighting in test.lightings):
+            for turn, speed in test.rows:
+                if speed not in speeds:
                     continue
-                cells.append(Cell(test, speed, pct, turn=turn))
-                if robustness:
-                    cells += [Cell(test, speed, pct, v, turn) for v in protocol.robustness]
+                for pct in test.impact_points_pct:
+                    if columns is not None and pct not in columns:
+                        continue
+                    cells.append(Cell(test, speed, pct, turn=turn, lighting=lighting))
+                    # The calculator's night load cases have no robustness points (TOTAL_SCORES None).
+                    if robustness and lighting == "day":
+                        cells += [Cell(test, speed, pct, v, turn) for v in robustness_of(protocol, test)]
     return cells

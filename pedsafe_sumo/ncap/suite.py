@@ -40,12 +40,12 @@ SUMMARY_METRICS = (
 #: The columns of ncap.csv: the eight result columns (docs/ncap.md), then what explains them.
 CELL_COLUMNS = (
     "test", "ego_speed_kmh", "impact_point_pct", "condition", "avoided", "impact_speed_kmh", "colour",
-    "cell_score", "test_range", "turn", "variation", "cell_id", "measured_impact_point_pct", "end_reason",
-    "first_detection_distance_m", "detected_by", *METRIC_COLUMNS, "status", "error",
+    "cell_score", "test_range", "turn", "variation", "lighting", "cell_id", "measured_impact_point_pct",
+    "end_reason", "first_detection_distance_m", "detected_by", *METRIC_COLUMNS, "status", "error",
 )  # fmt: skip
 SCORE_COLUMNS = (
-    "test", "condition", "points", "points_standard", "points_extended", "max_points", "cells", "complete",
-    *SUMMARY_METRICS,
+    "test", "lighting", "condition", "points", "points_kind", "points_standard", "points_extended",
+    "max_points", "cells", "complete", *SUMMARY_METRICS,
 )  # fmt: skip
 
 
@@ -120,6 +120,7 @@ def cell_row(
         "test_range": cell.test_range,
         "turn": cell.turn,
         "variation": cell.variation.name,
+        "lighting": cell.lighting,
         "cell_id": cell.cell_id,
         "measured_impact_point_pct": point_pct,
         "end_reason": result.end_reason,
@@ -183,6 +184,7 @@ def error_row(cell: Cell, condition: str, exc: BaseException) -> dict[str, Any]:
         "test_range": cell.test_range,
         "turn": cell.turn,
         "variation": cell.variation.name,
+        "lighting": cell.lighting,
         "cell_id": cell.cell_id,
         "measured_impact_point_pct": math.nan,
         "end_reason": "",
@@ -195,14 +197,17 @@ def error_row(cell: Cell, condition: str, exc: BaseException) -> dict[str, Any]:
 
 
 def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
-    """Points per test and condition from the nominal cells (robustness runs are reported, not scored).
+    """Points per test, lighting and condition from the nominal cells (robustness runs are scored by
+    robustness.py), and an `overall` row per condition.
 
-    `complete` says whether every cell of the test's grid was run without error: points over a partial
-    grid are the calculator's formula applied to the cells that were run, not a rating.
+    `complete` says whether every cell of the test's grid was run without error; `points_kind` is
+    "partial" where it was not: such points are the calculator's formula applied to the cells that were
+    run, not a rating. The overall row is complete only when every test of the protocol was run, day and
+    night (coverage.grid_summary lists what is missing).
     """
     rows = []
     nominal = table[(table["variation"] == "nominal") & (table["status"] == "ok")]
-    for (name, condition), group in nominal.groupby(["test", "condition"], sort=False):
+    for (name, lighting, condition), group in nominal.groupby(["test", "lighting", "condition"], sort=False):
         test = protocol.tests[name]
         points = points_of_test(
             test.points_standard,
@@ -214,6 +219,7 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
         rows.append(
             {
                 "test": name,
+                "lighting": lighting,
                 "condition": condition,
                 **points,
                 "max_points": test.points_standard + test.points_extended,
@@ -222,8 +228,11 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
                 **summary_metrics(group),
             }
         )
-    scores = pd.DataFrame(rows, columns=list(SCORE_COLUMNS))
+    scores = pd.DataFrame(rows, columns=[c for c in SCORE_COLUMNS if c != "points_kind"])
     if not scores.empty:
+        load_cases = {
+            (name, lighting) for name, test in protocol.tests.items() for lighting in test.lightings
+        }
         totals = scores.groupby("condition", sort=False).agg(
             points=("points", "sum"),
             points_standard=("points_standard", "sum"),
@@ -232,11 +241,14 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
             cells=("cells", "sum"),
             complete=("complete", "all"),
         )
+        for condition, group in scores.groupby("condition", sort=False):
+            if set(zip(group["test"], group["lighting"])) != load_cases:
+                totals.loc[condition, "complete"] = False
         metrics = nominal.groupby("condition", sort=False)[list(METRIC_COLUMNS)].apply(summary_metrics_frame)
-        totals = totals.join(metrics)
-        totals = totals.reset_index().assign(test="overall")[list(SCORE_COLUMNS)]
-        scores = pd.concat([scores, totals], ignore_index=True)
-    return scores
+        totals = totals.join(metrics).reset_index().assign(test="overall", lighting="all")
+        scores = pd.concat([scores, totals[scores.columns]], ignore_index=True)
+    scores.insert(4, "points_kind", ["rating" if c else "partial" for c in scores["complete"]])
+    return scores[list(SCORE_COLUMNS)]
 
 
 def summary_metrics(cells: pd.DataFrame) -> dict[str, float]:
