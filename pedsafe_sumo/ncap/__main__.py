@@ -11,8 +11,9 @@ and V2I, and writes:
                         so `python -m pedsafe_sumo.replay DIR --scenario CELL_ID --episode 0 --condition sv
                         [--export-fcd F]` replays any cell (CELL_ID as in ncap.csv's cell_id).
 Before it starts it says in one line how many runs it makes (cells x conditions); the grid is the
-protocol's, at most 1,064 cells (152 without --robustness) under two conditions. Bad input ends in one
-line on stderr and exit status 2; a DIR that is not new or empty is refused, and nothing in it is touched.
+protocol's, at most 726 cells (152 by day without --robustness, 254 day and night) under two conditions.
+Bad input ends in one line on stderr and exit status 2; a DIR that is not new or empty is refused, and
+nothing in it is touched.
 """
 
 from __future__ import annotations

@@ -34,6 +34,16 @@ REFUSED_LAYERS = {
 }
 
 
+#: Layers the calculator applies to a pedestrian test outside its test pool (never verified by a test, so
+#: a maker's claim stands); a simulation has no claim to stand on, so they earn nothing here.
+UNSTAGED_LAYERS = (
+    "Illumination (Sun glare)",
+    "Infrastructure / Clutter",
+    "Obscuration / Obstruction",
+    "Illumination (Night)",
+)
+
+
 def missing_cells(protocol: Protocol, table: pd.DataFrame) -> list[str]:
     """'TEST LIGHTING (n of N cells)' for every load case not fully run without error under every
     condition of the run, in protocol order."""
@@ -61,6 +71,10 @@ def grid_summary(protocol: Protocol, table: pd.DataFrame) -> str:
     parts = missing_cells(protocol, table)
     if not (table["variation"] != "nominal").any():
         parts.append("robustness layers (not run: --robustness)")
+    else:
+        parts.append(
+            f"robustness layers {', '.join(UNSTAGED_LAYERS)} (not staged: outside the calculator's test pool)"
+        )
     parts += [f"robustness layer {layer} (refused: {why})" for layer, why in REFUSED_LAYERS.items()]
     parts += [f"{tests} (refused: {why})" for tests, why in REFUSED_TESTS.items()]
     return "ncap: PARTIAL grid, points are partial (not a 2026 rating); missing: " + "; ".join(parts)

@@ -26,6 +26,7 @@ CRITERIA = ("mitigation_or_avoidance", "avoidance")
 PLACEMENTS = ("crosswalk", "midblock")
 KMH_PER_MPS = 3.6
 LIGHTINGS = ("day", "night")
+ROBUSTNESS_CRITERIA = ("not_red", "same_or_better")
 
 
 class NcapError(ValueError):
@@ -93,6 +94,15 @@ class Variation:
     speed_delta_kmh: float = 0.0
     heading_delta_deg: float = 0.0
     start_offset_m: float = 0.0
+    #: The dummy starts this share of its walk to the impact point nearer (-0.25: 25 % nearer).
+    start_share: float = 0.0
+    #: The calculator's robustness layer ("Speed", "Initial position offset", "Trajectory/Heading").
+    layer: str = ""
+    #: test name -> "not_red" or "same_or_better"; the variation applies to these tests only.
+    criteria: tuple[tuple[str, str], ...] = ()
+
+    def criterion(self, test: str) -> str | None:
+        return dict(self.criteria).get(test)
 
 
 NOMINAL = Variation()
@@ -192,11 +202,22 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
         if edges[-1] != ("red", math.inf) or any(c not in COLOURS for c, _ in edges):
             raise NcapError("protocol bands: every list ends with red to inf and names known colours")
     rob = raw["robustness"]
-    variations = (
-        *(Variation(f"speed{d:+g}", speed_delta_kmh=d) for d in rob["speed_deltas_kmh"]),
-        *(Variation(f"heading{d:+g}", heading_delta_deg=d) for d in rob["heading_deltas_deg"]),
-        *(Variation(f"start{d:+g}", start_offset_m=d) for d in rob["start_offsets_m"]),
+    variations = tuple(
+        Variation(
+            name=v["name"],
+            speed_delta_kmh=float(v.get("speed_delta_kmh", 0.0)),
+            heading_delta_deg=float(v.get("heading_delta_deg", 0.0)),
+            start_share=float(v.get("start_share", 0.0)),
+            layer=v["layer"],
+            criteria=tuple((str(t), str(c)) for t, c in v["criterion"].items()),
+        )
+        for v in rob["variations"]
     )
+    for v in variations:
+        if not set(dict(v.criteria)) <= set(tests) or not set(dict(v.criteria).values()) <= set(
+            ROBUSTNESS_CRITERIA
+        ):
+            raise NcapError(f"protocol robustness {v.name}: unknown test or criterion")
     timing = raw["timing"]
     return Protocol(
         tests=tests,
@@ -214,8 +235,8 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
 
 
 def robustness_of(protocol: Protocol, test: NcapTest) -> tuple[Variation, ...]:
-    """The robustness variations that apply to a test (all of protocol.robustness here)."""
-    return protocol.robustness
+    """The robustness variations that apply to a test (those with a criterion for it)."""
+    return tuple(v for v in protocol.robustness if v.criterion(test.name) is not None)
 
 
 def parse_speeds(text: str | None) -> tuple[float, ...] | None:

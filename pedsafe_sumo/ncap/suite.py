@@ -20,6 +20,7 @@ import pandas as pd
 
 from pedsafe_sumo.ncap.metrics import METRIC_COLUMNS, cell_metrics
 from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, Protocol
+from pedsafe_sumo.ncap.robustness import ROBUSTNESS_COLUMNS, robustness_points
 from pedsafe_sumo.ncap.scoring import band_colour, cell_score, points_of_test
 from pedsafe_sumo.ncap.staging import StagedCell, spec_for, stage_cell
 from pedsafe_sumo.sim.connection import SimulatorError
@@ -45,7 +46,7 @@ CELL_COLUMNS = (
 )  # fmt: skip
 SCORE_COLUMNS = (
     "test", "lighting", "condition", "points", "points_kind", "points_standard", "points_extended",
-    "max_points", "cells", "complete", *SUMMARY_METRICS,
+    "max_points", "cells", "complete", *ROBUSTNESS_COLUMNS, *SUMMARY_METRICS,
 )  # fmt: skip
 
 
@@ -197,8 +198,9 @@ def error_row(cell: Cell, condition: str, exc: BaseException) -> dict[str, Any]:
 
 
 def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
-    """Points per test, lighting and condition from the nominal cells (robustness runs are scored by
-    robustness.py), and an `overall` row per condition.
+    """Points per test, lighting and condition from the nominal cells, the robustness points of a day
+    load case from its variation runs (robustness.py; NaN when none was run), and an `overall` row per
+    condition.
 
     `complete` says whether every cell of the test's grid was run without error; `points_kind` is
     "partial" where it was not: such points are the calculator's formula applied to the cells that were
@@ -207,8 +209,13 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
     """
     rows = []
     nominal = table[(table["variation"] == "nominal") & (table["status"] == "ok")]
+    varied = table[table["variation"] != "nominal"]
     for (name, lighting, condition), group in nominal.groupby(["test", "lighting", "condition"], sort=False):
         test = protocol.tests[name]
+        runs = varied[(varied["test"] == name) & (varied["condition"] == condition)]
+        robust = dict.fromkeys(ROBUSTNESS_COLUMNS, math.nan)
+        if lighting == "day" and not runs.empty:
+            robust = robustness_points(protocol, name, runs, group)
         points = points_of_test(
             test.points_standard,
             test.points_extended,
@@ -225,6 +232,7 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
                 "max_points": test.points_standard + test.points_extended,
                 "cells": len(group),
                 "complete": grid <= ran,
+                **robust,
                 **summary_metrics(group),
             }
         )
@@ -240,6 +248,9 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
             max_points=("max_points", "sum"),
             cells=("cells", "sum"),
             complete=("complete", "all"),
+            robustness_layers_passed=("robustness_layers_passed", lambda v: v.sum(min_count=1)),
+            robustness_layers_applicable=("robustness_layers_applicable", lambda v: v.sum(min_count=1)),
+            points_robustness=("points_robustness", lambda v: v.sum(min_count=1)),
         )
         for condition, group in scores.groupby("condition", sort=False):
             if set(zip(group["test"], group["lighting"])) != load_cases:
