@@ -15,8 +15,8 @@ from pedsafe_sumo.ncap.protocol import Protocol
 #: The calculator's low-speed pedestrian load cases ([CALC] STAGE_SUBELEMENT_TO_LOADCASES "LSC"), refused.
 REFUSED_TESTS = {
     "CPMRCm, CPMRCs": (
-        "the ego reversing: SUMO moves a vehicle forwards along its lanes only (TraCI setSpeed takes no "
-        "negative speed: a value below 0 hands the speed back to the car-following model)"
+        "the ego reversing: SUMO drives no negative speed (setSpeed(-2) leaves the ego moving forwards under "
+        "its car-following model) and the agent interface refuses a negative target speed"
     ),
     "CPMFC": (
         "the ego moving off from standstill: the staging starts the ego at its test speed on a fixed "
