@@ -203,7 +203,9 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
         "seed": seed,
         "conditions": list(conditions),
         "protocol": protocol.raw,
-        "parameters": params,
+        # What replay runs every cell with: the night camera's when only night cells were run (a night
+        # cell of a day-and-night run replays with the day camera; night_parameters records its own).
+        "parameters": night_params(params, protocol) if set(table["lighting"]) == {"night"} else params,
         "night_parameters": night_params(params, protocol) if "night" in set(table["lighting"]) else None,
         "scenarios": {
             cid: dataclasses.asdict(spec_for(s.cell, poles, s.setup.time_limit_s))
