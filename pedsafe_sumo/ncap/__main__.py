@@ -1,5 +1,5 @@
 """python -m pedsafe_sumo.ncap --out DIR [--tests CPNA-25,CPFA,...] [--speeds 10,20,...] [--site S]
-[--algorithm pkg.module:Class] [--condition sv|v2i|both] [--seed S] [--robustness]
+[--algorithm pkg.module:Class] [--condition sv|v2i|both] [--lighting day|night|both] [--seed S] [--robustness]
 
 Runs the Euro NCAP pedestrian AEB grid (protocol.toml) on the site's real approach, every cell under SV
 and V2I, and writes:
@@ -11,8 +11,9 @@ and V2I, and writes:
                         so `python -m pedsafe_sumo.replay DIR --scenario CELL_ID --episode 0 --condition sv
                         [--export-fcd F]` replays any cell (CELL_ID as in ncap.csv's cell_id).
 Before it starts it says in one line how many runs it makes (cells x conditions); the grid is the
-protocol's, at most 1,064 cells (152 without --robustness) under two conditions. Bad input ends in one
-line on stderr and exit status 2; a DIR that is not new or empty is refused, and nothing in it is touched.
+protocol's, at most 726 cells (152 by day without --robustness, 254 day and night) under two conditions.
+Bad input ends in one line on stderr and exit status 2; a DIR that is not new or empty is refused, and
+nothing in it is touched.
 """
 
 from __future__ import annotations
@@ -37,8 +38,10 @@ from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class
 from pedsafe_sumo.io.cases import write_case
 from pedsafe_sumo.io.episodes import to_table
 from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
+from pedsafe_sumo.ncap.coverage import grid_summary
 from pedsafe_sumo.ncap.figure import grid_figure
-from pedsafe_sumo.ncap.protocol import NcapError, load_protocol, parse_speeds, select_cells
+from pedsafe_sumo.ncap.night import night_params
+from pedsafe_sumo.ncap.protocol import LIGHTINGS, NcapError, load_protocol, parse_speeds, select_cells
 from pedsafe_sumo.ncap.staging import spec_for, stage_cell
 from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, get_site
@@ -68,6 +71,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--seed", default="0", help="seed of the perception noise, 0 to 2**63 - 1 [0]")
     parser.add_argument("--params", type=Path, help="parameter file laid over the defaults")
     parser.add_argument(
+        "--lighting",
+        default="day",
+        help="day, night (the night load cases: the onboard camera's night model) or both [day]",
+    )
+    parser.add_argument(
         "--robustness", action="store_true", help="add the robustness variations of the dummy per cell"
     )
     return parser.parse_args(argv)
@@ -87,7 +95,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         protocol = load_protocol()
-        cells = select_cells(protocol, args.tests, parse_speeds(args.speeds), args.robustness)
+        lightings = LIGHTINGS if args.lighting == "both" else (args.lighting,)
+        cells = select_cells(protocol, args.tests, parse_speeds(args.speeds), args.robustness, lightings)
+        if not cells:
+            raise NcapError(f"--tests {args.tests} has no {args.lighting} load case")
         if args.condition not in (*CONDITIONS, "both"):
             raise NcapError(f"--condition must be sv, v2i or both, got '{args.condition}'")
         conditions = CONDITIONS if args.condition == "both" else (args.condition,)
@@ -168,7 +179,16 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
             bar.update(1)
 
         try:
-            table = run_cells(runner, protocol, cells, conditions, seed, on_result)
+            tables = []
+            for lighting in LIGHTINGS:
+                these = [c for c in cells if c.lighting == lighting]
+                if not these:
+                    continue
+                if lighting == "night":  # the same engine with the onboard camera's night model
+                    runner.close()
+                    runner = NcapRunner(site, night_params(params, protocol), agent_class)
+                tables.append(run_cells(runner, protocol, these, conditions, seed, on_result))
+            table = pd.concat(tables, ignore_index=True)
         except SimulatorError as exc:
             return error(f"SUMO failed: {exc}")
         finally:
@@ -183,7 +203,10 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
         "seed": seed,
         "conditions": list(conditions),
         "protocol": protocol.raw,
-        "parameters": params,
+        # What replay runs every cell with: the night camera's when only night cells were run (a night
+        # cell of a day-and-night run replays with the day camera; night_parameters records its own).
+        "parameters": night_params(params, protocol) if set(table["lighting"]) == {"night"} else params,
+        "night_parameters": night_params(params, protocol) if "night" in set(table["lighting"]) else None,
         "scenarios": {
             cid: dataclasses.asdict(spec_for(s.cell, poles, s.setup.time_limit_s))
             for cid, s in staged.items()
@@ -203,6 +226,7 @@ def run(args, argv, protocol, cells, conditions, seed, site, params, agent_class
     )
     with pd.option_context("display.width", 120):
         print(scores.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    print(grid_summary(protocol, table))
     return 0
 
 

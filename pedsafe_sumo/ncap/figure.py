@@ -35,7 +35,10 @@ def grid_figure(table: pd.DataFrame, path: Path) -> Path:
     import matplotlib.pyplot as plt  # after the backend is chosen
     from matplotlib.patches import Patch, Rectangle  # with pyplot, after the backend
 
-    nominal = table[table["variation"] == "nominal"]
+    nominal = table[table["variation"] == "nominal"].copy()
+    if "lighting" in nominal:  # a night load case is a panel of its own: "CPNA night"
+        night = nominal["lighting"] != "day"
+        nominal.loc[night, "test"] = nominal.loc[night, "test"] + " " + nominal.loc[night, "lighting"]
     tests = list(dict.fromkeys(nominal["test"]))
     conditions = list(dict.fromkeys(nominal["condition"]))
     fig, axes = plt.subplots(

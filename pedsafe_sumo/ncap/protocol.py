@@ -25,6 +25,8 @@ APPROACHES = ("nearside", "farside", "longitudinal", "turning")
 CRITERIA = ("mitigation_or_avoidance", "avoidance")
 PLACEMENTS = ("crosswalk", "midblock")
 KMH_PER_MPS = 3.6
+LIGHTINGS = ("day", "night")
+ROBUSTNESS_CRITERIA = ("not_red", "same_or_better")
 
 
 class NcapError(ValueError):
@@ -69,6 +71,9 @@ class NcapTest:
     #: Turning tests: the dummy walks the exit's crosswalk in the "same" direction as the ego's initial
     #: heading or the "opposite" one.
     direction: str = ""
+    #: The lightings the calculator has a load case of this test in ("day"; "night" too for CPNA, CPFA,
+    #: CPNCO, CPLA: "CPNA day" and "CPNA night"), each with the same grid and points.
+    lightings: tuple[str, ...] = ("day",)
 
     @property
     def speeds_kmh(self) -> tuple[float, ...]:
@@ -89,6 +94,15 @@ class Variation:
     speed_delta_kmh: float = 0.0
     heading_delta_deg: float = 0.0
     start_offset_m: float = 0.0
+    #: The dummy starts this share of its walk to the impact point nearer (-0.25: 25 % nearer).
+    start_share: float = 0.0
+    #: The calculator's robustness layer ("Speed", "Initial position offset", "Trajectory/Heading").
+    layer: str = ""
+    #: test name -> "not_red" or "same_or_better"; the variation applies to these tests only.
+    criteria: tuple[tuple[str, str], ...] = ()
+
+    def criterion(self, test: str) -> str | None:
+        return dict(self.criteria).get(test)
 
 
 NOMINAL = Variation()
@@ -101,6 +115,8 @@ class Cell:
     impact_point_pct: float
     variation: Variation = NOMINAL
     turn: str = ""
+    #: "day" or "night" (the onboard camera's night model, ncap/night.py).
+    lighting: str = "day"
 
     @property
     def test_range(self) -> str:
@@ -111,6 +127,8 @@ class Cell:
         """Unique, file-name safe: CPNA-25_30kmh, CPTAsame-50_farside10kmh (and _speed+3 etc. for a
         robustness run)."""
         base = f"{self.test.name}-{_num(self.impact_point_pct)}_{self.turn}{_num(self.ego_speed_kmh)}kmh"
+        if self.lighting != "day":
+            base = f"{base}_{self.lighting}"
         return base if self.variation is NOMINAL else f"{base}_{self.variation.name}"
 
 
@@ -126,6 +144,8 @@ class Protocol:
     obstruction: dict[str, Any]
     robustness: tuple[Variation, ...]
     raw: dict[str, Any]
+    #: Brake onset: the commanded deceleration [m/s2] whose first step marks it (metrics.cell_metrics).
+    brake_onset_decel_mps2: float = 1.0
 
 
 def _num(value: float) -> str:
@@ -159,6 +179,7 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
             points_extended=float(t["points_extended"]),
             criterion=t.get("criterion", "mitigation_or_avoidance"),
             direction=t.get("direction", ""),
+            lightings=tuple(t.get("lightings", ("day",))),
         )
         if test.approach not in APPROACHES or test.placement not in PLACEMENTS:
             raise NcapError(f"protocol test {name}: unknown approach or placement")
@@ -170,6 +191,8 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
             raise NcapError(
                 f"protocol test {name}: a turning test, and only one, has direction same|opposite"
             )
+        if not test.lightings or not set(test.lightings) <= set(LIGHTINGS) or test.lightings[0] != "day":
+            raise NcapError(f"protocol test {name}: lightings must start with day and be among {LIGHTINGS}")
         tests[name] = test
     bands = {
         float(vut): tuple((str(colour), float(upper)) for colour, upper in edges)
@@ -179,11 +202,22 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
         if edges[-1] != ("red", math.inf) or any(c not in COLOURS for c, _ in edges):
             raise NcapError("protocol bands: every list ends with red to inf and names known colours")
     rob = raw["robustness"]
-    variations = (
-        *(Variation(f"speed{d:+g}", speed_delta_kmh=d) for d in rob["speed_deltas_kmh"]),
-        *(Variation(f"heading{d:+g}", heading_delta_deg=d) for d in rob["heading_deltas_deg"]),
-        *(Variation(f"start{d:+g}", start_offset_m=d) for d in rob["start_offsets_m"]),
+    variations = tuple(
+        Variation(
+            name=v["name"],
+            speed_delta_kmh=float(v.get("speed_delta_kmh", 0.0)),
+            heading_delta_deg=float(v.get("heading_delta_deg", 0.0)),
+            start_share=float(v.get("start_share", 0.0)),
+            layer=v["layer"],
+            criteria=tuple((str(t), str(c)) for t, c in v["criterion"].items()),
+        )
+        for v in rob["variations"]
     )
+    for v in variations:
+        if not set(dict(v.criteria)) <= set(tests) or not set(dict(v.criteria).values()) <= set(
+            ROBUSTNESS_CRITERIA
+        ):
+            raise NcapError(f"protocol robustness {v.name}: unknown test or criterion")
     timing = raw["timing"]
     return Protocol(
         tests=tests,
@@ -196,7 +230,13 @@ def load_protocol(path: Path = PROTOCOL_PATH) -> Protocol:
         obstruction=dict(raw["obstruction"]),
         robustness=variations,
         raw=raw,
+        brake_onset_decel_mps2=float(raw["metrics"]["brake_onset_decel_mps2"]),
     )
+
+
+def robustness_of(protocol: Protocol, test: NcapTest) -> tuple[Variation, ...]:
+    """The robustness variations that apply to a test (those with a criterion for it)."""
+    return tuple(v for v in protocol.robustness if v.criterion(test.name) is not None)
 
 
 def parse_speeds(text: str | None) -> tuple[float, ...] | None:
@@ -220,11 +260,16 @@ def select_cells(
     tests: str | None = None,
     speeds_kmh: tuple[float, ...] | None = None,
     robustness: bool = False,
+    lightings: tuple[str, ...] = ("day",),
 ) -> list[Cell]:
-    """The cells of `tests` ('CPNA,CPFA-50'; None: every test) at `speeds_kmh` (None: each grid's).
+    """The cells of `tests` ('CPNA,CPFA-50'; None: every test) at `speeds_kmh` (None: each grid's), in
+    each of `lightings` the test has a load case in (a night-only selection skips the day-only tests).
 
     A speed outside a selected test's grid is an error: the protocol has no such cell.
     """
+    unknown = [lighting for lighting in lightings if lighting not in LIGHTINGS]
+    if unknown or not lightings:
+        raise NcapError(f"--lighting must be day, night or both, got '{','.join(lightings)}'")
     wanted: dict[str, set[float] | None] = {}
     names = [t.strip() for t in tests.split(",")] if tests else list(protocol.tests)
     for token in names:
@@ -252,13 +297,15 @@ def select_cells(
         if outside:
             grid = ", ".join(_num(s) for s in test.speeds_kmh)
             raise NcapError(f"--speeds: {name} has no {_num(outside[0])} km/h row (its grid: {grid})")
-        for turn, speed in test.rows:
-            if speed not in speeds:
-                continue
-            for pct in test.impact_points_pct:
-                if columns is not None and pct not in columns:
+        for lighting in (lighting for lighting in lightings if lighting in test.lightings):
+            for turn, speed in test.rows:
+                if speed not in speeds:
                     continue
-                cells.append(Cell(test, speed, pct, turn=turn))
-                if robustness:
-                    cells += [Cell(test, speed, pct, v, turn) for v in protocol.robustness]
+                for pct in test.impact_points_pct:
+                    if columns is not None and pct not in columns:
+                        continue
+                    cells.append(Cell(test, speed, pct, turn=turn, lighting=lighting))
+                    # The calculator's night load cases have no robustness points (TOTAL_SCORES None).
+                    if robustness and lighting == "day":
+                        cells += [Cell(test, speed, pct, v, turn) for v in robustness_of(protocol, test)]
     return cells

@@ -272,6 +272,9 @@ def stage_cell(
         ped_speed_mps = (test.ped_speed_kmh + variation.speed_delta_kmh) / KMH_PER_MPS
         if ped_speed_mps <= 0:
             raise NcapError(f"{cell.cell_id}: the varied dummy speed is not positive")
+    if variation.start_share:  # the start a share of the walk nearer (the calculator's -25 %)
+        walk_time_s = _on_grid(walk_time_s * (1 + variation.start_share), step_length_s)
+        delay_s = impact_time_s - walk_time_s
     if variation.start_offset_m:
         walk_time_s = _on_grid(walk_time_s + variation.start_offset_m / ped_speed_mps, step_length_s)
         delay_s = impact_time_s - walk_time_s

@@ -15,9 +15,12 @@ from collections.abc import Callable, Iterable
 from functools import lru_cache
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
+from pedsafe_sumo.ncap.metrics import METRIC_COLUMNS, cell_metrics
 from pedsafe_sumo.ncap.protocol import KMH_PER_MPS, Cell, Protocol
+from pedsafe_sumo.ncap.robustness import ROBUSTNESS_COLUMNS, robustness_points
 from pedsafe_sumo.ncap.scoring import band_colour, cell_score, points_of_test
 from pedsafe_sumo.ncap.staging import StagedCell, spec_for, stage_cell
 from pedsafe_sumo.sim.connection import SimulatorError
@@ -26,14 +29,24 @@ from pedsafe_sumo.sim.outcome import EpisodeResult
 from pedsafe_sumo.sim.staging import SumoStaging
 from pedsafe_sumo.sumo_net import read_net
 
+#: The metrics of ncap_scores.csv over a test's cells run (NaN where no cell has the moment): the mean
+#: TTC at brake onset and warning time over the cells that braked / warned, the mean speed reduction,
+#: the largest peak deceleration.
+SUMMARY_METRICS = (
+    "mean_brake_onset_ttc_s",
+    "mean_warning_time_s",
+    "mean_speed_reduction_kmh",
+    "max_peak_decel_mps2",
+)
 #: The columns of ncap.csv: the eight result columns (docs/ncap.md), then what explains them.
 CELL_COLUMNS = (
     "test", "ego_speed_kmh", "impact_point_pct", "condition", "avoided", "impact_speed_kmh", "colour",
-    "cell_score", "test_range", "turn", "variation", "cell_id", "measured_impact_point_pct", "end_reason",
-    "first_detection_distance_m", "detected_by", "status", "error",
+    "cell_score", "test_range", "turn", "variation", "lighting", "cell_id", "measured_impact_point_pct",
+    "end_reason", "first_detection_distance_m", "detected_by", *METRIC_COLUMNS, "status", "error",
 )  # fmt: skip
 SCORE_COLUMNS = (
-    "test", "condition", "points", "points_standard", "points_extended", "max_points", "cells", "complete",
+    "test", "lighting", "condition", "points", "points_kind", "points_standard", "points_extended",
+    "max_points", "cells", "complete", *ROBUSTNESS_COLUMNS, *SUMMARY_METRICS,
 )  # fmt: skip
 
 
@@ -89,7 +102,9 @@ def impact_of(result: EpisodeResult, direction: tuple[float, float]) -> tuple[fl
     return float(speed_kmh), float(point_pct)
 
 
-def cell_row(protocol: Protocol, staged: StagedCell, condition: str, result: EpisodeResult) -> dict[str, Any]:
+def cell_row(
+    protocol: Protocol, staged: StagedCell, condition: str, result: EpisodeResult, step_length_s: float
+) -> dict[str, Any]:
     cell = staged.cell
     collided = result.end_reason == "collision"
     speed_kmh, point_pct = impact_of(result, staged.ego_direction)
@@ -106,11 +121,15 @@ def cell_row(protocol: Protocol, staged: StagedCell, condition: str, result: Epi
         "test_range": cell.test_range,
         "turn": cell.turn,
         "variation": cell.variation.name,
+        "lighting": cell.lighting,
         "cell_id": cell.cell_id,
         "measured_impact_point_pct": point_pct,
         "end_reason": result.end_reason,
         "first_detection_distance_m": result.outcome["first_detection_distance_m"],
         "detected_by": result.outcome["detected_by"],
+        **cell_metrics(
+            result.log, step_length_s, cell.ego_speed_kmh, collided, protocol.brake_onset_decel_mps2
+        ),
         "status": "ok",
         "error": "",
     }
@@ -144,7 +163,7 @@ def run_cells(
             except Exception as exc:  # the AD stack under test failed: the cell has no result
                 result, row = None, error_row(cell, condition, exc)
             else:
-                row = cell_row(protocol, staged, condition, result)
+                row = cell_row(protocol, staged, condition, result, runner.step_length_s)
             rows.append(row)
             if on_result is not None:
                 on_result(cell, condition, result, row)
@@ -166,26 +185,37 @@ def error_row(cell: Cell, condition: str, exc: BaseException) -> dict[str, Any]:
         "test_range": cell.test_range,
         "turn": cell.turn,
         "variation": cell.variation.name,
+        "lighting": cell.lighting,
         "cell_id": cell.cell_id,
         "measured_impact_point_pct": math.nan,
         "end_reason": "",
         "first_detection_distance_m": math.nan,
         "detected_by": "",
+        **dict.fromkeys(METRIC_COLUMNS, math.nan),
         "status": "error",
         "error": f"{type(exc).__name__}: {message}",
     }
 
 
 def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
-    """Points per test and condition from the nominal cells (robustness runs are reported, not scored).
+    """Points per test, lighting and condition from the nominal cells, the robustness points of a day
+    load case from its variation runs (robustness.py; NaN when none was run), and an `overall` row per
+    condition.
 
-    `complete` says whether every cell of the test's grid was run without error: points over a partial
-    grid are the calculator's formula applied to the cells that were run, not a rating.
+    `complete` says whether every cell of the test's grid was run without error; `points_kind` is
+    "partial" where it was not: such points are the calculator's formula applied to the cells that were
+    run, not a rating. The overall row is complete only when every test of the protocol was run, day and
+    night (coverage.grid_summary lists what is missing).
     """
     rows = []
     nominal = table[(table["variation"] == "nominal") & (table["status"] == "ok")]
-    for (name, condition), group in nominal.groupby(["test", "condition"], sort=False):
+    varied = table[table["variation"] != "nominal"]
+    for (name, lighting, condition), group in nominal.groupby(["test", "lighting", "condition"], sort=False):
         test = protocol.tests[name]
+        runs = varied[(varied["test"] == name) & (varied["condition"] == condition)]
+        robust = dict.fromkeys(ROBUSTNESS_COLUMNS, math.nan)
+        if lighting == "day" and not runs.empty:
+            robust = robustness_points(protocol, name, runs, group)
         points = points_of_test(
             test.points_standard,
             test.points_extended,
@@ -196,15 +226,21 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
         rows.append(
             {
                 "test": name,
+                "lighting": lighting,
                 "condition": condition,
                 **points,
                 "max_points": test.points_standard + test.points_extended,
                 "cells": len(group),
                 "complete": grid <= ran,
+                **robust,
+                **summary_metrics(group),
             }
         )
-    scores = pd.DataFrame(rows, columns=list(SCORE_COLUMNS))
+    scores = pd.DataFrame(rows, columns=[c for c in SCORE_COLUMNS if c != "points_kind"])
     if not scores.empty:
+        load_cases = {
+            (name, lighting) for name, test in protocol.tests.items() for lighting in test.lightings
+        }
         totals = scores.groupby("condition", sort=False).agg(
             points=("points", "sum"),
             points_standard=("points_standard", "sum"),
@@ -212,10 +248,37 @@ def score_tests(protocol: Protocol, table: pd.DataFrame) -> pd.DataFrame:
             max_points=("max_points", "sum"),
             cells=("cells", "sum"),
             complete=("complete", "all"),
+            robustness_layers_passed=("robustness_layers_passed", lambda v: v.sum(min_count=1)),
+            robustness_layers_applicable=("robustness_layers_applicable", lambda v: v.sum(min_count=1)),
+            points_robustness=("points_robustness", lambda v: v.sum(min_count=1)),
         )
-        totals = totals.reset_index().assign(test="overall")[list(SCORE_COLUMNS)]
-        scores = pd.concat([scores, totals], ignore_index=True)
-    return scores
+        for condition, group in scores.groupby("condition", sort=False):
+            if set(zip(group["test"], group["lighting"])) != load_cases:
+                totals.loc[condition, "complete"] = False
+        metrics = nominal.groupby("condition", sort=False)[list(METRIC_COLUMNS)].apply(summary_metrics_frame)
+        totals = totals.join(metrics).reset_index().assign(test="overall", lighting="all")
+        scores = pd.concat([scores, totals[scores.columns]], ignore_index=True)
+    scores.insert(4, "points_kind", ["rating" if c else "partial" for c in scores["complete"]])
+    return scores[list(SCORE_COLUMNS)]
+
+
+def summary_metrics(cells: pd.DataFrame) -> dict[str, float]:
+    """SUMMARY_METRICS over some cells' rows (finite values only: a cell that never braked has no onset)."""
+
+    def finite(column: str) -> pd.Series:
+        values = cells[column].astype(float)
+        return values[np.isfinite(values)]
+
+    return {
+        "mean_brake_onset_ttc_s": float(finite("brake_onset_ttc_s").mean()),
+        "mean_warning_time_s": float(finite("warning_time_s").mean()),
+        "mean_speed_reduction_kmh": float(finite("speed_reduction_kmh").mean()),
+        "max_peak_decel_mps2": float(finite("peak_decel_mps2").max()),
+    }
+
+
+def summary_metrics_frame(cells: pd.DataFrame) -> pd.Series:
+    return pd.Series(summary_metrics(cells))
 
 
 def spec_record(cell: Cell, runner: EpisodeRunner, protocol: Protocol, seed: int) -> dict[str, Any]:

@@ -41,6 +41,8 @@ def ncap(*args: str, module: str = "pedsafe_sumo.ncap") -> subprocess.CompletedP
         (["--algorithm", "nosuchpkg.mod:Stack"], "cannot import module 'nosuchpkg.mod'"),
         (["--condition", "v3i"], "--condition must be sv, v2i or both"),
         (["--seed", "-1"], "--seed must not be negative"),
+        (["--lighting", "dusk"], "--lighting must be day, night or both"),
+        (["--tests", "CPTAsame", "--lighting", "night"], "has no night load case"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, args, says):
@@ -88,6 +90,13 @@ def test_a_small_grid_writes_the_issues_files_and_any_cell_replays(tmp_path):
     assert set(scores["test"]) == {"CPNA", "CPTAsame", "overall"} and (scores["points"] == 0).all()
     assert (out / "figures" / "ncap_grid.png").stat().st_size > 0
     assert len(list((out / "cases").glob("*.parquet"))) == 6
+    # The metrics: never braking, no brake onset, no speed taken off, no warning output.
+    assert table["brake_onset_ttc_s"].isna().all() and table["warning_time_s"].isna().all()
+    assert (table["speed_reduction_kmh"].abs() < 1e-9).all()
+    # The last line says the grid is partial and what is missing.
+    last = done.stdout.strip().splitlines()[-1]
+    assert last.startswith("ncap: PARTIAL grid") and "CPNA day (29 of 30 cells)" in last
+    assert (scores["points_kind"] == "partial").all()
 
     # A turning cell replays too (the engine holding the ego's movement green, as the suite ran it).
     fcd = tmp_path / "cell.fcd.xml"
@@ -100,6 +109,21 @@ def test_a_small_grid_writes_the_issues_files_and_any_cell_replays(tmp_path):
     assert "trajectory matches the log" in replay.stdout and "differs" not in replay.stdout
     text = fcd.read_text()
     assert "<fcd-export" in text and 'id="ego"' in text and 'id="ped"' in text
+
+
+@pytest.mark.slow
+def test_a_night_only_run_replays_its_cells_with_the_night_camera(tmp_path):
+    out = tmp_path / "night"
+    done = ncap("--out", str(out), "--tests", "CPNCO-25", "--speeds", "50", "--lighting", "night")
+    assert done.returncode == 0, done.stderr
+    table = pd.read_csv(out / "ncap.csv")
+    assert list(table["cell_id"]) == ["CPNCO-25_50kmh_night"] * 2 and (table["lighting"] == "night").all()
+    replay = ncap(
+        str(out), "--scenario", "CPNCO-25_50kmh_night", "--episode", "0", "--condition", "sv",
+        "--export-fcd", str(tmp_path / "night.fcd.xml"), module="pedsafe_sumo.replay",
+    )  # fmt: skip
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    assert "trajectory matches the log" in replay.stdout and "differs" not in replay.stdout
 
 
 @pytest.mark.slow

@@ -19,7 +19,7 @@ from pedsafe_sumo.ncap.protocol import load_protocol, select_cells
 from pedsafe_sumo.ncap.scoring import applied_colour, band_colour, cell_score, points_of_test
 
 PROTOCOL = load_protocol()
-#: Our test -> the calculator's load case (the day variant: the SUMO scene has no night).
+#: Our test -> the calculator's day load case (the night ones: test_night.py).
 LOADCASE = {
     "CPNA": "CPNA day",
     "CPFA": "CPFA day",
