@@ -196,7 +196,7 @@ class SsmWriter(_Staged):
         # Streamed: the declaration, the comment and the root's opening tag now, one <conflict> element per
         # kept interaction as it comes (each built and serialised by ElementTree), the closing tag at the end.
         self._handle.write('<?xml version="1.0" encoding="UTF-8"?>\n')
-        self._handle.write(_xml(ElementTree.Comment(SSM_COMMENT)) + "\n")
+        self._handle.write(ElementTree.tostring(ElementTree.Comment(SSM_COMMENT), encoding="unicode") + "\n")
         self._handle.write(f"<{SSM_ROOT}>\n")
 
     def keeps(self, row: dict[str, Any]) -> bool:
