@@ -32,8 +32,8 @@ from pedsafe_sumo.report.audit import Section, audit
 from pedsafe_sumo.report.html import (
     HTML_FILE,
     ApproachTable,
+    PageTable,
     page_context,
-    page_table,
     write_html_report,
     write_page,
 )
@@ -336,6 +336,10 @@ def _paired_within_approach(episodes: pd.DataFrame) -> pd.DataFrame:
     return episodes.assign(episode=episodes["approach"].map(arms).astype(int) * stride + episodes["episode"])
 
 
+#: The caption of an approach's Table I on the pooled page.
+APPROACH_TABLE_CAPTION = "The episodes on this approach only; columns and intervals as in Table I below."
+
+
 def report_every_approach(path: Path, partial: bool, say=print) -> list[Path]:
     """A run of several approaches (batch --approach all): each approach in full as `--approach` reports
     it (under DIR/approach_<arm>/), then Table I and the paired tests pooled over the approaches (SV and V2I
@@ -351,11 +355,11 @@ def report_every_approach(path: Path, partial: bool, say=print) -> list[Path]:
         approach_tables.append(
             ApproachTable(
                 arm,
-                page_table(
-                    TABLE_ONE_TITLE,
+                PageTable(
+                    f"Table I, approach {arm}",
+                    APPROACH_TABLE_CAPTION,
                     *table_one_rows(table),
                     f"table-one-{arm}",
-                    heading=f"Table I, approach {arm}",
                 ),
                 f"approach_{arm}/{HTML_FILE}",
             )
