@@ -215,13 +215,13 @@ def table_one(run: Run) -> pd.DataFrame:
     """Table I: per scenario and condition, collision rate, mean injury probability and conflict rate with
     their 95% intervals, and the collisions by type: the numbers `python -m pedsafe_sumo.report` prints
     and writes to tables/table1.csv."""
-    return report_command.report_tables(run.directory)[0]
+    return report_command.tables_of(run.directory)[0]
 
 
 def paired_comparison(run: Run) -> pd.DataFrame:
     """The paired SV-vs-V2I comparison per scenario (the same seeds under both conditions): the
     differences and their tests, as the report prints them and writes tables/paired.csv."""
-    return report_command.report_tables(run.directory)[1]
+    return report_command.tables_of(run.directory)[1]
 
 
 def figure(run: Run, name: str) -> Figure:

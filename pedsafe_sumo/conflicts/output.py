@@ -11,7 +11,7 @@ import csv
 import math
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import quoteattr
+from xml.etree import ElementTree
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -112,6 +112,70 @@ def _position(x_m: float, y_m: float) -> str:
     return "NA" if not (math.isfinite(x_m) and math.isfinite(y_m)) else f"{x_m:.2f},{y_m:.2f}"
 
 
+SSM_ROOT = "SSMLog"
+SSM_COMMENT = " pedsafe_sumo.conflicts: pedestrian-vehicle interactions (docs/conflicts.md) "
+#: One level of indentation of the SSM file (SUMO's own output indents by four spaces).
+XML_INDENT = "    "
+
+
+def _xml(element: ElementTree.Element, level: int = 0) -> str:
+    """An element as indented XML text, one element per line, at `level` levels of indentation."""
+    ElementTree.indent(element, space=XML_INDENT, level=level)
+    return XML_INDENT * level + ElementTree.tostring(element, encoding="unicode")
+
+
+def ssm_conflict(row: dict[str, Any]) -> ElementTree.Element:
+    """The <conflict> element of one interaction row (SsmWriter), attributes in SUMO's order."""
+    flag = {True: "true", False: "false"}
+    r = {k: (_value(v, 3) if isinstance(v, float) else v) for k, v in row.items()}
+    conflict = ElementTree.Element(
+        "conflict",
+        {
+            "begin": _value(row["begin_s"]),
+            "end": _value(row["end_s"]),
+            "ego": str(row["vehicle_id"]),
+            "foe": str(row["person_id"]),
+            "egoType": str(row["vehicle_type"]),
+            "foeType": str(row["person_type"]),
+        },
+    )
+    children = (
+        (
+            "minTTC",
+            {
+                "time": _value(row["ttc_time_s"]),
+                "position": _position(row["ttc_x_m"], row["ttc_y_m"]),
+                "value": _value(row["ttc_s"]),
+            },
+        ),
+        ("maxDRAC", {"value": _value(row["drac_mps2"])}),
+        ("PET", {"position": _position(row["pet_x_m"], row["pet_y_m"]), "value": _value(row["pet_s"])}),
+        (
+            "minClearance",
+            {
+                "time": _value(row["time_s"]),
+                "position": _position(row["x_m"], row["y_m"]),
+                "value": str(r["min_clearance_m"]),
+                "collision": flag[bool(row["collision"])],
+            },
+        ),
+        (
+            "amini",
+            {
+                "time": _value(row["conflict_time_s"]),
+                "md": str(r["md_m"]),
+                "tmd": str(r["tmd_s"]),
+                "cs": str(r["cs_mps"]),
+                "probability": _value(row["conflict_probability"], 4),
+                "conflict": flag[bool(row["conflict"])],
+            },
+        ),
+    )
+    for tag, attributes in children:
+        ElementTree.SubElement(conflict, tag, attributes)
+    return conflict
+
+
 class SsmWriter(_Staged):
     """Interactions in the layout of SUMO's SSM device output (`--device.ssm.file`).
 
@@ -129,11 +193,11 @@ class SsmWriter(_Staged):
         self.thresholds = (ttc_threshold_s, drac_threshold_mps2, pet_threshold_s)
         self.kept = 0
         self._handle = open(self.tmp, "w", encoding="utf-8")
+        # Streamed: the declaration, the comment and the root's opening tag now, one <conflict> element per
+        # kept interaction as it comes (each built and serialised by ElementTree), the closing tag at the end.
         self._handle.write('<?xml version="1.0" encoding="UTF-8"?>\n')
-        self._handle.write(
-            "<!-- pedsafe_sumo.conflicts: pedestrian-vehicle interactions (docs/conflicts.md) -->\n"
-        )
-        self._handle.write("<SSMLog>\n")
+        self._handle.write(ElementTree.tostring(ElementTree.Comment(SSM_COMMENT), encoding="unicode") + "\n")
+        self._handle.write(f"<{SSM_ROOT}>\n")
 
     def keeps(self, row: dict[str, Any]) -> bool:
         ttc, drac, pet = self.thresholds
@@ -149,29 +213,10 @@ class SsmWriter(_Staged):
         if not self.keeps(row):
             return
         self.kept += 1
-        flag = {True: "true", False: "false"}
-        r = {k: (_value(v, 3) if isinstance(v, float) else v) for k, v in row.items()}
-        lines = [
-            f"    <conflict begin={quoteattr(_value(row['begin_s']))} end={quoteattr(_value(row['end_s']))} "
-            f"ego={quoteattr(row['vehicle_id'])} foe={quoteattr(row['person_id'])} "
-            f"egoType={quoteattr(row['vehicle_type'])} foeType={quoteattr(row['person_type'])}>",
-            f'        <minTTC time="{_value(row["ttc_time_s"])}" '
-            f'position="{_position(row["ttc_x_m"], row["ttc_y_m"])}" value="{_value(row["ttc_s"])}"/>',
-            f'        <maxDRAC value="{_value(row["drac_mps2"])}"/>',
-            f'        <PET position="{_position(row["pet_x_m"], row["pet_y_m"])}" '
-            f'value="{_value(row["pet_s"])}"/>',
-            f'        <minClearance time="{_value(row["time_s"])}" '
-            f'position="{_position(row["x_m"], row["y_m"])}" '
-            f'value="{r["min_clearance_m"]}" collision="{flag[bool(row["collision"])]}"/>',
-            f'        <amini time="{_value(row["conflict_time_s"])}" md="{r["md_m"]}" tmd="{r["tmd_s"]}" '
-            f'cs="{r["cs_mps"]}" probability="{_value(row["conflict_probability"], 4)}" '
-            f'conflict="{flag[bool(row["conflict"])]}"/>',
-            "    </conflict>",
-        ]
-        self._handle.write("\n".join(lines) + "\n")
+        self._handle.write(_xml(ssm_conflict(row), level=1) + "\n")
 
     def _finish(self) -> None:
-        self._handle.write("</SSMLog>\n")
+        self._handle.write(f"</{SSM_ROOT}>\n")
 
     def _close_handle(self) -> None:
         if not self._handle.closed:

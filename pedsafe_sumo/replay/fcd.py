@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import quoteattr
+from xml.etree import ElementTree
 
 from pedsafe_sumo import OSM_ATTRIBUTION
 from pedsafe_sumo.sim.staging import PED_ID
@@ -124,34 +124,68 @@ def _time(time_s: float) -> str:
     return f"{time_s:.2f}" if abs(time_s * 100 - round(time_s * 100)) < 1e-6 else f"{time_s:.6f}"
 
 
+#: One level of indentation (SUMO's own FCD output indents by four spaces).
+XML_INDENT = "    "
+#: The root's attributes as SUMO writes them (the schema of FCD files).
+FCD_ROOT_ATTRIBUTES = {
+    "xmlns:xsi": "http://www.w3.org/2001/XMLSchema-instance",
+    "xsi:noNamespaceSchemaLocation": "http://sumo.dlr.de/xsd/fcd_file.xsd",
+}
+
+
+def fcd_element(timesteps: list[Timestep]) -> ElementTree.Element:
+    """The <fcd-export> element of `timesteps`, attributes in SUMO's order."""
+    root = ElementTree.Element("fcd-export", FCD_ROOT_ATTRIBUTES)
+    for step in timesteps:
+        timestep = ElementTree.SubElement(root, "timestep", {"time": _time(step.time_s)})
+        for v in step.vehicles:
+            ElementTree.SubElement(
+                timestep,
+                "vehicle",
+                {
+                    "id": v.vehicle_id,
+                    "x": _number(v.x_m),
+                    "y": _number(v.y_m),
+                    "angle": _number(v.angle_deg),
+                    "type": v.type_id,
+                    "speed": _number(v.speed_mps),
+                    "pos": _number(v.lane_pos_m),
+                    "lane": v.lane_id,
+                    "slope": _number(v.slope_deg),
+                },
+            )
+        for person in step.persons:
+            ElementTree.SubElement(
+                timestep,
+                "person",
+                {
+                    "id": person.person_id,
+                    "x": _number(person.x_m),
+                    "y": _number(person.y_m),
+                    "angle": _number(person.angle_deg),
+                    "type": person.type_id,
+                    "speed": _number(person.speed_mps),
+                    "pos": _number(person.edge_pos_m),
+                    "edge": person.edge_id,
+                    "slope": _number(person.slope_deg),
+                },
+            )
+    return root
+
+
 def write_fcd(path: Path, timesteps: list[Timestep], comment: str = "") -> Path:
     """Write `timesteps` as SUMO FCD XML to `path` (through a temporary file, renamed when complete)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    root = fcd_element(timesteps)
+    ElementTree.indent(root, space=XML_INDENT)
     lines = ['<?xml version="1.0" encoding="UTF-8"?>']
     for text in (comment, OSM_ATTRIBUTION):
-        if text:
-            lines.append(f"<!-- {text.replace('--', '- -')} -->")
-    lines.append(
-        '<fcd-export xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
-        'xsi:noNamespaceSchemaLocation="http://sumo.dlr.de/xsd/fcd_file.xsd">'
-    )
-    for step in timesteps:
-        lines.append(f'    <timestep time="{_time(step.time_s)}">')
-        for v in step.vehicles:
+        if text:  # "--" may not stand in an XML comment
             lines.append(
-                f'        <vehicle id={quoteattr(v.vehicle_id)} x="{_number(v.x_m)}" y="{_number(v.y_m)}" '
-                f'angle="{_number(v.angle_deg)}" type={quoteattr(v.type_id)} speed="{_number(v.speed_mps)}" '
-                f'pos="{_number(v.lane_pos_m)}" lane={quoteattr(v.lane_id)} slope="{_number(v.slope_deg)}"/>'
+                ElementTree.tostring(ElementTree.Comment(f" {text.replace('--', '- -')} "), "unicode")
             )
-        for p in step.persons:
-            lines.append(
-                f'        <person id={quoteattr(p.person_id)} x="{_number(p.x_m)}" y="{_number(p.y_m)}" '
-                f'angle="{_number(p.angle_deg)}" type={quoteattr(p.type_id)} speed="{_number(p.speed_mps)}" '
-                f'pos="{_number(p.edge_pos_m)}" edge={quoteattr(p.edge_id)} slope="{_number(p.slope_deg)}"/>'
-            )
-        lines.append("    </timestep>")
-    lines.append("</fcd-export>")
+    lines.append(ElementTree.tostring(root, encoding="unicode"))
     tmp = path.with_name(path.name + ".tmp")
     try:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -29,12 +29,26 @@ from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.approaches import leg_argument
 from pedsafe_sumo.report import figures, impact
 from pedsafe_sumo.report import indexes as idx
-from pedsafe_sumo.report.audit import audit
-from pedsafe_sumo.report.html import HTML_FILE, write_html_report
-from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run, run_header
+from pedsafe_sumo.report.audit import Section, audit
+from pedsafe_sumo.report.html import (
+    HTML_FILE,
+    ApproachTable,
+    PageTable,
+    page_context,
+    write_html_report,
+    write_page,
+)
+from pedsafe_sumo.report.rundir import (
+    ReportError,
+    RunDirectory,
+    approaches_of,
+    load_pooled,
+    load_run,
+    load_run_per_approach,
+    run_header,
+)
 from pedsafe_sumo.report.staging_checks import collision_type_columns
 from pedsafe_sumo.report.summaries import (
-    CASE_SCENARIO,
     choose_case_pair,
     detection_summaries,
     load_case_traces,
@@ -87,12 +101,11 @@ def draw_figure(run: RunDirectory, name: str, path: Path | None = None, say=_qui
         raise ReportError(f"unknown figure '{name}' (known: {', '.join(FIGURE_FILES)})")
     ok = ok_episodes(run.episodes)
     if name in ("injury_vs_age", "injury_vs_speed"):
-        jaywalking = ok[ok["scenario"] == CASE_SCENARIO]
-        if jaywalking.empty:
-            say(f"note: no {CASE_SCENARIO} episodes (status ok) in this run: injury figures skipped")
+        if not figures.collision_scenarios(ok):
+            say("note: no collision (status ok) in this run: injury figures skipped")
             return None
         draw = figures.injury_vs_age if name == "injury_vs_age" else figures.injury_vs_speed
-        return draw(jaywalking, CASE_SCENARIO, path)
+        return draw(ok, path)
     if name == "impact_speed":
         say(impact.intercept_note(ok))
         return impact.impact_speed_histogram(ok, path)
@@ -174,9 +187,10 @@ def _proximity_title(model) -> str:
     )
 
 
-def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
+def index_checks(run: RunDirectory, tables_dir: Path, say) -> tuple[list[Path], list[Section]]:
     """Stationary contacts, our collision against SUMO's, where PET is defined, the proximity measure:
-    printed, and written to tables_dir (indexes.md and one CSV each). Columns a run lacks are a note."""
+    printed, and written to tables_dir (indexes.md and one CSV each); returns the files and the page's
+    sections. Columns a run lacks are a note."""
     episodes = run.episodes
     sections: list[tuple[str, str, Any, Any]] = []  # (title, csv name, table, rows function)
     contacts = idx.stationary_contacts(episodes)
@@ -210,8 +224,12 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
     tables_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     markdown = [f"**{run.incomplete}**\n"] if run.incomplete else []
+    page_sections = []
     for title, csv_name, table, rows_of in sections:
         header, rows = rows_of(table)
+        page_sections.append(
+            Section(title, header, rows, csv_name.removesuffix(".csv"), SHORT_HEADINGS.get(csv_name, ""))
+        )
         say(title)
         say(text_table(header, rows))
         say("")
@@ -228,27 +246,72 @@ def index_checks(run: RunDirectory, tables_dir: Path, say) -> list[Path]:
         path = tables_dir / "indexes.md"
         path.write_text("\n".join(markdown), encoding="utf-8")
         written.append(path)
-    return written
+    return written, page_sections
 
 
-def report_tables(run: RunDirectory) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Table I (with the collisions by type) and the paired SV-vs-V2I comparison, as the report prints and
-    writes them; ReportError (one line) when the rows do not allow them."""
+#: The page's headings of the index checks whose title does not start with one.
+SHORT_HEADINGS = {"agreement.csv": "Agreement with SUMO's collision check"}
+DETECTION_TITLE = (
+    "First detection: per scenario and condition, the distance X that 90% of the episodes first detect "
+    "the pedestrian at or beyond (episodes that never detect count against it; figure "
+    "first_detection_distance.png)"
+)
+
+
+def detection_section(run: RunDirectory) -> Section | None:
+    """The first-detection distances the report prints, as a table for the page."""
+    summaries = detection_summaries(run.episodes)
+    if not summaries:
+        return None
+    rows = [
+        [
+            s.scenario,
+            condition_label(s.condition),
+            str(s.n),
+            str(s.n_never),
+            f"{s.distance_90_m:.1f} m" if math.isfinite(s.distance_90_m) else "fewer than 90% ever detect",
+        ]
+        for s in summaries
+    ]
+    header = ["scenario", "condition", "n", "never detected", "90% detect beyond"]
+    return Section(DETECTION_TITLE, header, rows, "first-detection", "First detection")
+
+
+def tables_of(
+    run: RunDirectory, paired_episodes: pd.DataFrame | None = None
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Table I (with the collisions by type) and the paired tests of a run; `paired_episodes`, the rows the
+    paired tests match (the run's own by default)."""
     try:
         first_stage = first_estimated_stage(run.run_info)
         table = table_one_of_run(
             run.episodes, proposals=(run.run_info or {}).get("sampler_proposals"), first_stage=first_stage
         )
-        paired = paired_of_run(run.episodes, first_stage)
+        paired = paired_of_run(run.episodes if paired_episodes is None else paired_episodes, first_stage)
         table = collision_type_columns(table, run.episodes)
     except ValueError as exc:
         raise ReportError(f"{run.path}: {exc}") from exc
     return table, paired
 
 
+def _out_dir(run: RunDirectory, names: tuple[str, ...]) -> Path:
+    """Where the report of `run` goes, checked: no link leads a write out of the run directory."""
+    out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path
+    if run.selected_approach:
+        out_dir = out_dir / f"approach_{run.selected_approach}"
+    try:  # no link in a received run directory leads the writes below out of it (docs/trust.md)
+        check_tree(run.path, [str(out_dir.relative_to(run.path) / n) for n in names], "report")
+    except ConfinementError as exc:
+        raise ReportError(str(exc)) from None
+    for directory in (out_dir, *(out_dir / n for n in names if n != HTML_FILE)):
+        check_output_dir(directory, "report into", ReportError)
+    check_output_file(out_dir / HTML_FILE, "report into", ReportError, make_parents=True)
+    return out_dir
+
+
 def report(run: RunDirectory, say=print) -> list[Path]:
     """Print the tables, write tables and figures under the run directory; returns the files written."""
-    table, paired = report_tables(run)
+    table, paired = tables_of(run)
     if run.incomplete:
         say(run.incomplete)
     if run.run_info is not None:
@@ -269,24 +332,15 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     say(paired_title(paired))
     say(text_table(*paired_rows(paired)))
     say("")
-    out_dir = run.path / PARTIAL_DIR if run.incomplete else run.path
-    if run.selected_approach:
-        out_dir = out_dir / f"approach_{run.selected_approach}"
-    try:  # no link in a received run directory leads the writes below out of it (docs/trust.md)
-        check_tree(
-            run.path,
-            [str(out_dir.relative_to(run.path) / n) for n in (TABLES_DIR, FIGURES_DIR, HTML_FILE)],
-            "report",
-        )
-    except ConfinementError as exc:
-        raise ReportError(str(exc)) from None
-    for directory in (out_dir, out_dir / TABLES_DIR, out_dir / FIGURES_DIR):
-        check_output_dir(directory, "report into", ReportError)
-    check_output_file(out_dir / HTML_FILE, "report into", ReportError, make_parents=True)
+    out_dir = _out_dir(run, (TABLES_DIR, FIGURES_DIR, HTML_FILE))
     written = write_tables(table, paired, out_dir / TABLES_DIR, banner=run.incomplete)
-    written += index_checks(run, out_dir / TABLES_DIR, say)
-    audited, sections = audit(run, out_dir / TABLES_DIR, say)
+    index_files, sections = index_checks(run, out_dir / TABLES_DIR, say)
+    written += index_files
+    detection = detection_section(run)
+    sections += [detection] if detection else []
+    audited, audit_sections = audit(run, out_dir / TABLES_DIR, say)
     written += audited
+    sections += audit_sections
     written += write_figures(run, out_dir / FIGURES_DIR, say)
     written.append(
         write_html_report(run, table, paired, out_dir / FIGURES_DIR, out_dir / HTML_FILE, sections)
@@ -295,6 +349,71 @@ def report(run: RunDirectory, say=print) -> list[Path]:
     if run.incomplete:
         say(run.incomplete)
     return written
+
+
+def _paired_within_approach(episodes: pd.DataFrame) -> pd.DataFrame:
+    """The rows with episode numbers made distinct per approach, so that the paired tests pool the
+    approaches while matching SV and V2I within one (every approach runs the same episode numbers)."""
+    arms = {arm: k for k, arm in enumerate(pd.unique(episodes["approach"]))}
+    stride = int(episodes["episode"].max()) + 1
+    return episodes.assign(episode=episodes["approach"].map(arms).astype(int) * stride + episodes["episode"])
+
+
+#: The caption of an approach's Table I on the pooled page.
+APPROACH_TABLE_CAPTION = "The episodes on this approach only; columns and intervals as in Table I below."
+
+
+def report_every_approach(path: Path, partial: bool, say=print) -> list[Path]:
+    """A run of several approaches (batch --approach all): each approach in full as `--approach` reports
+    it (under DIR/approach_<arm>/), then Table I and the paired tests pooled over the approaches (SV and V2I
+    matched within an approach) in DIR/tables/ and DIR/report.html, whose page also shows every approach's
+    Table I and links to its page."""
+    written: list[Path] = []
+    approach_tables = []
+    for arm, run in load_run_per_approach(path, partial).items():
+        say(f"== approach {arm} ==")
+        written += report(run, say)
+        say("")
+        table, _ = tables_of(run)
+        approach_tables.append(
+            ApproachTable(
+                arm,
+                PageTable(
+                    f"Table I, approach {arm}",
+                    APPROACH_TABLE_CAPTION,
+                    *table_one_rows(table),
+                    f"table-one-{arm}",
+                ),
+                f"approach_{arm}/{HTML_FILE}",
+            )
+        )
+    pooled = load_pooled(path, partial)
+    arms = ", ".join(a.approach for a in approach_tables)
+    table, paired = tables_of(pooled, _paired_within_approach(pooled.episodes))
+    say(f"== pooled over approaches {arms} (SV and V2I paired within an approach) ==")
+    if pooled.incomplete:
+        say(pooled.incomplete)
+    say(TABLE_ONE_TITLE)
+    say(text_table(*table_one_rows(table)))
+    say("")
+    say(paired_title(paired))
+    say(text_table(*paired_rows(paired)))
+    say("")
+    out_dir = _out_dir(pooled, (TABLES_DIR, HTML_FILE))
+    pooled_files = write_tables(table, paired, out_dir / TABLES_DIR, banner=pooled.incomplete)
+    context = page_context(
+        pooled,
+        table,
+        paired,
+        None,
+        approach_tables=approach_tables,
+        title_suffix=f" (approaches {arms} pooled)",
+    )
+    pooled_files.append(write_page(context, out_dir / HTML_FILE))
+    say("wrote " + ", ".join(str(p.relative_to(path)) for p in pooled_files) + f" in {path}")
+    if pooled.incomplete:
+        say(pooled.incomplete)
+    return written + pooled_files
 
 
 class _StdoutLines:
@@ -329,11 +448,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--approach",
         type=leg_argument,
-        help="report the episodes on this approach only (a batch run with --approach all holds several)",
+        help="report the episodes on this approach only (a batch run with --approach all holds several; "
+        "without this option each is reported, then all of them pooled)",
     )
     args = parser.parse_args(argv)
+    say = _StdoutLines()
     try:
-        report(load_run(args.run_dir, partial=args.partial, approach=args.approach), say=_StdoutLines())
+        if args.approach is None and len(approaches_of(args.run_dir, args.partial)) > 1:
+            report_every_approach(args.run_dir, args.partial, say)
+        else:
+            report(load_run(args.run_dir, partial=args.partial, approach=args.approach), say=say)
     except ReportError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

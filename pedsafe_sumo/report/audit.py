@@ -33,6 +33,8 @@ class Section:
     header: list[str]
     rows: list[list[str]]
     table_id: str
+    #: the page's short heading (the rest of the title is its caption); "" = the title's words before ": "
+    heading: str = ""
 
 
 def audit(run: RunDirectory, tables_dir: Path, say) -> tuple[list[Path], list[Section]]:
@@ -43,12 +45,17 @@ def audit(run: RunDirectory, tables_dir: Path, say) -> tuple[list[Path], list[Se
     sections = [Section(WITNESS_TITLE, *witness_rows(witness), "witness")]
     if len(disagreements):
         sections.append(
-            Section(DISAGREEMENTS_TITLE, *disagreement_rows(disagreements), "witness-disagreements")
+            Section(
+                DISAGREEMENTS_TITLE,
+                *disagreement_rows(disagreements),
+                "witness-disagreements",
+                "Witness disagreements",
+            )
         )
     else:
         say("collision witness: no episode where the loop and the witness disagree")
     staging = staging_diagnostics(episodes)
-    sections.append(Section(STAGING_TITLE, *staging_rows(staging), "staging"))
+    sections.append(Section(STAGING_TITLE, *staging_rows(staging), "staging", "Staging diagnostics"))
 
     tables_dir.mkdir(parents=True, exist_ok=True)
     written = []

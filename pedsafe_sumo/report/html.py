@@ -1,26 +1,30 @@
-"""DIR/report.html: the run's report as one self-contained page (every image embedded as base64).
+"""DIR/report.html: the run's report as one self-contained page (every image embedded as base64), rendered
+from the Jinja2 templates of pedsafe_sumo/report/templates/ with autoescaping on.
 
-Sections: the run line, Table I and the paired SV-vs-V2I tests (the same rows as the text report), the
-collision witness and the staging diagnostics (report/audit.py),
-every figure under the report's figures/ folder, a gallery of the logged cases (a picture of each,
-its outcome, and the commands that replay and export it) and the run's configuration (run.json).
+From the top: the verdict (per scenario and condition the rates with their 95% intervals, per scenario the
+paired SV-vs-V2I test in words, the stack under test); Table I per approach where the run has several;
+Table I and the paired tests (the same rows as the text report); every diagnostic table (the index checks,
+the first detection, the collision witness, the staging diagnostics); every figure under the report's
+figures/ folder; every logged case (a picture, its outcome, the commands that replay and export it),
+filterable by scenario, condition and outcome; the configuration as a table, with the raw run.json folded.
 
 A case's picture is the replay tool's screenshot when one was saved beside the case log
-(`cases/<case>.png`, the gallery prints the command); else a plot of the logged trajectories drawn
-here from the case log, which costs no simulation.
+(`cases/<case>.png`, the page prints the command); else a plot of the logged trajectories drawn here from
+the case log, which costs no simulation.
 """
 
 from __future__ import annotations
 
 import base64
-import html
 import io
 import json
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import jinja2
 import matplotlib
 
 matplotlib.use("Agg")
@@ -32,40 +36,82 @@ from pedsafe_sumo.report.rundir import RunDirectory, run_header  # noqa: E402
 from pedsafe_sumo.report.tables import (  # noqa: E402
     TABLE_ONE_TITLE,
     condition_label,
+    estimator_note,
+    is_weighted,
     paired_rows,
     paired_title,
     table_one_rows,
 )
+from pedsafe_sumo.report.verdict import config_rows, paired_readings, rate_rows  # noqa: E402
 
 HTML_FILE = "report.html"
-#: Cases shown in the gallery (collisions first, then conflicts); the page says how many more there are.
-MAX_GALLERY_CASES = 24
+TEMPLATE = "report.html.j2"
+#: Headings of the titles whose first words do not make one (the rest of the title is the caption).
+PAIRED_HEADING = "Paired SV vs V2I"
+#: A title's words before its first ": " make its heading when they are at most this long.
+MAX_HEADING_CHARS = 40
 
-STYLE = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
-h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: .2em; margin-top: 1.6em; }
-table.data { border-collapse: collapse; margin: .6em 0; font-size: .92em; }
-table.data th, table.data td { border: 1px solid #bbb; padding: .3em .6em; text-align: right; }
-table.data th { background: #e8eef6; }
-table.data td:first-child, table.data td:nth-child(2) { text-align: left; }
-.figures img { max-width: 100%; border: 1px solid #ddd; margin: .4em 0; }
-.gallery { display: grid; grid-template-columns: repeat(auto-fill, minmax(340px, 1fr)); gap: 1em; }
-.case { border: 1px solid #ccc; border-radius: 6px; padding: .6em; background: #fafafa; }
-.case img { width: 100%; } .case code { font-size: .78em; word-break: break-all; display: block; }
-.collision { color: #b00020; font-weight: bold; } .conflict { color: #b06000; font-weight: bold; }
-pre { background: #f4f4f4; padding: .8em; overflow-x: auto; font-size: .8em; }
-.banner { background: #ffe08a; padding: .6em; font-weight: bold; }
-"""
+
+@dataclass(frozen=True)
+class PageTable:
+    """A table as the page shows it: a short heading, a caption paragraph, the cells."""
+
+    heading: str
+    caption: str
+    header: list[str]
+    rows: list[list[str]]
+    table_id: str
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class ApproachTable:
+    """Table I of one approach of a run with several (report of a batch --approach all)."""
+
+    approach: str
+    table: PageTable
+    #: the approach's own page, relative to the pooled one
+    link: str
+
+
+def split_title(title: str, heading: str = "") -> tuple[str, str]:
+    """(heading, caption) of a table title: `heading` when given (the caption is the rest of the title), else
+    the title's words before its first ": " when they are short, else the whole title. A title's lines are
+    joined with "; " where the line ends without punctuation."""
+    lines = [line.strip() for line in title.splitlines() if line.strip()]
+    text = "".join(
+        line + ("" if k == len(lines) - 1 else " " if line[-1] in ";:.," else "; ")
+        for k, line in enumerate(lines)
+    )
+    if heading:
+        rest = text[len(heading) :].lstrip(" :") if text.startswith(heading) else text
+        inner, close, after = rest[1:].partition("): ")
+        if rest.startswith("(") and close:  # "Heading (qualifier): the rest" -> "Qualifier: the rest"
+            rest = f"{inner}: {after}"
+        return heading, _capitalised(rest)
+    first, sep, rest = text.partition(": ")
+    if sep and len(first) <= MAX_HEADING_CHARS:
+        return first, _capitalised(rest)
+    return text, ""
+
+
+def _capitalised(text: str) -> str:
+    return text[:1].upper() + text[1:]
+
+
+def page_table(
+    title: str, header: list[str], rows: list[list[str]], table_id: str, heading: str = ""
+) -> PageTable:
+    short, caption = split_title(title, heading)
+    return PageTable(short, caption, header, rows, table_id)
+
+
+def section_table(section: Section) -> PageTable:
+    return page_table(section.title, section.header, section.rows, section.table_id, section.heading)
 
 
 def _png_data_uri(data: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
-
-
-def _table_html(header: list[str], rows: list[list[str]], table_id: str) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in rows)
-    return f'<table class="data" id="{table_id}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
 
 def _case_plot(log: pd.DataFrame, title: str) -> bytes:
@@ -88,6 +134,8 @@ def _case_plot(log: pd.DataFrame, title: str) -> bytes:
         )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_title(title, fontsize=9)
+    ax.set_xlabel("x [m]", fontsize=8)
+    ax.set_ylabel("y [m]", fontsize=8)
     ax.tick_params(labelsize=7)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
@@ -105,51 +153,21 @@ def _fmt(value: Any, unit: str, digits: int = 2) -> str:
     return "n/a" if math.isnan(number) else f"{number:.{digits}f} {unit}"
 
 
-def _case_card(run: RunDirectory, row: pd.Series) -> str:
-    scenario, condition, episode, seed = (
-        row["scenario"],
-        row["condition"],
-        int(row["episode"]),
-        int(row["seed"]),
-    )
-    log_path = run.case_path(scenario, condition, seed)
-    screenshot = log_path.with_suffix(".png")
-    label = f"{scenario} episode {episode}, {condition_label(condition)} (seed {seed})"
-    if screenshot.is_file():
-        picture, caption = screenshot.read_bytes(), "replay screenshot"
-    else:
-        try:
-            log = pd.read_parquet(log_path, partitioning=None)
-            picture, caption = _case_plot(log, label), "logged trajectories"
-        except Exception as exc:  # a broken case file costs its picture, not the page
-            picture, caption = None, f"case log unreadable: {exc}"
-    if bool(row.get("collision", False)):
-        outcome = f'<span class="collision">collision at {_fmt(row.get("impact_speed_mps"), "m/s")}</span>'
-    elif bool(row.get("conflict", False)):
-        outcome = '<span class="conflict">conflict</span>'
-    else:
-        outcome = "no collision, no conflict"
-    commands = replay_commands(run, row)
-    image = f'<img alt="{html.escape(label)}" src="{_png_data_uri(picture)}">' if picture else ""
-    sensors = html.escape(str(row.get("detected_by", "")) or "never")
-    details = (
-        f"min TTC {_fmt(row.get('min_ttc_s'), 's')}, first detection "
-        f"{_fmt(row.get('first_detection_distance_m'), 'm', 1)} ({sensors})"
-    )
-    return (
-        f'<div class="case"><b>{html.escape(label)}</b><br>{image}<small>{html.escape(caption)}</small><br>'
-        f"{outcome}; {details}" + "".join(f"<code>{html.escape(c)}</code>" for c in commands) + "</div>"
-    )
+def _row_approach(run: RunDirectory, row: pd.Series) -> str:
+    """The approach of an episode row: its own column where the run has one, else the run's."""
+    value = row.get("approach")
+    return str(value) if isinstance(value, str) and value else run.approach
 
 
 def replay_commands(run: RunDirectory, row: pd.Series) -> list[str]:
-    """The commands that replay a case, render its picture (beside its case log, where the gallery
-    looks) and export it as FCD. A case of a batch run with --approach (its log named after the arm)
-    is picked with --approach: the run holds the same episode on every approach."""
+    """The commands that replay a case, render its picture (beside its case log, where the page looks)
+    and export it as FCD. A case of a batch run with --approach (its log named after the arm) is picked
+    with --approach: the run holds the same episode on every approach."""
     scenario, condition = row["scenario"], row["condition"]
     episode, seed = int(row["episode"]), int(row["seed"])
-    log_path = run.case_path(scenario, condition, seed)
-    arm = run.approach if run.approach and log_path.stem.endswith(f"_{run.approach}") else ""
+    approach = _row_approach(run, row)
+    log_path = run.case_path(scenario, condition, seed, approach)
+    arm = approach if approach and log_path.stem.endswith(f"_{approach}") else ""
     base = (
         f"python -m pedsafe_sumo.replay {run.path} --episode {episode} --condition {condition} "
         f"--scenario {scenario}" + (f" --approach {arm}" if arm else "")
@@ -161,18 +179,175 @@ def replay_commands(run: RunDirectory, row: pd.Series) -> list[str]:
     ]
 
 
-def gallery_rows(run: RunDirectory) -> tuple[pd.DataFrame, int]:
-    """The episode rows with a case log, collisions first then conflicts; (shown, how many in all)."""
+def case_rows(run: RunDirectory) -> pd.DataFrame:
+    """The episode rows with a case log, collisions first, then conflicts, then the rest."""
     episodes = run.episodes
     has_case = [
-        run.case_path(s, c, int(seed)).is_file()
-        for s, c, seed in zip(episodes["scenario"], episodes["condition"], episodes["seed"])
+        run.case_path(row["scenario"], row["condition"], int(row["seed"]), _row_approach(run, row)).is_file()
+        for _, row in episodes.iterrows()
     ]
     cases = episodes[has_case]
-    order = cases.assign(
-        _collision=~cases["collision"].astype(bool), _conflict=~cases["conflict"].astype(bool)
-    ).sort_values(["_collision", "_conflict", "scenario", "episode", "condition"])
-    return order.head(MAX_GALLERY_CASES), len(cases)
+    return cases.assign(
+        _collision=~cases["collision"].astype("boolean").fillna(False),
+        _conflict=~cases["conflict"].astype("boolean").fillna(False),
+    ).sort_values(["_collision", "_conflict", "scenario", "episode", "condition"], kind="stable")
+
+
+@dataclass(frozen=True)
+class CaseCard:
+    scenario: str
+    condition: str
+    approach: str
+    episode: int
+    seed: int
+    outcome: str
+    outcome_text: str
+    details: str
+    picture: str
+    caption: str
+    commands: list[str]
+
+
+def case_card(run: RunDirectory, row: pd.Series) -> CaseCard:
+    scenario, condition = str(row["scenario"]), str(row["condition"])
+    episode, seed = int(row["episode"]), int(row["seed"])
+    approach = _row_approach(run, row)
+    log_path = run.case_path(scenario, condition, seed, approach)
+    screenshot = log_path.with_suffix(".png")
+    label = f"{scenario} episode {episode}, {condition_label(condition)} (seed {seed})"
+    picture: bytes | None
+    if screenshot.is_file():
+        picture, caption = screenshot.read_bytes(), "replay screenshot"
+    else:
+        try:
+            log = pd.read_parquet(log_path, partitioning=None)
+            picture, caption = _case_plot(log, label), "logged trajectories"
+        except Exception as exc:  # a broken case file costs its picture, not the page
+            picture, caption = None, f"case log unreadable: {exc}"
+    if bool(row.get("collision", False)):
+        outcome, text = "collision", f"collision at {_fmt(row.get('impact_speed_mps'), 'm/s')}"
+    elif bool(row.get("conflict", False)):
+        outcome, text = "conflict", "conflict"
+    else:
+        outcome, text = "none", "no collision, no conflict"
+    sensors = str(row.get("detected_by", "")) or "never"
+    details = (
+        f"min TTC {_fmt(row.get('min_ttc_s'), 's')}, first detection "
+        f"{_fmt(row.get('first_detection_distance_m'), 'm', 1)} ({sensors})"
+    )
+    return CaseCard(
+        scenario,
+        condition_label(condition),
+        approach,
+        episode,
+        seed,
+        outcome,
+        text,
+        details,
+        _png_data_uri(picture) if picture else "",
+        caption,
+        replay_commands(run, row),
+    )
+
+
+def _environment() -> jinja2.Environment:
+    return jinja2.Environment(
+        loader=jinja2.PackageLoader("pedsafe_sumo.report", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,  # a name the page uses but was not given is an error, not ""
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+
+
+def render_page(context: dict[str, Any]) -> str:
+    """The page's HTML from the template and `context` (every name the template uses)."""
+    return _environment().get_template(TEMPLATE).render(**context)
+
+
+#: The figures in the page's order, with what each shows; a figure not named here follows, by name.
+FIGURE_CAPTIONS = {
+    "injury_vs_age.png": "Injury probability against pedestrian age, a panel per scenario with a collision",
+    "injury_vs_speed.png": "Injury probability against initial speed, a panel per scenario with a collision",
+    "impact_speed.png": "Impact speeds of the collisions",
+    "first_detection_distance.png": "Distance at first detection, a panel per scenario",
+    "case_speed_vs_frame.png": "One paired case: the ego's speed under SV and V2I, and the first detections",
+}
+
+
+@dataclass(frozen=True)
+class PageFigure:
+    name: str
+    caption: str
+    uri: str
+
+
+def figure_list(figures_dir: Path) -> list[PageFigure]:
+    """Every PNG of the report's figures folder, in FIGURE_CAPTIONS' order, then the others by name."""
+    pictures = sorted(figures_dir.glob("*.png")) if figures_dir.is_dir() else []
+    order = list(FIGURE_CAPTIONS)
+    pictures.sort(key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name))
+    return [
+        PageFigure(p.name, FIGURE_CAPTIONS.get(p.name, p.stem), _png_data_uri(p.read_bytes()))
+        for p in pictures
+    ]
+
+
+def page_context(
+    run: RunDirectory,
+    table: pd.DataFrame,
+    paired: pd.DataFrame,
+    figures_dir: Path | None,
+    sections: Sequence[Section] = (),
+    approach_tables: Sequence[ApproachTable] = (),
+    title_suffix: str = "",
+) -> dict[str, Any]:
+    """Everything the template shows."""
+    info = run.run_info or {}
+    cards = [case_card(run, row) for _, row in case_rows(run).iterrows()] if figures_dir is not None else []
+    table_one = page_table(TABLE_ONE_TITLE, *table_one_rows(table), "table-one", heading="Table I")
+    note = estimator_note(table)
+    if note:
+        table_one.notes.append(note)
+    return {
+        "run_name": run.path.name + title_suffix,
+        "run_line": run_header(run),
+        "incomplete": run.incomplete,
+        "run_info_problem": run.run_info_problem,
+        "algorithm": str(info.get("algorithm", "")),
+        "rates": rate_rows(table, is_weighted(run.episodes)),
+        "readings": paired_readings(paired),
+        "weighted": "test" in paired.columns,
+        "approach_tables": list(approach_tables),
+        "table_one": table_one,
+        "paired": page_table(
+            paired_title(paired), *paired_rows(paired), "paired-tests", heading=PAIRED_HEADING
+        ),
+        "diagnostics": [section_table(s) for s in sections],
+        "figures": figure_list(figures_dir) if figures_dir is not None else [],
+        "show_figures_and_cases": figures_dir is not None,
+        "cases": cards,
+        "cases_dir": str(run.cases_dir),
+        "filters": {
+            "scenario": sorted({c.scenario for c in cards}),
+            "condition": sorted({c.condition for c in cards}),
+            "outcome": [o for o in ("collision", "conflict", "none") if any(c.outcome == o for c in cards)],
+            "approach": sorted({c.approach for c in cards if c.approach}),
+        },
+        "config": config_rows(run.run_info),
+        "run_json": json.dumps(run.run_info, indent=1, sort_keys=True, default=str)
+        if run.run_info is not None
+        else "",
+    }
+
+
+def write_page(context: dict[str, Any], out_path: Path) -> Path:
+    """Render `context` to `out_path` (through a temporary file) and return its path."""
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_path.with_name(out_path.name + ".tmp")
+    tmp.write_text(render_page(context), encoding="utf-8")
+    tmp.replace(out_path)
+    return out_path
 
 
 def write_html_report(
@@ -183,61 +358,6 @@ def write_html_report(
     out_path: Path,
     sections: Sequence[Section] = (),
 ) -> Path:
-    """Write the page to `out_path` (through a temporary file) and return its path. `sections` (the
-    collision witness and the staging diagnostics, report/audit.py) follow the paired tests."""
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>pedsafe_sumo report: {html.escape(run.path.name)}</title>",
-        f"<style>{STYLE}</style></head><body>",
-        f"<h1>Pedestrian safety report: {html.escape(run.path.name)}</h1>",
-    ]
-    if run.incomplete:
-        parts.append(f'<p class="banner">{html.escape(run.incomplete)}</p>')
-    parts.append(f"<p>{html.escape(run_header(run))}</p>")
-    parts.append(f"<h2>{html.escape(TABLE_ONE_TITLE)}</h2>")
-    parts.append(_table_html(*table_one_rows(table), "table-one"))
-    parts.append(f"<h2>{html.escape(paired_title(paired))}</h2>")
-    parts.append(_table_html(*paired_rows(paired), "paired-tests"))
-    for section in sections:
-        heading, _, note = section.title.partition("\n")
-        parts.append(f"<h2>{html.escape(heading)}</h2>")
-        if note:
-            parts.append(f"<p>{html.escape(note)}</p>")
-        parts.append(_table_html(section.header, section.rows, section.table_id))
-    parts.append('<h2>Figures</h2><div class="figures">')
-    pictures = sorted(figures_dir.glob("*.png")) if figures_dir.is_dir() else []
-    for picture in pictures:
-        parts.append(
-            f'<figure><img alt="{html.escape(picture.stem)}" src="{_png_data_uri(picture.read_bytes())}">'
-            f"<figcaption>{html.escape(picture.name)}</figcaption></figure>"
-        )
-    if not pictures:
-        parts.append("<p>No figures for this run.</p>")
-    parts.append("</div>")
-    shown, total = gallery_rows(run)
-    parts.append(f"<h2>Logged cases ({total})</h2>")
-    if total == 0:
-        parts.append(
-            "<p>The batch kept no case log (cases are kept for pairs with a collision or a conflict).</p>"
-        )
-    else:
-        parts.append('<div class="gallery">')
-        parts.extend(_case_card(run, row) for _, row in shown.iterrows())
-        parts.append("</div>")
-        if total > len(shown):
-            parts.append(f"<p>{total - len(shown)} more cases in {html.escape(str(run.cases_dir))}.</p>")
-    parts.append("<h2>Configuration</h2>")
-    if run.run_info is None:
-        parts.append(
-            f"<p>No run.json{': ' + html.escape(run.run_info_problem) if run.run_info_problem else ''}.</p>"
-        )
-    else:
-        config = json.dumps(run.run_info, indent=1, sort_keys=True, default=str)
-        parts.append(f"<details open><summary>run.json</summary><pre>{html.escape(config)}</pre></details>")
-    parts.append("</body></html>")
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_path.with_name(out_path.name + ".tmp")
-    tmp.write_text("\n".join(parts) + "\n", encoding="utf-8")
-    tmp.replace(out_path)
-    return out_path
+    """Write the page of one run (or one approach of it) to `out_path`; `sections` are the diagnostic
+    tables (the index checks, the first detection, the witness, the staging diagnostics)."""
+    return write_page(page_context(run, table, paired, figures_dir, sections), out_path)

@@ -75,10 +75,12 @@ class RunDirectory:
     def cases_dir(self) -> Path:
         return self.path / CASES_DIR
 
-    def case_path(self, scenario: str, condition: str, seed: int) -> Path:
-        """The case log of an episode: a batch with --approach names it after the arm, one without not."""
-        if self.approach:
-            named = self.cases_dir / f"{case_stem(scenario, condition, int(seed), self.approach)}.parquet"
+    def case_path(self, scenario: str, condition: str, seed: int, approach: str = "") -> Path:
+        """The case log of an episode: a batch with --approach names it after the arm, one without not.
+        `approach`: the episode's arm ("" = the run's)."""
+        approach = approach or self.approach
+        if approach:
+            named = self.cases_dir / f"{case_stem(scenario, condition, int(seed), approach)}.parquet"
             if named.is_file():
                 return named
         return self.cases_dir / f"{case_stem(scenario, condition, int(seed))}.parquet"
@@ -248,3 +250,16 @@ def run_header(run: RunDirectory) -> str:
     if versions:
         parts.append(f"versions: {versions}")
     return parts[0] + " " + "; ".join(parts[1:])
+
+
+def approaches_of(path: Path, partial: bool = False) -> list[str]:
+    """The approaches a run's rows are on, in the order first met ([] without an approach column)."""
+    return _approaches(_read_run(Path(path), partial)[0])
+
+
+def load_pooled(path: Path, partial: bool = False) -> RunDirectory:
+    """Every row of a run of several approaches as one RunDirectory (the pooled report: its case logs are
+    found by each row's own approach)."""
+    path = Path(path)
+    episodes, run_info, problem, incomplete, _ = _read_run(path, partial)
+    return RunDirectory(path, episodes, run_info, problem, incomplete, "", "")

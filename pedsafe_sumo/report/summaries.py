@@ -7,7 +7,7 @@ be tested without looking at pixels; `figures.py` only draws them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -218,6 +218,14 @@ class CaseTrace:
     #: frame of the first step with a roadside detection reaching the vehicle (V2I only); None if none
     first_roadside_frame: int | None
     collision: bool
+    #: simulation time of each logged step, s (the figure's axis)
+    time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def time_of_frame(self, frame: int | None) -> float | None:
+        """The logged time of `frame` (None for None)."""
+        if frame is None:
+            return None
+        return float(self.time_s[int(np.flatnonzero(self.frame == frame)[0])])
 
 
 def frames_of(time_s) -> np.ndarray:
@@ -254,6 +262,7 @@ def case_trace(log: pd.DataFrame, condition: str, collision: bool) -> CaseTrace:
         _first_frame(frames, onboard),
         _first_frame(frames, roadside),
         collision,
+        log["time_s"].to_numpy(dtype=float),
     )
 
 

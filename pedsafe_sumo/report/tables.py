@@ -505,3 +505,8 @@ def write_tables(table: pd.DataFrame, paired: pd.DataFrame, directory: Path, ban
         encoding="utf-8",
     )
     return paths
+
+
+def interval_cell(value: float, low: float, high: float) -> str:
+    """A rate or mean with its interval, as Table I's cells show it ("0.3000 [0.1078, 0.6032]")."""
+    return _with_interval(value, low, high)

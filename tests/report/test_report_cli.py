@@ -63,25 +63,27 @@ def test_report_prints_tables_and_writes_every_file(tmp_path, capsys):
     for name in TABLES:
         assert (run / "tables" / name).stat().st_size > 0
     assert sorted(p.name for p in (run / "figures").iterdir()) == sorted(FIGURES)
-    assert_real_png(run / "figures" / "injury_vs_age.png", 6.4, 4.2)
-    assert_real_png(run / "figures" / "injury_vs_speed.png", 6.4, 4.2)
-    assert_real_png(run / "figures" / "first_detection_distance.png", 10.0, 4.2)  # two scenario panels
+    # a panel per scenario with a collision (crossing and jaywalking), side by side
+    assert_real_png(run / "figures" / "injury_vs_age.png", 10.4, 4.0)
+    assert_real_png(run / "figures" / "injury_vs_speed.png", 10.4, 4.0)
+    assert_real_png(run / "figures" / "first_detection_distance.png", 10.4, 4.6)  # two scenario panels
     assert_real_png(run / "figures" / "case_speed_vs_frame.png", 7.0, 4.2)
 
 
-def test_without_jaywalking_the_injury_figures_are_skipped(tmp_path, capsys):
+def test_without_a_collision_the_injury_figures_are_skipped(tmp_path, capsys):
     episodes = standard_episodes()
-    run = write_run(tmp_path / "run", episodes[episodes["scenario"] == "crossing"], run_info=None)
+    crossing = episodes[episodes["scenario"] == "crossing"].assign(collision=False, injury_probability=0.0)
+    run = write_run(tmp_path / "run", crossing, run_info=None)
     assert main([str(run)]) == 0
     out = capsys.readouterr().out
-    assert "note: no jaywalking episodes (status ok) in this run: injury figures skipped" in out
+    assert "note: no collision (status ok) in this run: injury figures skipped" in out
     assert "note: no case pair" in out and "case figure skipped" in out
     assert not out.startswith("run ")  # no run.json, no header
     assert sorted(p.name for p in (run / "figures").iterdir()) == [
         "first_detection_distance.png",
         "impact_speed.png",
     ]
-    assert_real_png(run / "figures" / "first_detection_distance.png", 5.0, 4.2)
+    assert_real_png(run / "figures" / "first_detection_distance.png", 5.2, 4.6)  # one panel
     # Table I, the paired tests, and the checks of the indexes this run has columns for (the episodes
     # carry every column of EPISODE_COLUMNS, contact_stationary included)
     index_tables = ("agreement.csv", "contacts.csv", "pet.csv", "proximity.csv", "indexes.md")
