@@ -107,9 +107,14 @@ def test_figures_are_matplotlib_figures(runs):
     drawn = api.figure(run, "impact_speed")
     assert isinstance(drawn, Figure) and drawn.axes
     assert "Impact speeds" in drawn.axes[0].get_title()
-    # No jaywalking episode in a crossing run: the injury figures cannot be drawn, and the error says why.
-    with pytest.raises(api.ReportError, match="no jaywalking episodes"):
-        api.figure(run, "injury_vs_age")
+    # The injury figures have a panel per scenario with a collision: without one they cannot be drawn,
+    # and the error says why.
+    collided = run.episodes["collision"].astype("boolean").fillna(False)
+    if collided.any():
+        assert len(api.figure(run, "injury_vs_age").axes) >= 1
+    else:
+        with pytest.raises(api.ReportError, match="no collision"):
+            api.figure(run, "injury_vs_age")
     with pytest.raises(api.ReportError, match="unknown figure 'speed'"):
         api.figure(run, "speed")
 
