@@ -325,7 +325,8 @@ class EpisodeRunner:
             step_if_moved_since(api, moved_at_s)  # no moveToXY left pending (sim/flush.py)
             if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
                 close_quietly(agent)  # while the episode fails, its first failure is the one reported
-        ego_lane = load_net_map(str(self.site.file("net.xml"))).lanes.get(setup.ego.lane_id)
+        # The stop line is the junction's: that of the approach lane, wherever the ego started.
+        ego_lane = load_net_map(str(self.site.file("net.xml"))).lanes.get(setup.ego.stop_line_lane_id)
         lane_shape = ego_lane.shape_xy_m if ego_lane is not None else ()
         return judge_episode(
             setup, condition, seed, trace, self.arm, self.injury_model, self.proximity_model, lane_shape

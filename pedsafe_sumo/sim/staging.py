@@ -377,8 +377,9 @@ def start_signals(api, staging: SignalStaging | None, program=None) -> None:
 
 def place_on_junction(api, setup: EpisodeSetup) -> None:
     """Move the vehicles that stand on a junction's internal lane at the start (left_turn's oncoming
-    vehicle) there from where SUMO inserted them (it inserts on edges only)."""
-    for vehicle in setup.parked:
+    vehicle; an ego starting on the junction before its approach) there from where SUMO inserted them (it
+    inserts on edges only)."""
+    for vehicle in (setup.ego, *setup.parked):
         if vehicle.internal_lane_id and vehicle.vehicle_id in api.vehicle.getIDList():
             api.vehicle.moveTo(vehicle.vehicle_id, vehicle.internal_lane_id, vehicle.internal_pos_m)
 
