@@ -211,10 +211,10 @@ class StraightPlacement(Placement):
         )
         if room_m < spec.ego_start_min_m:
             road = f"lane {approach.lane_ids[ego_lane]}" + (
-                f" and the road before it ({', '.join(upstream.edges)})" if upstream.edges else ""
+                f" and the road before it ({', '.join(upstream.edges)}) hold" if upstream.edges else " holds"
             )
             return (
-                f"approach staging: {road} hold the ego at most {room_m:.1f} m before the nearest conflict "
+                f"approach staging: {road} the ego at most {room_m:.1f} m before the nearest conflict "
                 f"point, less than ego_start_min_m {spec.ego_start_min_m:g} m"
             )
         start = next(p for p in points if p.start)
