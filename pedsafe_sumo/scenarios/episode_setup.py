@@ -53,6 +53,9 @@ class VehicleSetup:
     #: first step. "": it starts where it is inserted.
     internal_lane_id: str = ""
     internal_pos_m: float = 0.0
+    #: The ego starting before its approach (approach staging, on the road before it: placements/
+    #: straight.py): the approach lane it drives to the junction's stop line on. "": `lane_id` is that lane.
+    approach_lane_id: str = ""
     #: > 0: the vehicle stands parked at the kerb beside `lane_id`, its centre this far to the right of
     #: the lane's centre (a one-lane approach: placements.straight.kerb_parking_offset_m); SUMO inserts it
     #: on the lane at `front_pos_m` and parks it in a parking space there (sim/kerb.py). 0: it stands in
@@ -71,6 +74,11 @@ class VehicleSetup:
     #: show [s], the moment its front reaches the stop line (0: from the start; scenarios.staging.
     #: stage_signals).
     green_from_s: float = 0.0
+
+    @property
+    def stop_line_lane_id(self) -> str:
+        """The lane it reaches the junction's stop line on (its approach lane)."""
+        return self.approach_lane_id or self.lane_id
 
 
 @dataclass(frozen=True)

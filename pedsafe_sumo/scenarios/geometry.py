@@ -27,6 +27,7 @@ import sumolib
 
 from pedsafe_sumo.network.approaches import legs_at
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.scenarios.upstream import UpstreamRoad, connection_lanes, free_through, upstream_road
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
 
@@ -57,24 +58,7 @@ def lane_path_in(net, lane, next_edge_id: str) -> LanePath:
     connections = [c for c in lane.getOutgoing() if c.getTo().getID() == next_edge_id]
     if not connections:
         raise ValueError(f"lane {lane.getID()} has no connection to edge {next_edge_id}")
-    return _as_lane_path(_lanes_of(net, connections[0]))
-
-
-def _lanes_of(net, connection) -> list:
-    """The sumolib lanes a vehicle drives through a connection: its from-lane, the junction's internal
-    lane(s) (an internal junction, e.g. before a crosswalk, splits one in two: followed by its via lane,
-    not its to-lane, which skips the second part), and its to-lane."""
-    lanes = [connection.getFromLane()]
-    via = connection.getViaLaneID()
-    current = net.getLane(via) if via else connection.getToLane()
-    for _ in range(8):  # internal lanes split at internal junctions, then the outgoing lane
-        lanes.append(current)
-        if current.getEdge().getFunction() != "internal":
-            break
-        following = current.getOutgoing()[0]
-        via = following.getViaLaneID()
-        current = net.getLane(via) if via else following.getToLane()
-    return lanes
+    return _as_lane_path(connection_lanes(net, connections[0]))
 
 
 def _as_lane_path(lanes) -> LanePath:
@@ -134,6 +118,11 @@ class Approach:
     walkways: tuple[Walkway, ...] = ()
     #: The junction's centre (its node's coordinate, network frame, m).
     junction_xy: tuple[float, float] = (math.nan, math.nan)
+    #: Per vehicle lane (as lane_ids): the road before it, straight on through the junctions before the
+    #: approach over major links no traffic light controls (upstream.free_through), up to 500 m
+    #: (upstream.UPSTREAM_MAX_M): approach staging starts the ego there when the lane is shorter than its
+    #: drawn start distance (placements/straight.py).
+    upstream_roads: tuple[UpstreamRoad, ...] = ()
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -317,6 +306,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
             for k, lane in enumerate(vehicle_lanes)
             if any(c.getDirection() == "s" and c.getTo() == straight[0] for c in lane.getOutgoing())
         ),
+        upstream_roads=tuple(upstream_road(net, lane, follow=free_through) for lane in vehicle_lanes),
     )
 
 
@@ -421,7 +411,7 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
         return abs(change - wanted)
 
     connection = min(connections, key=turn_error)
-    driven = _lanes_of(net, connection)
+    driven = connection_lanes(net, connection)
     path = [tuple(p) for ln in driven for p in ln.getShape()]
     exit_lane = driven[-1]
     # Drop repeated points where one lane's shape ends at the next one's start.

@@ -193,21 +193,29 @@ def check_hosting(site, specs: dict, params: dict[str, Any], conditions) -> None
 
 def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
     """One line per registered scenario and approach: whether the site hosts it (the build's summary); the
-    site's own approach (what runs without --approach) first, its lines without the arm."""
+    site's own approach (what runs without --approach) first, its lines without the arm; each scenario
+    under its own staging, then under approach staging (docs/engine.md, "Approach staging") where that
+    differs."""
     params = params or load_params(None)
     lines = []
     own = default_arm(site)
     arms = [own] + [a for a in site_approaches(site) if a != own]
-    rows = [(arm, item) for arm in arms for item in site_hosting(site, dict(SCENARIOS), params, arm).items()]
-    for arm, (name, problem) in rows:
-        lines.append(
-            f"  {name}{'' if arm == own else f' on approach {arm}'}: "
-            + (
-                "hosted (its roadside poles see its staging area)"
-                if problem is None
-                else f"NOT hosted: {problem}"
+    approach_specs = {
+        name: spec.with_overrides({"staging": "approach"})
+        for name, spec in SCENARIOS.items()
+        if spec.staging != "approach"
+    }
+    for label, specs in (("", dict(SCENARIOS)), (" under approach staging", approach_specs)):
+        rows = [(arm, item) for arm in arms for item in site_hosting(site, specs, params, arm).items()]
+        for arm, (name, problem) in rows:
+            lines.append(
+                f"  {name}{'' if arm == own else f' on approach {arm}'}{label}: "
+                + (
+                    "hosted (its roadside poles see its staging area)"
+                    if problem is None
+                    else f"NOT hosted: {problem}"
+                )
             )
-        )
     return lines
 
 

@@ -19,7 +19,6 @@ import sumolib
 
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.scenarios.geometry import (
-    _lanes_of,
     default_arm,
     lane_pos_to_offset_m,
     load_approach,
@@ -27,17 +26,11 @@ from pedsafe_sumo.scenarios.geometry import (
     opposite_leg,
 )
 from pedsafe_sumo.scenarios.signals import SignalStagingError, load_junction_signals
+from pedsafe_sumo.scenarios.upstream import RoadLane, connection_lanes, position_on, road_lane, upstream_road
 from pedsafe_sumo.sumo_net import read_net
 
 #: The arm across the junction from each arm.
 OPPOSITE_ARM = {"N": "S", "S": "N", "E": "W", "W": "E"}
-
-
-@dataclass(frozen=True)
-class OncomingLane:
-    lane_id: str
-    shape: tuple[tuple[float, float], ...]
-    length_m: float  # SUMO's lane length [m]
 
 
 @dataclass(frozen=True)
@@ -46,12 +39,13 @@ class OncomingPath:
     lane(s), the lane beyond; and its two edges."""
 
     arm: str
-    lanes: tuple[OncomingLane, ...]
+    lanes: tuple[RoadLane, ...]
     route: tuple[str, str]
     #: The road before the approach lane, straight on through the junctions before it (their internal
-    #: lanes included), in driving order, and its edges: approach staging starts the oncoming vehicle
-    #: there when the approach is shorter than its run to the conflict (`extended`).
-    upstream_lanes: tuple[OncomingLane, ...] = ()
+    #: lanes included), in driving order, and its edges (upstream.upstream_road, every straight
+    #: connection followed): approach staging starts the oncoming vehicle there when the approach is
+    #: shorter than its run to the conflict (`extended`).
+    upstream_lanes: tuple[RoadLane, ...] = ()
     upstream_edges: tuple[str, ...] = ()
 
     def extended(self) -> OncomingPath:
@@ -90,54 +84,14 @@ def load_oncoming(site: Site, arm: str | None = None) -> OncomingPath:
             f"lane {lane.getID()} of the {opposite} approach (the oncoming lane) has no straight movement"
         )
     connection = straight[0]
-    lanes = _lanes_of(net, connection)
-    upstream, edges = _upstream(net, lane)
+    upstream = upstream_road(net, lane)
     return OncomingPath(
         arm=opposite,
-        lanes=tuple(
-            OncomingLane(ln.getID(), tuple(tuple(p) for p in ln.getShape()), float(ln.getLength()))
-            for ln in lanes
-        ),
+        lanes=tuple(road_lane(ln) for ln in connection_lanes(net, connection)),
         route=(connection.getFrom().getID(), connection.getTo().getID()),
-        upstream_lanes=tuple(_oncoming_lane(ln) for ln in upstream),
-        upstream_edges=edges,
+        upstream_lanes=upstream.lanes,
+        upstream_edges=upstream.edges,
     )
-
-
-#: How far before the oncoming approach lane `_upstream` follows the road [m]: beyond the longest start
-#: distance approach staging may draw (specs.SPEC_UPPER_BOUNDS, ego_start_max_m 500 m).
-UPSTREAM_MAX_M = 500.0
-
-
-def _oncoming_lane(lane) -> OncomingLane:
-    return OncomingLane(lane.getID(), tuple(tuple(p) for p in lane.getShape()), float(lane.getLength()))
-
-
-def _upstream(net, lane) -> tuple[list, tuple[str, ...]]:
-    """The lanes before sumolib `lane` that lead straight on into it (through the junctions between, their
-    internal lanes included), in driving order, up to UPSTREAM_MAX_M, and their edges."""
-    lanes: list = []
-    edges: list[str] = []
-    done_m = 0.0
-    current = lane
-    while done_m < UPSTREAM_MAX_M:
-        before = [
-            c
-            for ln in current.getIncoming()
-            if ln.getEdge().getFunction() == ""
-            for c in ln.getOutgoing()
-            if c.getToLane() == current and c.getDirection() == "s"
-        ]
-        if not before:
-            break
-        driven = _lanes_of(net, before[0])[:-1]  # its lane and the junction's internal lane(s)
-        if driven[0].getEdge().getID() in edges:
-            break  # a loop
-        lanes[:0] = driven
-        edges.insert(0, driven[0].getEdge().getID())
-        done_m += sum(float(ln.getLength()) for ln in driven)
-        current = driven[0]
-    return lanes, tuple(edges)
 
 
 def _segment_crossing(a, b, p, q) -> float | None:
@@ -169,12 +123,7 @@ def sight_line_pos_m(path: OncomingPath, eye_xy, target_xy) -> float | None:
 def lane_position(path: OncomingPath, front_pos_m: float) -> tuple[str, float]:
     """(lane id, position on it) of a front `front_pos_m` SUMO metres along the path; beyond its end, the last
     lane's end."""
-    done_m = 0.0
-    for lane in path.lanes:
-        if front_pos_m <= done_m + lane.length_m:
-            return lane.lane_id, max(front_pos_m - done_m, 0.0)
-        done_m += lane.length_m
-    return path.lanes[-1].lane_id, path.lanes[-1].length_m
+    return position_on(path.lanes, front_pos_m)
 
 
 def point_at(path: OncomingPath, pos_m: float) -> tuple[float, float]:

@@ -95,6 +95,14 @@ def draw_episode(
     )
 
 
+def ego_exit_edge(setup: EpisodeSetup) -> str:
+    """The edge the ego's route takes beyond the junction: the one after its approach lane's edge (the
+    route may start on the road before the approach)."""
+    route = setup.ego_route
+    approach_edge = setup.ego.stop_line_lane_id.rsplit("_", 1)[0]
+    return route[route.index(approach_edge) + 1] if approach_edge in route[:-1] else route[1]
+
+
 def pedestrian(traits: dict, clothing, start_delay_s: float, path) -> PedestrianSetup:
     """The pedestrian of an episode: its traits, its body (road_users), where it walks and when."""
     return PedestrianSetup(
@@ -129,7 +137,7 @@ def stage_signals(
         # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so
         # (ego_signal and ped_signal "none").
         return setup
-    ego_link = junction.vehicle_link(setup.ego.lane_id, setup.ego_route[1])
+    ego_link = junction.vehicle_link(setup.ego.stop_line_lane_id, ego_exit_edge(setup))
     ped_link = junction.crossing_link(setup.ped_crossing_id) if setup.ped_crossing_id else NO_LINK
     if (ped_link == NO_LINK) != (spec.ped_signal == "none"):
         where = f"crossing {setup.ped_crossing_id}" if setup.ped_crossing_id else "a mid-block crossing"
@@ -197,7 +205,8 @@ def _fit_approach(
 def _leaders(setup: EpisodeSetup) -> list:
     """The vehicles that come down the ego's lane ahead of it to turn on its green (approach staging's
     right_turn leader)."""
-    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.lane_id == setup.ego.lane_id]
+    lane_id = setup.ego.stop_line_lane_id
+    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.lane_id == lane_id]
 
 
 def step_off_time_s(ped: PedestrianSetup) -> float:

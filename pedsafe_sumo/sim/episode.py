@@ -107,6 +107,7 @@ from pedsafe_sumo.sim.staging import (
     draw_background,
     load_site_data,
     move_pedestrian,
+    stop_line_lane_shape,
     subscribe_vehicles,
 )
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
@@ -325,8 +326,7 @@ class EpisodeRunner:
             step_if_moved_since(api, moved_at_s)  # no moveToXY left pending (sim/flush.py)
             if not run_step.timed_out:  # a stack cut off mid-step may still be running: leave it
                 close_quietly(agent)  # while the episode fails, its first failure is the one reported
-        ego_lane = load_net_map(str(self.site.file("net.xml"))).lanes.get(setup.ego.lane_id)
-        lane_shape = ego_lane.shape_xy_m if ego_lane is not None else ()
+        lane_shape = stop_line_lane_shape(str(self.site.file("net.xml")), setup)
         return judge_episode(
             setup, condition, seed, trace, self.arm, self.injury_model, self.proximity_model, lane_shape
         )

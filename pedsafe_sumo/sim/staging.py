@@ -45,6 +45,7 @@ from pedsafe_sumo.scenarios.specs import ScenarioSpec
 from pedsafe_sumo.sim.connection import SumoSession
 from pedsafe_sumo.sim.kerb import check_parked, kerb_parked, park_at_kerb, parking_xml, with_additional
 from pedsafe_sumo.sim.queue import form_queue, formed_queue
+from pedsafe_sumo.sim.road_map import load_net_map
 
 #: SUMO's ids of the episode's ego vehicle and pedestrian.
 EGO_ID = "ego"
@@ -377,10 +378,19 @@ def start_signals(api, staging: SignalStaging | None, program=None) -> None:
 
 def place_on_junction(api, setup: EpisodeSetup) -> None:
     """Move the vehicles that stand on a junction's internal lane at the start (left_turn's oncoming
-    vehicle) there from where SUMO inserted them (it inserts on edges only)."""
-    for vehicle in setup.parked:
+    vehicle; an ego starting on the junction before its approach) there from where SUMO inserted them (it
+    inserts on edges only)."""
+    for vehicle in (setup.ego, *setup.parked):
         if vehicle.internal_lane_id and vehicle.vehicle_id in api.vehicle.getIDList():
             api.vehicle.moveTo(vehicle.vehicle_id, vehicle.internal_lane_id, vehicle.internal_pos_m)
+
+
+def stop_line_lane_shape(net_file: str, setup: EpisodeSetup):
+    """The drawn shape of the lane whose end is the stop line the ego's signal compliance is judged at
+    (stopline_signal, could_stop_at_yellow): its approach lane at the junction, wherever it started (on
+    the road before it under approach staging); () when the network has no such lane."""
+    lane = load_net_map(net_file).lanes.get(setup.ego.stop_line_lane_id)
+    return lane.shape_xy_m if lane is not None else ()
 
 
 def move_pedestrian(api, pose, radius_m: float) -> None:

@@ -31,7 +31,8 @@ from pedsafe_sumo.scenarios.walkways import (
 
 #: The fallbacks the timing may take, in the order it tries them (StagedScene.approach_fallbacks).
 FALLBACKS = {
-    "start_clipped": "the road holds less than the drawn start distance: the ego starts where it ends",
+    "start_clipped": "the road (with the road before the approach) holds less than the drawn start distance: "
+    "the ego starts where it begins",
     "sidewalk_short": "the sidewalk upstream of the step-off point is shorter than the drawn walk-in",
     "walk_in_shortened": "the pedestrian would appear before ped_appear_min_s: the walk-in is shortened",
     "start_lengthened": "still before ped_appear_min_s: the ego starts farther back, within the road",
@@ -46,7 +47,8 @@ FALLBACKS = {
 class ApproachTiming:
     """Where the ego starts and the pedestrian's whole walk, under approach staging."""
 
-    #: The ego's front at the start, SUMO metres from the start of its lane.
+    #: The ego's front at the start, SUMO metres from the start of its approach lane (negative: before it,
+    #: on the road before the approach; placements/straight.py, ego_start).
     front_pos_m: float
     start_distance_m: float
     #: Walk-in, step-off point (at kerb_index), the crossing, the walk-on.
@@ -68,7 +70,8 @@ def stage_approach(
     """The approach staging of a scene whose pedestrian crosses along `crossing` (its first point the
     step-off point, its last the far end) and meets the ego at SUMO distance `conflict_pos_m` from the
     start of the ego's lane, `walk_to_conflict_s` after stepping off. `start_range_m`: the shortest and
-    the longest start distance the road holds (the ego's front on its lane, its whole body behind it).
+    the longest start distance the road holds (the ego's front on it, its whole body behind it; the road
+    may include the road before the approach lane).
     `walkway`: the sidewalk the pedestrian walks in along, its shape running towards the step-off point (None:
     the approach's own)."""
     spec, draws, approach = inputs.spec, inputs.draws, inputs.approach

@@ -29,6 +29,7 @@ from pedsafe_sumo.scenarios.road_users import (
     VEHICLE_CLASSES,
     VehicleSize,
 )
+from pedsafe_sumo.scenarios.upstream import UpstreamRoad, position_on
 from pedsafe_sumo.scenarios.walkways import sidewalk_before_m
 
 if TYPE_CHECKING:
@@ -155,20 +156,23 @@ class StraightPlacement(Placement):
         ego_size = VEHICLE_CLASSES["car"]
         ego_mps = inputs.ego_speed_mps
         lane_length_m = approach.lane_lengths_m[row.ego_lane]
+        upstream = ego_upstream(approach, row.ego_lane)
         timing = stage_approach(
             inputs,
             path,
             conflict_pos_m,
             math.dist(path[0], conflict_xy) / inputs.traits["walking_speed_mps"],
-            # The ego's front on its lane (not yet on the junction), its whole body on it.
-            (max(conflict_pos_m - lane_length_m, 0.0), conflict_pos_m - ego_size.length_m),
+            # The ego's front before the junction, its whole body on the road: the approach lane and the
+            # road before it.
+            (
+                max(conflict_pos_m - lane_length_m, 0.0),
+                upstream.length_m + conflict_pos_m - ego_size.length_m,
+            ),
         )
-        ego = VehicleSetup(
-            "ego", approach.lane_ids[row.ego_lane], timing.front_pos_m, ego_mps, EGO_BLUE_RGB, ego_size
-        )
+        ego, route = ego_start(approach, row.ego_lane, timing.front_pos_m, ego_mps)
         return StagedScene(
             ego=ego,
-            ego_route=approach.through_route,
+            ego_route=route,
             path=timing.path,
             clothing_rgb=clothing,
             start_delay_s=timing.start_delay_s,
@@ -199,11 +203,19 @@ class StraightPlacement(Placement):
         sensor's reach), its whole body on the lane, and a sidewalk must lead to the step-off point."""
         ego_lane = 0 if len(approach.lane_ids) == 1 else 1
         points = self.staging_points(spec, approach, None)
-        room_m = min(lane_pos_of(approach, ego_lane, p.xy) for p in points) - VEHICLE_CLASSES["car"].length_m
+        upstream = ego_upstream(approach, ego_lane)
+        room_m = (
+            upstream.length_m
+            + min(lane_pos_of(approach, ego_lane, p.xy) for p in points)
+            - VEHICLE_CLASSES["car"].length_m
+        )
         if room_m < spec.ego_start_min_m:
+            road = f"lane {approach.lane_ids[ego_lane]}" + (
+                f" and the road before it ({', '.join(upstream.edges)}) hold" if upstream.edges else " holds"
+            )
             return (
-                f"approach staging: lane {approach.lane_ids[ego_lane]} holds the ego at most {room_m:.1f} m "
-                f"before the nearest conflict point, less than ego_start_min_m {spec.ego_start_min_m:g} m"
+                f"approach staging: {road} the ego at most {room_m:.1f} m before the nearest conflict "
+                f"point, less than ego_start_min_m {spec.ego_start_min_m:g} m"
             )
         start = next(p for p in points if p.start)
         if spec.walk_in_max_s > 0 and (
@@ -241,6 +253,48 @@ class StraightPlacement(Placement):
                 f"the cars parked at its kerb may need {row_m:.1f} m before the stop line"
             )
         return None
+
+
+def ego_upstream(approach: Approach, lane_index: int) -> UpstreamRoad:
+    """The road before vehicle lane `lane_index` of the approach (none where it begins at the network's
+    edge, at a signalised junction or at a link that yields: upstream.free_through)."""
+    return approach.upstream_roads[lane_index] if approach.upstream_roads else UpstreamRoad()
+
+
+def ego_start(
+    approach: Approach, lane_index: int, front_pos_m: float, speed_mps: float
+) -> tuple[VehicleSetup, tuple[str, ...]]:
+    """The ego at the start and its route, its front `front_pos_m` SUMO metres from the start of vehicle
+    lane `lane_index` of the approach; negative: that far before it, on the road before it
+    (`ego_upstream`), its route from there. SUMO inserts on edges only: a front on a junction's internal
+    lane is inserted at the end of the lane before it and moved there before the first step
+    (VehicleSetup.internal_lane_id)."""
+    size = VEHICLE_CLASSES["car"]
+    lane_id = approach.lane_ids[lane_index]
+    if front_pos_m >= 0.0:
+        ego = VehicleSetup("ego", lane_id, front_pos_m, speed_mps, EGO_BLUE_RGB, size)
+        return ego, approach.through_route
+    upstream = ego_upstream(approach, lane_index)
+    on_id, on_pos_m = position_on(upstream.lanes, upstream.length_m + front_pos_m)
+    internal_id, internal_pos_m = "", 0.0
+    if on_id.startswith(":"):
+        index = next(k for k, lane in enumerate(upstream.lanes) if lane.lane_id == on_id)
+        before = next(lane for lane in reversed(upstream.lanes[:index]) if not lane.lane_id.startswith(":"))
+        internal_id, internal_pos_m = on_id, on_pos_m
+        on_id, on_pos_m = before.lane_id, before.length_m
+    edge_id = on_id.rsplit("_", 1)[0]
+    ego = VehicleSetup(
+        "ego",
+        on_id,
+        on_pos_m,
+        speed_mps,
+        EGO_BLUE_RGB,
+        size,
+        internal_lane_id=internal_id,
+        internal_pos_m=internal_pos_m,
+        approach_lane_id=lane_id,
+    )
+    return ego, (*upstream.edges[upstream.edges.index(edge_id) :], *approach.through_route)
 
 
 def road_offsets_m(approach: Approach) -> list[float]:
