@@ -1,0 +1,103 @@
+"""Hosting decided by staging: before the first episode the batch stages, without SUMO, every episode it will
+run, and a combination of scenario and approach whose staging fails for any of its seeds is skipped (with
+the reason, printed and recorded in run.json) or, when the user asked for exactly it, refused.
+
+The static hosting check (scenarios/hosting.py) reads the approach's geometry and the poles; whether an
+episode can be staged also depends on its draws (the ego's speed, the gaps of the queue, the signal
+timing). Staging an episode without SUMO is the episode runner's own `draw_setup` (the placement and the
+signal staging: the world the worker will build from the same seed; the background traffic, drawn from a
+stream of its own, is left out), and then
+what SUMO would refuse of it: every staged vehicle (the ego, the occluders, the queue) must stand on its
+lane, its front between the lane's start and its end (`vehicle.add` with a departPos outside the lane
+is not inserted: "SUMO did not insert vehicle 'queued_3'" on a 20 m approach with a queue of four).
+An episode of a combination that passes is then staged by the worker exactly as here.
+
+Importance sampling (`--sampler is`) draws its worlds from a proposal fitted during the run: the check
+stages the nominal worlds of its seeds, which is what its pilot stage runs first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from typing import Any
+
+from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.scenarios.signals import SignalStagingError
+from pedsafe_sumo.sim.episode import EpisodeRunner
+from pedsafe_sumo.sumo_net import read_net
+
+#: Print a progress line when the check is expected to take longer than this [s]: below it the batch
+#: starts without a word.
+PROGRESS_AFTER_S = 3.0
+
+
+class _NoAgent:
+    """The runner stages episodes only here; no episode runs, so no stack is started."""
+
+
+def staging_problem(runner: EpisodeRunner, spec, seed: int, lane_lengths_m: dict[str, float]) -> str | None:
+    """Why episode `seed` of `spec` cannot be staged (one line), or None."""
+    try:
+        # The background traffic is drawn from a stream of its own (after the world's draws) and SUMO
+        # inserts it as it comes: it cannot make staging fail, and drawing it is 60 % of the cost.
+        setup = runner.draw_setup(dataclasses.replace(spec, background_traffic=0), seed)
+    except (SignalStagingError, ValueError) as exc:
+        return f"seed {seed}: {exc}"
+    for vehicle in (setup.ego, *setup.parked):
+        length_m = lane_lengths_m.get(vehicle.lane_id)
+        if length_m is None:
+            return f"seed {seed}: vehicle '{vehicle.vehicle_id}' is staged on {vehicle.lane_id}, not a lane"
+        if not 0.0 <= vehicle.front_pos_m <= length_m:
+            where = (
+                f"{-vehicle.front_pos_m:.1f} m before the start"
+                if vehicle.front_pos_m < 0.0
+                else f"{vehicle.front_pos_m - length_m:.1f} m beyond the end"
+            )
+            return (
+                f"seed {seed}: vehicle '{vehicle.vehicle_id}' would stand {where} of its lane "
+                f"{vehicle.lane_id} ({length_m:.1f} m long): SUMO does not insert it"
+            )
+    return None
+
+
+def unstageable_units(
+    site,
+    params: dict[str, Any],
+    specs: dict[str, Any],
+    run_seed: int,
+    episodes: int,
+    say: Callable[[str], None] = print,
+) -> dict[str, str]:
+    """Unit -> why one of its episodes cannot be staged (the first seed that fails), for the units of
+    `specs` over episodes 0..`episodes`-1 of run `run_seed`."""
+    runner = EpisodeRunner(site, params, _NoAgent)
+    try:
+        net = read_net(str(site.file("net.xml")))
+        lane_lengths_m = {
+            lane.getID(): lane.getLength() for edge in net.getEdges() for lane in edge.getLanes()
+        }
+        seeds = [episode_seed(run_seed, episode) for episode in range(episodes)]
+        started = time.perf_counter()
+        announced = False
+        failed: dict[str, str] = {}
+        total = len(specs) * len(seeds)
+        done = 0
+        for unit, spec in specs.items():
+            for seed in seeds:
+                problem = staging_problem(runner, spec, seed, lane_lengths_m)
+                done += 1
+                if problem is not None:
+                    failed[unit] = problem
+                    done += len(seeds) - seeds.index(seed) - 1
+                    break
+                elapsed_s = time.perf_counter() - started
+                if not announced and elapsed_s * total / done > PROGRESS_AFTER_S and done < total:
+                    say(f"staging {total:,} episodes without SUMO before the first one runs ...")
+                    announced = True
+        if announced:
+            say(f"staged {total:,} episodes in {time.perf_counter() - started:.1f} s")
+    finally:
+        runner.close()
+    return failed
