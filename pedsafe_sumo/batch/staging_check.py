@@ -5,15 +5,17 @@ the reason, printed and recorded in run.json) or, when the user asked for exactl
 The static hosting check (scenarios/hosting.py) reads the approach's geometry and the poles; whether an
 episode can be staged also depends on its draws (the ego's speed, the gaps of the queue, the signal
 timing). Staging an episode without SUMO is the episode runner's own `draw_setup` (the placement and the
-signal staging: the world the worker will build from the same seed; the background traffic, drawn from a
-stream of its own, is left out), and then
-what SUMO would refuse of it: every staged vehicle (the ego, the occluders, the queue) must stand on its
-lane, its front between the lane's start and its end (`vehicle.add` with a departPos outside the lane
-is not inserted: "SUMO did not insert vehicle 'queued_3'" on a 20 m approach with a queue of four).
-An episode of a combination that passes is then staged by the worker exactly as here.
+signal staging: the world the worker builds from the same seed; the background traffic, drawn from a
+stream of its own, is left out), then what SUMO cannot do with it: every staged vehicle (the ego, the
+occluders, the queue) must stand on its lane, its front between the lane's start and its end. A vehicle
+staged before the lane's start is not where the episode means it to be: on a 27 m approach lane at
+Ingolstadt a jaywalking occluder staged 5.6 m before its start was inserted elsewhere and a car of the
+queue behind it not at all ("SUMO did not insert vehicle 'queued_4'", tests/batch/test_hosting_staging.py).
+The check covers what can be told without SUMO; an error row of a combination that passes it is a bug
+(its cause belongs in this check, with a test).
 
 Importance sampling (`--sampler is`) draws its worlds from a proposal fitted during the run: the check
-stages the nominal worlds of its seeds, which is what its pilot stage runs first.
+stages the nominal worlds of its seeds; the worlds a proposal draws are not checked in advance.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ def staging_problem(runner: EpisodeRunner, spec, seed: int, lane_lengths_m: dict
             )
             return (
                 f"seed {seed}: vehicle '{vehicle.vehicle_id}' would stand {where} of its lane "
-                f"{vehicle.lane_id} ({length_m:.1f} m long): SUMO does not insert it"
+                f"{vehicle.lane_id} ({length_m:.1f} m long): SUMO cannot put it there"
             )
     return None
 
