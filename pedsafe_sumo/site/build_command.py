@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(
         prog="build_network",
         description="Build a SUMO study site folder (net, polygons, roadside units, sumocfg, site file) from "
-        "OpenStreetMap; every command takes the folder as --site.",
+        "OpenStreetMap, or from any SUMO network (--net); every command takes the folder as --site.",
     )
     parser.add_argument(
         "--site",
