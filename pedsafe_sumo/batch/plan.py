@@ -151,8 +151,13 @@ def prepare(args: argparse.Namespace) -> Plan:
     # Hosted is what can be staged for every seed the run will draw (batch/staging_check.py).
     # A protocol's scenarios, or scenarios named on an approach named (or the site's own): refused, not
     # skipped, when one cannot be staged.
-    named_exactly = protocol is not None or (scenario != "all" and arguments["approach"] != "all")
-    scenarios, specs, unstageable = stageable_units(site, params, specs, scenarios, arguments, named_exactly)
+    named = protocol is not None or (scenario != "all" and arguments["approach"] != "all")
+    if recorded is None:
+        scenarios, specs, unstageable = stageable_units(site, params, specs, scenarios, arguments, named)
+    else:  # a resumed run skips what its start skipped (the site's files are checked to be the same)
+        unstageable = recorded.get("skipped_unstageable", {})
+        scenarios = [name for name in scenarios if name not in unstageable]
+        specs = {name: specs[name] for name in scenarios}
     reference = site_reference(arguments["site"], site)
     digests = site_file_digests(reference)
     identity = {

@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import Any
 
 from pedsafe_sumo.batch.chunks import episode_seed
+from pedsafe_sumo.control.baseline import BaselineStack
 from pedsafe_sumo.scenarios.signals import SignalStagingError
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sumo_net import read_net
@@ -33,10 +34,8 @@ from pedsafe_sumo.sumo_net import read_net
 #: Print a progress line when the check is expected to take longer than this [s]: below it the batch
 #: starts without a word.
 PROGRESS_AFTER_S = 3.0
-
-
-class _NoAgent:
-    """The runner stages episodes only here; no episode runs, so no stack is started."""
+#: Then a line this often [s].
+PROGRESS_EVERY_S = 15.0
 
 
 def staging_problem(runner: EpisodeRunner, spec, seed: int, lane_lengths_m: dict[str, float]) -> str | None:
@@ -73,31 +72,34 @@ def unstageable_units(
     say: Callable[[str], None] = print,
 ) -> dict[str, str]:
     """Unit -> why one of its episodes cannot be staged (the first seed that fails), for the units of
-    `specs` over episodes 0..`episodes`-1 of run `run_seed`."""
-    runner = EpisodeRunner(site, params, _NoAgent)
+    `specs` over episodes 0..`episodes`-1 of run `run_seed`. Says so when it is expected to take longer
+    than PROGRESS_AFTER_S, then every PROGRESS_EVERY_S how far it is."""
+    runner = EpisodeRunner(site, params, BaselineStack)  # no episode runs: no stack is started
     try:
-        net = read_net(str(site.file("net.xml")))
-        lane_lengths_m = {
-            lane.getID(): lane.getLength() for edge in net.getEdges() for lane in edge.getLanes()
-        }
+        # Internal lanes too: a turning scenario may stage a vehicle inside the junction.
+        net = read_net(str(site.file("net.xml")), withInternal=True)
+        lane_lengths_m = {lane.getID(): lane.getLength() for e in net.getEdges() for lane in e.getLanes()}
         seeds = [episode_seed(run_seed, episode) for episode in range(episodes)]
-        started = time.perf_counter()
+        started = last_said = time.perf_counter()
         announced = False
         failed: dict[str, str] = {}
         total = len(specs) * len(seeds)
         done = 0
         for unit, spec in specs.items():
-            for seed in seeds:
+            for index, seed in enumerate(seeds):
                 problem = staging_problem(runner, spec, seed, lane_lengths_m)
-                done += 1
                 if problem is not None:
                     failed[unit] = problem
-                    done += len(seeds) - seeds.index(seed) - 1
+                    done += len(seeds) - index
                     break
-                elapsed_s = time.perf_counter() - started
-                if not announced and elapsed_s * total / done > PROGRESS_AFTER_S and done < total:
+                done += 1
+                now = time.perf_counter()
+                if not announced and (now - started) * total / done > PROGRESS_AFTER_S and done < total:
                     say(f"staging {total:,} episodes without SUMO before the first one runs ...")
-                    announced = True
+                    announced, last_said = True, now
+                elif announced and now - last_said > PROGRESS_EVERY_S:
+                    say(f"  staged {done:,} of {total:,} ({now - started:.0f} s)")
+                    last_said = now
         if announced:
             say(f"staged {total:,} episodes in {time.perf_counter() - started:.1f} s")
     finally:
