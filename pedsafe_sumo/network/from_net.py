@@ -148,7 +148,8 @@ def build_site_from_net(
             "main_junction": junction.getID(),
             "main_junction_xy": [round(c, 2) for c in junction.getCoord()],
             "signal_nodes": [n.getID() for n in group],
-            "polygons": "none" if polygons is None and polygons_text is None else "given",
+            # The occluders' count (the user's polygon file; none without one).
+            "polygons": sum(1 for _ in ET.parse(stage / poly_file).getroot().iter("poly")),
             "roadside_unit": rsu_units[0],
             "approaches": approach_info,
             "roadside_units": rsu_units,

@@ -252,9 +252,11 @@ def test_polygons_given_are_the_sites_occluders_and_a_refresh_keeps_them(tmp_pat
     shapes = [p.get("shape") for p in ET.parse(out / "rilsa.poly.xml").getroot().iter("poly")]
     assert shapes == ["460.00,540.00 470.00,540.00 470.00,550.00 460.00,550.00 460.00,540.00"]
     assert load_static_occluders(out / "rilsa.poly.xml", occluders).poly_ids == ("house",)
+    assert json.loads((out / "rilsa.site.json").read_text())["polygons"] == 1
     assert _build("--refresh", str(out)).returncode == 0
     assert [p.get("shape") for p in ET.parse(out / "rilsa.poly.xml").getroot().iter("poly")] == shapes
     resolve_site(str(out))
     bare = tmp_path / "bare"
     assert _build("--net", str(RILSA), "--junction", "0", "--out", str(bare)).returncode == 0
     assert not list(ET.parse(bare / "bare.poly.xml").getroot().iter("poly"))
+    assert json.loads((bare / "bare.site.json").read_text())["polygons"] == 0
