@@ -44,8 +44,10 @@ def staging_problem(runner: EpisodeRunner, spec, seed: int, lane_lengths_m: dict
         # The background traffic is drawn from a stream of its own (after the world's draws) and SUMO
         # inserts it as it comes: it cannot make staging fail, and drawing it is 60 % of the cost.
         setup = runner.draw_setup(dataclasses.replace(spec, background_traffic=0), seed)
-    except (SignalStagingError, ValueError) as exc:
+    except (SignalStagingError, ValueError) as exc:  # the staging's own refusals
         return f"seed {seed}: {exc}"
+    except Exception as exc:  # anything else would end the episode in an error row: named, never hidden
+        return f"seed {seed}: {type(exc).__name__}: {exc}"
     for vehicle in (setup.ego, *setup.parked):
         length_m = lane_lengths_m.get(vehicle.lane_id)
         if length_m is None:
