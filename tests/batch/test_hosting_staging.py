@@ -25,7 +25,7 @@ from pedsafe_sumo.batch.chunks import episode_seed
 from pedsafe_sumo.batch.staging_check import unstageable_units
 from pedsafe_sumo.network.sites import resolve_site
 from pedsafe_sumo.params import load_params
-from pedsafe_sumo.scenarios.hosting import site_hosting
+from pedsafe_sumo.scenarios.hosting import hosting_matrix, site_hosting
 from pedsafe_sumo.scenarios.specs import SCENARIOS
 
 INGOLSTADT = REPO_ROOT / "tests" / "network" / "data" / "sumo_nets" / "ingolstadt.net.xml.gz"
@@ -122,3 +122,32 @@ def test_with_all_it_is_skipped_with_the_reason_and_no_row_errs(site, tmp_path):
     rows = pd.read_parquet(out / "episodes.parquet")
     assert "jaywalking" not in set(rows["scenario"]) and len(rows) == len(run["scenarios"])
     assert (rows["error"].fillna("") == "").all(), rows["error"].tolist()
+
+
+def test_on_xueqing_jaywalking_from_the_south_is_listed_under_sv_and_cannot_be_staged(tmp_path):
+    """Xueqing's south approach: under SV alone (no pole needed) the static check lists jaywalking there,
+    but its queue behind the occluder does not fit on the 47 m lane before the stop line, for any seed;
+    named, it is refused in one line."""
+    import dataclasses
+    import re
+
+    params = load_params(None)
+    xueqing = resolve_site("xueqing")
+    hosted, _ = hosting_matrix(xueqing, {"jaywalking": SCENARIOS["jaywalking"]}, params, ["S"], ["sv"])
+    assert hosted == [("jaywalking", "S")]
+    spec = dataclasses.replace(SCENARIOS["jaywalking"], approach="S")
+    why = unstageable_units(xueqing, params, {"jaywalking@S": spec}, 1, 1)["jaywalking@S"]
+    match = re.match(FAILED, why)
+    assert match and int(match.group(1)) == episode_seed(1, 0), why
+    lanes = ET.parse(xueqing.file("net.xml")).iter("lane")
+    assert float(match.group(5)) == pytest.approx(
+        float(next(lane for lane in lanes if lane.get("id") == match.group(4)).get("length")), abs=0.05
+    )
+    out = tmp_path / "run"
+    proc = batch("--scenario", "jaywalking", "--approach", "S", "--condition", "sv", "--episodes", "3",
+                 "--out", str(out))  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        f"error: site xueqing cannot stage scenario 'jaywalking' on approach S: {why}"
+    ]
+    assert not out.exists()
