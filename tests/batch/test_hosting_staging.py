@@ -10,7 +10,9 @@ poles) lists jaywalking as hosted.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -23,10 +25,12 @@ from batch_cli import batch
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.batch.chunks import episode_seed
 from pedsafe_sumo.batch.staging_check import unstageable_units
+from pedsafe_sumo.control.baseline import BaselineStack
 from pedsafe_sumo.network.sites import resolve_site
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.scenarios.hosting import hosting_matrix, site_hosting
 from pedsafe_sumo.scenarios.specs import SCENARIOS
+from pedsafe_sumo.sim.episode import EpisodeRunner
 
 INGOLSTADT = REPO_ROOT / "tests" / "network" / "data" / "sumo_nets" / "ingolstadt.net.xml.gz"
 FAILED = (
@@ -55,8 +59,6 @@ def _lane_length_m(site: Path, lane_id: str) -> float:
 
 
 def test_the_static_check_lists_it_and_staging_finds_why_not(site):
-    import re
-
     params = load_params(None)
     resolved = resolve_site(str(site))
     problems = site_hosting(resolved, {k: SCENARIOS[k] for k in ("crossing", "jaywalking")}, params)
@@ -75,11 +77,6 @@ def test_the_static_check_lists_it_and_staging_finds_why_not(site):
 def test_sumo_refuses_what_the_check_refuses(site):
     """The episode the check refuses, run: SUMO does not insert every vehicle of its row (the one the
     check names is put elsewhere, a car behind it not at all)."""
-    import re
-
-    from pedsafe_sumo.control.baseline import BaselineStack
-    from pedsafe_sumo.sim.episode import EpisodeRunner
-
     params = load_params(None)
     resolved = resolve_site(str(site))
     why = unstageable_units(resolved, params, {"jaywalking": SCENARIOS["jaywalking"]}, 1, 1)["jaywalking"]
@@ -128,9 +125,6 @@ def test_on_xueqing_jaywalking_from_the_south_is_listed_under_sv_and_cannot_be_s
     """Xueqing's south approach: under SV alone (no pole needed) the static check lists jaywalking there,
     but its queue behind the occluder does not fit on the 47 m lane before the stop line, for any seed;
     named, it is refused in one line."""
-    import dataclasses
-    import re
-
     params = load_params(None)
     xueqing = resolve_site("xueqing")
     hosted, _ = hosting_matrix(xueqing, {"jaywalking": SCENARIOS["jaywalking"]}, params, ["S"], ["sv"])

@@ -18,6 +18,8 @@ import pytest
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.network.sites import resolve_site, verify_site
+from pedsafe_sumo.params import load_params
+from pedsafe_sumo.perception.world import load_static_occluders
 from pedsafe_sumo.sumo_binaries import sumo_binary
 
 NETS = Path(__file__).parent / "data" / "sumo_nets"
@@ -235,9 +237,6 @@ def test_a_left_hand_network_is_refused(tmp_path):
 def test_polygons_given_are_the_sites_occluders_and_a_refresh_keeps_them(tmp_path):
     """A 10 m square building north-west of RiLSA's junction: copied into the site's poly.xml (read by the
     perception layer as one occluder), kept by --refresh; without --polygons the site has none."""
-    from pedsafe_sumo.params import load_params
-    from pedsafe_sumo.perception.world import load_static_occluders
-
     poly = tmp_path / "houses.poly.xml"
     poly.write_text(
         '<?xml version="1.0" encoding="UTF-8"?>\n<additional>\n'
