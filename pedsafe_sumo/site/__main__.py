@@ -12,8 +12,9 @@ from pedsafe_sumo.network.sites import SITE_HELP, SiteError, UnknownSiteError, r
 from pedsafe_sumo.network.summary import summarise
 from pedsafe_sumo.network.sumo_inputs import check_site_sumo_files
 from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
-from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
+from pedsafe_sumo.scenarios.hosting import hosting_scorer
 from pedsafe_sumo.site.build_command import refresh_from_net
+from pedsafe_sumo.site.staged_hosting import staged_hosting_lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     for line in summarise(site).lines():
         print(line)
     print("  scenarios:")
-    for line in hosting_lines(resolve_site(args.site)):
+    for line in staged_hosting_lines(resolve_site(args.site)):
         print(f"  {line}")
     print(f"  open it: sumo-gui -c {site.file('sumocfg')}   edit it: netedit -s {site.file('net.xml')}")
     if site.source_net is None:

@@ -21,7 +21,8 @@ from pedsafe_sumo.network.from_net import build_site_from_net, parse_xy
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, TRAFFIC_SIDE_NOTE
-from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
+from pedsafe_sumo.scenarios.hosting import hosting_scorer
+from pedsafe_sumo.site.staged_hosting import staged_hosting_lines
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
 DEFAULT_RADIUS_M = 200.0
@@ -183,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     for path in report.unchanged:
         print(f"  unchanged {path}")
     print("scenarios:")
-    for line in hosting_lines(resolve_site(str(report.out_dir.resolve()))):
+    for line in staged_hosting_lines(resolve_site(str(report.out_dir.resolve()))):
         print(line)
     print(f"  use it: --site {report.out_dir}")
     return 0

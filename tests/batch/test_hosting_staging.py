@@ -145,3 +145,19 @@ def test_on_xueqing_jaywalking_from_the_south_is_listed_under_sv_and_cannot_be_s
         f"error: site xueqing cannot stage scenario 'jaywalking' on approach S: {why}"
     ]
     assert not out.exists()
+
+
+def test_the_site_summary_lists_it_not_hosted_with_the_staging_reason(site):
+    proc = subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.site", "--site", str(site), "--no-build"],
+        capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    stripped = [line.strip() for line in proc.stdout.splitlines() if ": " in line]
+    lines = {line.split(": ", 1)[0]: line for line in stripped}
+    assert lines["crossing"] == "crossing: hosted (its roadside poles see its staging area)"
+    assert re.fullmatch(
+        "jaywalking: NOT hosted: cannot be staged: " + FAILED + ": SUMO cannot put it there "
+        "\\(the batch's staging check\\)",
+        lines["jaywalking"],
+    ), lines["jaywalking"]
