@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Build networks/<site>/ from OpenStreetMap: python tools/build_network.py --site xueqing [--help]."""
+"""Build a site folder from OpenStreetMap (python tools/build_network.py --site xueqing) or from any SUMO
+network (python tools/build_network.py --net my.net.xml --junction ID --out DIR); --help lists the options."""
 
 import sys
 from pathlib import Path

@@ -23,6 +23,7 @@ from pedsafe_sumo.batch.inputs import InputFileError, check_site
 from pedsafe_sumo.batch.resume import check_new_run_directory, check_same_run, recorded_run
 from pedsafe_sumo.batch.runner import WorkerConfig, site_file_digests, worker_versions
 from pedsafe_sumo.batch.sampled import FAMILY_JOINT, SAMPLER_IS, SAMPLER_MC, SamplerError, sampler_identity
+from pedsafe_sumo.batch.staging_check import unstageable_units
 from pedsafe_sumo.batch.trust import check_stack_from_file
 from pedsafe_sumo.cli import MAX_EPISODES, check_max_runs, check_run_count, check_seed
 from pedsafe_sumo.control.agent import AlgorithmLoadError, load_agent_class, stack_spec
@@ -147,6 +148,16 @@ def prepare(args: argparse.Namespace) -> Plan:
             raise UsageError(f"site {site.name} hosts none of the scenarios (see the lines above)")
         specs = {name: specs[name] for name in scenarios}
     check_hosting(site, specs, params, conditions)  # its roadside poles see each scenario's staging area
+    # Hosted is what can be staged for every seed the run will draw (batch/staging_check.py).
+    # A protocol's scenarios, or scenarios named on an approach named (or the site's own): refused, not
+    # skipped, when one cannot be staged.
+    named = protocol is not None or (scenario != "all" and arguments["approach"] != "all")
+    if recorded is None:
+        scenarios, specs, unstageable = stageable_units(site, params, specs, scenarios, arguments, named)
+    else:  # a resumed run skips what its start skipped (the site's files are checked to be the same)
+        unstageable = recorded.get("skipped_unstageable", {})
+        scenarios = [name for name in scenarios if name not in unstageable]
+        specs = {name: specs[name] for name in scenarios}
     reference = site_reference(arguments["site"], site)
     digests = site_file_digests(reference)
     identity = {
@@ -162,6 +173,8 @@ def prepare(args: argparse.Namespace) -> Plan:
         "chunk_size_pairs": arguments["chunk_size"],
         "sampler": _sampler_identity(arguments, scenarios),
     }
+    if unstageable:  # recorded in run.json; not part of the identity a resume compares
+        identity["skipped_unstageable"] = unstageable
     scenario_overrides, _ = parse_set(arguments["set"])
     if protocol is not None:
         identity["protocol"] = protocol.record()
@@ -334,6 +347,40 @@ def approach_units(
         raise UsageError(f"site {site.name} hosts none of these combinations (see the lines above)")
     units = [f"{name}@{arm}" for name, arm in hosted]
     return units, {f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm) for name, arm in hosted}
+
+
+def unit_label(unit: str) -> str:
+    """How a line names a unit: "scenario 'crossing'" or "scenario 'crossing' on approach S"."""
+    name, _, arm = unit.partition("@")
+    return f"scenario '{name}'" + (f" on approach {arm}" if arm else "")
+
+
+def stageable_units(
+    site: Site,
+    params: dict[str, Any],
+    specs: dict[str, Any],
+    units: list[str],
+    arguments: dict[str, Any],
+    explicit: bool,
+) -> tuple[list[str], dict[str, Any], dict[str, str]]:
+    """(units, specs, {unit: why} of those skipped): the units whose every episode of this run can be
+    staged (staging_check.unstageable_units, over the episodes each unit runs, pilot stages included).
+    A unit that cannot is refused in one line when the user named exactly it (`explicit`), else skipped
+    with the reason printed."""
+    episodes = arguments["episodes"]
+    if arguments["sampler"] == SAMPLER_IS:
+        layout = stage_layout(arguments["is_pilot_stages"], arguments["is_pilot_episodes"], episodes)
+        episodes = sum(stage.n_episodes for stage in layout)
+    failed = unstageable_units(site, params, {u: specs[u] for u in units}, arguments["seed"], episodes)
+    if failed and explicit:
+        unit, why = next(iter(failed.items()))
+        raise UsageError(f"site {site.name} cannot stage {unit_label(unit)}: {why}")
+    for unit, why in failed.items():
+        print(f"skipping {unit_label(unit)} on site {site.name}: cannot be staged: {why}")
+    kept = [u for u in units if u not in failed]
+    if not kept:
+        raise UsageError(f"site {site.name} can stage none of these scenarios (see the lines above)")
+    return kept, {u: specs[u] for u in kept}, failed
 
 
 def _sampler_identity(arguments: dict[str, Any], scenarios: list[str]) -> dict[str, Any] | None:

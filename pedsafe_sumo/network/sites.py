@@ -66,8 +66,9 @@ class Site:
     name: str
     directory: Path
     description: str
-    center_lat: float
-    center_lon: float
+    #: The centre in degrees; None for a site built from a SUMO network without a geo-reference.
+    center_lat: float | None
+    center_lon: float | None
     radius_m: float
     #: The OpenStreetMap extract the site was clipped from (None: unknown, e.g. built from a clip).
     source_osm: Path | None
@@ -76,6 +77,11 @@ class Site:
     #: Corner of the main junction where the roadside camera pole stands, and the arm it watches.
     rsu_corner: str = "NW"
     rsu_watch_arm: str = "N"
+    #: The SUMO network the site was built from (tools/build_network.py --net), None for a site built
+    #: from OpenStreetMap; such a site has no geo-reference.
+    source_net: Path | None = None
+    #: The junction the site was built at (its site file's main_junction).
+    main_junction: str = ""
 
     @property
     def network_dir(self) -> Path:
@@ -164,6 +170,13 @@ def _one_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def _degrees(info: dict, key: str) -> float | None:
+    """A centre coordinate of the site file: null only for a site built from a SUMO network."""
+    if info.get(key) is None and info.get("source_net"):
+        return None
+    return float(info[key])
+
+
 def read_site_file(path: Path, name: str) -> dict:
     try:
         info = json.loads(path.read_text(encoding="utf-8"))
@@ -187,13 +200,15 @@ def resolve_site(name_or_path: str | os.PathLike = DEFAULT_SITE, verify: bool = 
             name=name,
             directory=folder,
             description=str(info.get("description", "")),
-            center_lat=float(info["center_lat"]),
-            center_lon=float(info["center_lon"]),
+            center_lat=_degrees(info, "center_lat"),
+            center_lon=_degrees(info, "center_lon"),
             radius_m=float(info["radius_m"]),
             source_osm=_path_in_site(folder, info.get("source_osm")),
             clip_osm=_path_in_site(folder, info.get("clip_osm")) or folder / f"{name}.osm",
             rsu_corner=str(info.get("rsu_corner", "NW")),
             rsu_watch_arm=str(info.get("rsu_watch_arm", "N")),
+            source_net=_path_in_site(folder, info.get("source_net")),
+            main_junction=str(info.get("main_junction", "")),
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise SiteError(f"site {name}: {site_file} lacks a valid {_one_line(exc)}") from None

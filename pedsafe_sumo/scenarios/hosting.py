@@ -13,8 +13,9 @@ finish_camera). Vehicles are not part of the check (hiding the pedestrian is wha
 about), nor is the colour contrast (the clothing is drawn per episode). The scenario's poles must see
 where the pedestrian starts and at least half of the points of its path.
 
-The batch calls `check_hosting` before it writes anything; the build prints `hosting_lines` in its
-summary. A site that cannot host a scenario says why in one line.
+The batch calls `check_hosting` before it writes anything, then stages every episode it will run
+(batch/staging_check.py); the build prints `hosting_lines` in its summary, with that staging over a
+sample of seeds (site/staged_hosting.py). A site that cannot host a scenario says why in one line.
 """
 
 from __future__ import annotations
@@ -191,11 +192,17 @@ def check_hosting(site, specs: dict, params: dict[str, Any], conditions) -> None
             raise SiteError(f"site {site.name} cannot host scenario '{name}': {problem}")
 
 
-def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
+def hosting_lines(
+    site,
+    params: dict[str, Any] | None = None,
+    staged: Callable[[dict[str, Any]], dict[str, str]] | None = None,
+) -> list[str]:
     """One line per registered scenario and approach: whether the site hosts it (the build's summary); the
     site's own approach (what runs without --approach) first, its lines without the arm; each scenario
     under its own staging, then under approach staging (docs/engine.md, "Approach staging") where that
-    differs."""
+    differs. `staged` (the batch's staging check over a sample of seeds, given by the caller: unit
+    `name@arm` -> spec in, unit -> why not out) turns a combination the check above hosts but whose
+    episodes cannot be staged into NOT hosted."""
     params = params or load_params(None)
     lines = []
     own = default_arm(site)
@@ -206,8 +213,23 @@ def hosting_lines(site, params: dict[str, Any] | None = None) -> list[str]:
         if spec.staging != "approach"
     }
     for label, specs in (("", dict(SCENARIOS)), (" under approach staging", approach_specs)):
-        rows = [(arm, item) for arm in arms for item in site_hosting(site, specs, params, arm).items()]
-        for arm, (name, problem) in rows:
+        rows = [
+            (arm, name, problem)
+            for arm in arms
+            for name, problem in site_hosting(site, specs, params, arm).items()
+        ]
+        if staged is not None:
+            units = {
+                f"{name}@{arm}": dataclasses.replace(specs[name], approach=arm)
+                for arm, name, problem in rows
+                if problem is None
+            }
+            failed = staged(units) if units else {}
+            rows = [
+                (arm, name, f"cannot be staged: {failed[unit]}" if (unit := f"{name}@{arm}") in failed else p)
+                for arm, name, p in rows
+            ]
+        for arm, name, problem in rows:
             lines.append(
                 f"  {name}{'' if arm == own else f' on approach {arm}'}{label}: "
                 + (

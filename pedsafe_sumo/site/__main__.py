@@ -12,7 +12,9 @@ from pedsafe_sumo.network.sites import SITE_HELP, SiteError, UnknownSiteError, r
 from pedsafe_sumo.network.summary import summarise
 from pedsafe_sumo.network.sumo_inputs import check_site_sumo_files
 from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
-from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
+from pedsafe_sumo.scenarios.hosting import hosting_scorer
+from pedsafe_sumo.site.build_command import refresh_from_net
+from pedsafe_sumo.site.staged_hosting import staged_hosting_lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,7 +34,14 @@ def main(argv: list[str] | None = None) -> int:
             f"error: site {site.name} is installed with the package: summarise it with --no-build; a rebuild "
             "runs in a checkout of the repository, where its OpenStreetMap data is\n",
         )
-    if not args.no_build:
+    if not args.no_build and site.source_net is not None:
+        # A site built from a SUMO network: its network is the source, kept as it is.
+        try:
+            report = refresh_from_net(site)
+        except (BuildError, UnknownSiteError) as exc:
+            parser.exit(2, f"error: {exc}\n")
+        print(f"re-derived {site.directory} from its network in {report.seconds:.1f} s")
+    elif not args.no_build:
         # Rebuild from the committed clip when the source extract is not beside the checkout.
         # Only what the site file may name (network/site_paths.py, docs/trust.md).
         source = source_to_read(site)
@@ -70,10 +79,13 @@ def main(argv: list[str] | None = None) -> int:
     for line in summarise(site).lines():
         print(line)
     print("  scenarios:")
-    for line in hosting_lines(resolve_site(args.site)):
+    for line in staged_hosting_lines(resolve_site(args.site)):
         print(f"  {line}")
     print(f"  open it: sumo-gui -c {site.file('sumocfg')}   edit it: netedit -s {site.file('net.xml')}")
-    print(f"  {OSM_ATTRIBUTION}")
+    if site.source_net is None:
+        print(f"  {OSM_ATTRIBUTION}")
+    else:
+        print("  built from a SUMO network, no geo-reference: coordinates are the network's x, y in metres")
     return 0
 
 

@@ -17,15 +17,23 @@ from pedsafe_sumo.io.outputs import check_output_dir, check_output_file
 from pedsafe_sumo.network.approaches import leg_argument
 from pedsafe_sumo.network.build import BuildError, BuildReport, build_site
 from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_negative_values
+from pedsafe_sumo.network.from_net import build_site_from_net, parse_xy
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, TRAFFIC_SIDE_NOTE
-from pedsafe_sumo.scenarios.hosting import hosting_lines, hosting_scorer
+from pedsafe_sumo.scenarios.hosting import hosting_scorer
+from pedsafe_sumo.site.staged_hosting import staged_hosting_lines
 
 #: Clip radius of a new site when --radius is not given [m]: the junction and about 150 m of each arm.
 DEFAULT_RADIUS_M = 200.0
 #: Largest clip radius [m]: an intersection study site, not a town; netconvert's time grows with the area.
 MAX_RADIUS_M = 2000.0
+
+
+#: The options of a build from OpenStreetMap, which a build from a SUMO network (--net) does not take.
+OSM_OPTIONS = ("osm", "center", "radius", "osm_out", "patches", "no_clip", "refresh")
+#: The options only a build from a SUMO network takes.
+NET_OPTIONS = ("junction", "at", "polygons")
 
 
 def _refresh(parser, folder: Path) -> BuildReport:
@@ -34,6 +42,8 @@ def _refresh(parser, folder: Path) -> BuildReport:
         site = resolve_site(folder if "/" in str(folder) else f"./{folder}", verify=False)
     except SiteError as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
+    if site.source_net is not None:
+        return refresh_from_net(site)
     clip_to_read(site)  # a clip where the site file may name it, and no link out (docs/trust.md)
     check_targets(None, site.directory, site.name, None)
     if not site.clip_osm.is_file():
@@ -63,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(
         prog="build_network",
         description="Build a SUMO study site folder (net, polygons, roadside units, sumocfg, site file) from "
-        "OpenStreetMap; every command takes the folder as --site.",
+        "OpenStreetMap, or from any SUMO network (--net); every command takes the folder as --site.",
     )
     parser.add_argument(
         "--site",
@@ -114,24 +124,51 @@ def main(argv: list[str] | None = None) -> int:
         "file, poles and polygons from it",
     )
     parser.add_argument(
+        "--net",
+        type=Path,
+        metavar="FILE.net.xml",
+        help="build the site from this SUMO network, kept as it is (no OSM data, no geo-projection "
+        "needed), at --junction or --at; --out names the folder",
+    )
+    parser.add_argument("--junction", metavar="ID", help="with --net: the signalised junction of the site")
+    parser.add_argument(
+        "--at",
+        metavar="X,Y",
+        help="with --net: a point in the network's own frame (m); the site's junction is the signalised one "
+        "nearest it (within 60 m). Negative values: --at -12.5,30 or --at=-12.5,30",
+    )
+    parser.add_argument(
+        "--polygons",
+        type=Path,
+        metavar="FILE.poly.xml",
+        help="with --net: buildings and trees (SUMO polygons in the network's frame) that hide pedestrians "
+        "from the cameras (default: none)",
+    )
+    parser.add_argument(
         "--lefthand",
         action="store_true",
         help="the junction's traffic keeps left (the build cannot tell from OSM data alone): refused, "
         "left-hand traffic is not supported yet",
     )
     argv = sys.argv[1:] if argv is None else argv
-    args = parser.parse_args(with_negative_values(parser, argv, ["--center"]))
+    args = parser.parse_args(with_negative_values(parser, argv, ["--center", "--at"]))
     if args.lefthand:
         parser.exit(2, f"build_network: error: {LEFTHAND_REFUSAL}\n")
+    _check_source_options(parser, args)
     try:
         if args.refresh is not None:
             report = _refresh(parser, args.refresh)
+        elif args.net is not None:
+            report = _build_from_net(parser, args)
         else:
             report = _build(parser, args)
     except (BuildError, SiteError) as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
-    print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
+    if args.net is None and not _from_net(report):
+        print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
+    else:
+        print("  no geo-reference: the site lives in the network's own frame (x, y in metres)")
     if report.signal_nodes and len(report.signal_nodes) > 1:
         print(
             f"  the intersection has {len(report.signal_nodes)} signal nodes: "
@@ -147,10 +184,96 @@ def main(argv: list[str] | None = None) -> int:
     for path in report.unchanged:
         print(f"  unchanged {path}")
     print("scenarios:")
-    for line in hosting_lines(resolve_site(str(report.out_dir.resolve()))):
+    for line in staged_hosting_lines(resolve_site(str(report.out_dir.resolve()))):
         print(line)
     print(f"  use it: --site {report.out_dir}")
     return 0
+
+
+def _check_source_options(parser, args) -> None:
+    """--net excludes the OSM build's options; --junction, --at and --polygons need --net."""
+
+    def flag(name: str) -> str:
+        return "--" + name.replace("_", "-")
+
+    if args.net is not None:
+        given = [flag(n) for n in OSM_OPTIONS if getattr(args, n) not in (None, False)]
+        if given:
+            parser.exit(
+                2,
+                f"build_network: error: --net builds from a SUMO network: {', '.join(given)} "
+                "belong to a build from OpenStreetMap\n",
+            )
+        if (args.junction is None) == (args.at is None):
+            parser.exit(
+                2,
+                "build_network: error: --net needs the junction: --junction ID or --at X,Y "
+                "(the network's frame), one of them\n",
+            )
+        return
+    given = [flag(n) for n in NET_OPTIONS if getattr(args, n) is not None]
+    if given:
+        parser.exit(2, f"build_network: error: {', '.join(given)} need --net FILE.net.xml\n")
+
+
+def _from_net(report: BuildReport) -> bool:
+    try:
+        return resolve_site(str(report.out_dir.resolve()), verify=False).source_net is not None
+    except SiteError:
+        return False
+
+
+def _build_from_net(parser, args) -> BuildReport:
+    """A site from the SUMO network --net (network.from_net), written to --out (default
+    networks/NAME)."""
+    try:
+        at_xy = parse_xy(args.at) if args.at is not None else None
+    except ValueError as exc:
+        parser.exit(2, f"build_network: error: --at: {exc}\n")
+    if args.out_dir is not None:
+        name = args.name or args.out_dir.name
+    else:
+        name = args.name or args.net.name.removesuffix(".gz").removesuffix(".xml").removesuffix(".net")
+    out_dir = args.out_dir or WRITE_ROOT / "networks" / name
+    try:
+        check_output_dir(out_dir, "--out", BuildError)
+        check_targets(None, out_dir, name, None)
+    except (BuildError, SiteError) as exc:
+        parser.exit(2, f"build_network: error: {exc}\n")
+    return build_site_from_net(
+        args.net,
+        name,
+        out_dir,
+        junction_id=args.junction,
+        at_xy=at_xy,
+        polygons=args.polygons,
+        rsu_corner=args.rsu_corner,
+        rsu_watch_arm=args.rsu_watch,
+        description=args.description or "",
+        hosting_scorer=hosting_scorer,
+    )
+
+
+def refresh_from_net(site) -> BuildReport:
+    """Re-derive a site built from a SUMO network from its folder's (edited) network: the junction it was
+    built at, its polygons kept as they are, its watched arm and corner."""
+    poly = site.file("poly.xml")
+    try:
+        polygons_text = poly.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SiteError(f"site {site.name}: cannot read {poly}: {exc.strerror}") from None
+    return build_site_from_net(
+        site.file("net.xml"),
+        site.name,
+        site.directory,
+        junction_id=site.main_junction,
+        polygons_text=polygons_text,
+        rsu_corner=site.rsu_corner,
+        rsu_watch_arm=site.rsu_watch_arm,
+        description=site.description,
+        source_net=site.source_net,
+        hosting_scorer=hosting_scorer,
+    )
 
 
 def _build(parser, args) -> BuildReport:
