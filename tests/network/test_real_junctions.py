@@ -184,8 +184,9 @@ def test_the_junction_builds_signalised_and_one_light_controls_its_links(built, 
 
 def test_a_junction_with_diagonal_legs_names_them_by_their_bearing(built):
     site = built["seattle_westlake"]
-    # Lenora Street leaves the junction towards the north-east (OSM way 490176742 at ~41 degrees), 8th Avenue
-    # towards the north-west (~311 degrees); the legs are named by the eight-point rose.
+    # Lenora Street leaves the junction towards the north-east (OSM way 490176742 at ~41 degrees) and the
+    # south-west, 8th Avenue towards the south-east (~132 degrees); such legs, sharing a compass sector with
+    # another, are named by the eight-point rose.
     legs = {
         line.split(":")[0].strip(): line.split(": ", 1)[1]
         for line in site.summary.splitlines()
