@@ -258,11 +258,21 @@ def _has_crossing(net, node, edge) -> bool:
     )
 
 
+def _ego_lane_goes_straight(edge) -> bool:
+    """Whether the vehicle lane the straight scenarios drive the ego in (the one next to the kerb lane; on a
+    one-lane approach the lane itself: scenarios.geometry.straight_staging_problem) has a straight movement.
+    Without one, crossing, jaywalking and background blending cannot be staged on the road (the stem of a T,
+    a lane that only turns)."""
+    vehicle_lanes = [lane for lane in edge.getLanes() if lane.allows("passenger")]
+    ego_lane = vehicle_lanes[1 if len(vehicle_lanes) >= 2 else 0]
+    return any(c.getDirection() == "s" for c in ego_lane.getOutgoing())
+
+
 def choose_approach(net: sumolib.net.Net, group: list, preferred_arm: str | None = None):
     """(junction, arm) of the approach the scenarios are staged on: among the roads entering the signal
-    nodes of `group` from outside it, the best by (the preferred arm, two or more vehicle lanes, a
-    sidewalk, a crosswalk at the stop line, a leaving carriageway on the same arm, most vehicle lanes).
-    BuildError when no road enters the intersection."""
+    nodes of `group` from outside it, the best by (the preferred arm, a straight movement from the lane
+    the ego drives in, two or more vehicle lanes, a sidewalk, a crosswalk at the stop line, a leaving
+    carriageway on the same arm, most vehicle lanes). BuildError when no road enters the intersection."""
     group_ids = {n.getID() for n in group}
     legs = junction_legs(group)
     leg_of = {edge_id: leg.name for leg in legs for edge_id in leg.edge_ids}
@@ -281,6 +291,7 @@ def choose_approach(net: sumolib.net.Net, group: list, preferred_arm: str | None
             sidewalk = edge.getLane(0).getPermissions() == {"pedestrian"}
             score = (
                 arm == preferred_arm,
+                _ego_lane_goes_straight(edge),
                 _vehicle_lane_count(edge) >= 2,
                 sidewalk,
                 _has_crossing(net, node, edge),

@@ -1,0 +1,360 @@
+"""Real signalised junctions from OpenStreetMap, in four countries (tests/data/osm, ODbL; each folder's
+README names its source and place): each builds into a site whose traffic light controls the junction's
+links; every (scenario, approach) combination the build says it hosts runs with the signals staged and no
+error rows, and the roadside camera detects the pedestrian under V2I. A left-hand junction is refused in
+one line.
+
+| clip | what it exercises |
+|---|---|
+| seattle_westlake | diagonal legs (Lenora Street, 8th Avenue at ~45 degrees to Westlake Avenue) |
+| aguascalientes_convencion | one light over a divided road's signal nodes; stub approaches: refused |
+| copenhagen_allegade | a T-junction (one vehicle lane per approach) |
+| seattle_9th_50th | one-lane approaches (9th Avenue NE); one light joined over two junctions |
+| perth_albany | left-hand traffic (Australia): refused |
+
+Building a site takes ~5 s, so the builds and their checks run in the default suite; the batches are slow.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL
+
+DATA = REPO_ROOT / "tests" / "data" / "osm"
+TOOL = REPO_ROOT / "tools" / "build_network.py"
+SCENARIOS = ("crossing", "jaywalking", "background_blending", "right_turn", "left_turn")
+
+
+@dataclass(frozen=True)
+class Junction:
+    centre: str  #: LAT,LON of the junction (the clip's centre, its README)
+    country: str
+
+
+#: The junctions whose sites host scenarios (right-hand traffic).
+HOSTING = {
+    "seattle_westlake": Junction("47.616507,-122.338017", "United States"),
+    "aguascalientes_convencion": Junction("21.873629,-102.270820", "Mexico"),
+    "copenhagen_allegade": Junction("55.674679,12.532216", "Denmark"),
+    "seattle_9th_50th": Junction("47.664943,-122.318420", "United States"),
+}
+LEFT_HAND = ("perth_albany", Junction("-31.975191,115.897673", "Australia"))
+
+
+def _run(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, *args], capture_output=True, text=True, cwd=REPO_ROOT, timeout=timeout
+    )
+
+
+def _build(name: str, junction: Junction, out: Path, *extra: str, osm: Path | None = None):
+    return _run(
+        str(TOOL), "--osm", str(osm or DATA / name / f"{name}.osm"), "--no-clip",
+        f"--center={junction.centre}", "--radius", "130", "--name", name, "--out", str(out), *extra,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Built:
+    folder: Path
+    build_stdout: str
+    summary: str  # python -m pedsafe_sumo.site --site FOLDER --no-build
+    info: dict  # the site file
+    net: ET.Element
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory) -> dict[str, Built]:
+    root = tmp_path_factory.mktemp("real")
+    out = {}
+    for name, junction in HOSTING.items():
+        folder = root / name
+        proc = _build(name, junction, folder)
+        assert proc.returncode == 0, (name, proc.stderr)
+        summary = _run("-m", "pedsafe_sumo.site", "--site", str(folder), "--no-build")
+        assert summary.returncode == 0, (name, summary.stderr)
+        out[name] = Built(
+            folder,
+            proc.stdout,
+            summary.stdout,
+            json.loads((folder / f"{name}.site.json").read_text()),
+            ET.parse(folder / f"{name}.net.xml").getroot(),
+        )
+    return out
+
+
+def _hosted(built: Built) -> set[tuple[str, str]]:
+    """(scenario, approach) of every combination the build summary says the site hosts."""
+    own = built.info["rsu_watch_arm"]
+    found = set()
+    for line in built.build_stdout.splitlines():
+        if not line.startswith("  ") or ": " not in line:
+            continue
+        head, verdict = line.strip().split(": ", 1)
+        if head.endswith(" under approach staging"):
+            continue  # the batches here run the default (fixed) staging
+        name, _, arm = head.partition(" on approach ")
+        if name in SCENARIOS and verdict.startswith("hosted"):
+            found.add((name, arm or own))
+    return found
+
+
+def _osm_signals(name: str) -> list[tuple[float, float]]:
+    root = ET.parse(DATA / name / f"{name}.osm").getroot()
+    return [
+        (float(n.get("lat")), float(n.get("lon")))
+        for n in root.iter("node")
+        if any(t.get("k") == "highway" and t.get("v") == "traffic_signals" for t in n.iter("tag"))
+    ]
+
+
+def _distance_m(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Equirectangular distance between two (lat, lon) points: exact enough within a few hundred metres."""
+    north = math.radians(b[0] - a[0]) * 6371000.0
+    east = math.radians(b[1] - a[1]) * 6371000.0 * math.cos(math.radians((a[0] + b[0]) / 2))
+    return math.hypot(north, east)
+
+
+def _lights_of_junction(net: ET.Element, junction: str) -> dict[str, set[str]]:
+    """Traffic light id -> the junctions whose connections it controls, for the lights on `junction`'s
+    connections (read from the net.xml: a connection through a junction passes its internal lane
+    `:<junction>_...`, and names its light in `tl`)."""
+    by_light: dict[str, set[str]] = {}
+    for conn in net.iter("connection"):
+        via, tl = conn.get("via"), conn.get("tl")
+        if via and tl:
+            by_light.setdefault(tl, set()).add(via[1:].rsplit("_", 2)[0])
+    return {tl: nodes for tl, nodes in by_light.items() if junction in nodes}
+
+
+def _incoming_edges(net: ET.Element, junction: str) -> list[ET.Element]:
+    return [e for e in net.iter("edge") if e.get("to") == junction and not e.get("function")]
+
+
+def _vehicle_lanes(edge: ET.Element) -> list[ET.Element]:
+    return [lane for lane in edge.iter("lane") if lane.get("allow") != "pedestrian"]
+
+
+def _bearing_deg(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Compass bearing from a to b in the network's x (east), y (north) plane."""
+    return math.degrees(math.atan2(b[0] - a[0], b[1] - a[1])) % 360.0
+
+
+# --- every hosting junction: built, signalised, its light on its links (default suite) --------------------
+
+
+@pytest.mark.parametrize("name", list(HOSTING))
+def test_the_junction_builds_signalised_and_one_light_controls_its_links(built, name):
+    site = built[name]
+    main = site.info["main_junction"]
+    junction = next(j for j in site.net.iter("junction") if j.get("id") == main)
+    assert junction.get("type").startswith("traffic_light")
+    assert f"site {name}: main junction {main} (traffic_light, " in site.summary
+    lights = _lights_of_junction(site.net, main)
+    assert len(lights) == 1, lights  # one light stages the junction's signals
+    (light,) = lights
+    assert f"traffic light(s) on its connections: {light}" in site.summary
+    assert any(t.get("id") == light for t in site.net.iter("tlLogic"))
+    # Every vehicle movement through the junction (a connection from a road edge via the junction's
+    # internal lane) and every crosswalk (a connection from one of its walking areas onto one of its
+    # crossings) is controlled by that light.
+    vehicle = [
+        c
+        for c in site.net.iter("connection")
+        if not c.get("from").startswith(":") and (c.get("via") or "").startswith(f":{main}_")
+    ]
+    crosswalks = [
+        c
+        for c in site.net.iter("connection")
+        if c.get("from").startswith(f":{main}_w") and c.get("to").startswith(f":{main}_c")
+    ]
+    assert vehicle and crosswalks
+    assert {c.get("tl") for c in vehicle + crosswalks} == {light}
+    if name != "aguascalientes_convencion":  # its approaches cannot be staged (test below)
+        assert _hosted(site)
+
+
+def test_a_junction_with_diagonal_legs_names_them_by_their_bearing(built):
+    site = built["seattle_westlake"]
+    # Lenora Street leaves the junction towards the north-east (OSM way 490176742 at ~41 degrees) and the
+    # south-west, 8th Avenue towards the south-east (~132 degrees); such legs, sharing a compass sector with
+    # another, are named by the eight-point rose.
+    legs = {
+        line.split(":")[0].strip(): line.split(": ", 1)[1]
+        for line in site.summary.splitlines()
+        if line.startswith("    ") and " lane(s) in" in line
+    }
+    assert legs["NE"].startswith("Lenora Street")
+    diagonal = [name for name in legs if name in ("NE", "SE", "SW", "NW")]
+    assert len(diagonal) >= 2, legs
+    # Independently from the network: an edge entering the junction group from the NE leg has its far end at
+    # a bearing within 22.5 degrees of 45.
+    node_xy = {j.get("id"): (float(j.get("x")), float(j.get("y"))) for j in site.net.iter("junction")}
+    edges = {e.get("id"): e for e in site.net.iter("edge")}
+    ne_edges = site.info["approaches"]["NE"]
+    junction = ne_edges["junction"]
+    bearings = [
+        _bearing_deg(node_xy[junction], tuple(map(float, lane.get("shape").split()[0].split(","))))
+        for e in _incoming_edges(site.net, junction)
+        if e.get("id") in edges
+        for lane in _vehicle_lanes(e)[:1]
+    ]
+    assert any(abs(b - 45.0) < 22.5 for b in bearings), bearings
+    assert {arm for _, arm in _hosted(site)} >= {"NE"}
+
+
+@pytest.mark.parametrize("name", ["seattle_9th_50th", "aguascalientes_convencion"])
+def test_signals_netconvert_joins_are_one_light_over_several_nodes(built, name):
+    site = built[name]
+    # The clip maps two or more signal nodes near the junction (within 100 m of the one nearest the centre).
+    signals = _osm_signals(name)
+    centre = tuple(map(float, HOSTING[name].centre.split(",")))
+    nearest = min(signals, key=lambda s: _distance_m(s, centre))
+    assert sum(_distance_m(s, nearest) <= 100.0 for s in signals) >= 2
+    # netconvert joined them: the junction's one light (joinedS_...) controls connections through two or
+    # more traffic-light junctions of the network.
+    ((light, nodes),) = _lights_of_junction(site.net, site.info["main_junction"]).items()
+    assert light.startswith("joinedS_") and len(nodes) >= 2, (light, nodes)
+    types = {j.get("id"): j.get("type") for j in site.net.iter("junction")}
+    assert all(types[node].startswith("traffic_light") for node in nodes)
+
+
+def test_a_t_junction_is_staged_on_a_through_road_not_on_its_stem(built):
+    site = built["copenhagen_allegade"]
+    main = site.info["main_junction"]
+    assert "  3 arms:" in site.summary
+    # The stem (Frederiksberg Alle, from the east) has no straight movement: every connection of its lanes
+    # turns (SUMO's dir "l" or "r"), read from the net.xml.
+    incoming = _incoming_edges(site.net, main)
+    straight_from = {
+        c.get("from") for c in site.net.iter("connection") if c.get("dir") == "s" and c.get("via")
+    }
+    stems = [e for e in incoming if e.get("id") not in straight_from]
+    assert len(incoming) == 3 and len(stems) == 1
+    assert stems[0].get("name") == "Frederiksberg Alle"
+    # The site's own approach is a through road (crossing, jaywalking, background blending can be staged
+    # there), so the batch without --approach runs on it.
+    assert site.info["rsu_watch_arm"] in ("N", "S")
+    hosted = _hosted(site)
+    assert ("crossing", site.info["rsu_watch_arm"]) in hosted
+    assert not any(arm == "E" for _, arm in hosted)
+    # Every approach of this T has one vehicle lane.
+    assert {len(_vehicle_lanes(e)) for e in incoming} == {1}
+
+
+def test_one_lane_approaches_host_the_straight_scenarios(built):
+    site = built["seattle_9th_50th"]
+    lanes_in = {}
+    for line in site.summary.splitlines():
+        if line.startswith("    ") and " lane(s) in" in line:
+            arm, rest = line.strip().split(": ", 1)
+            lanes_in[arm] = int(rest.split(" - ")[1].split(" lane(s) in")[0])
+    assert lanes_in["N"] == lanes_in["S"] == 1 and lanes_in["E"] == lanes_in["W"] == 2
+    # From the net.xml: 9th Avenue Northeast enters the junction with one vehicle lane.
+    ninth = [
+        e
+        for e in _incoming_edges(site.net, site.info["main_junction"])
+        if e.get("name") == "9th Avenue Northeast"
+    ]
+    assert len(ninth) == 2 and all(len(_vehicle_lanes(e)) == 1 for e in ninth)
+    hosted = _hosted(site)
+    assert {("crossing", "N"), ("jaywalking", "N"), ("background_blending", "N")} <= hosted
+
+
+def test_a_junction_whose_approaches_are_stub_edges_is_refused_in_one_line(built, tmp_path):
+    """netconvert keeps a node just before each stop line of aguascalientes_convencion: every road enters the
+    junction on an edge 0.2 m long, where no ego can be inserted. The build lists each combination as not
+    hosted, and the batch refuses the site in one line, writing nothing."""
+    site = built["aguascalientes_convencion"]
+    main = site.info["main_junction"]
+    lengths = [float(_vehicle_lanes(e)[0].get("length")) for e in _incoming_edges(site.net, main)]
+    assert lengths and max(lengths) < 1.0, lengths
+    assert not _hosted(site)
+    assert "(0.2 m long): SUMO cannot put it there" in site.build_stdout
+    out = tmp_path / "run"
+    proc = _run(
+        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "1",
+        "--workers", "1", "--site", str(site.folder), "--out", str(out),
+    )  # fmt: skip
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "can stage none of these scenarios" in proc.stderr and not out.exists()
+
+
+# --- left-hand traffic (default suite) ---------------------------------------------------------------------
+
+
+def test_a_left_hand_junction_is_refused_when_the_data_or_the_user_says_so(tmp_path):
+    name, junction = LEFT_HAND
+    # Nothing in the clip says which side traffic keeps to: the build makes a right-hand network and says,
+    # every time, that it cannot tell.
+    osm_text = (DATA / name / f"{name}.osm").read_text(encoding="utf-8")
+    assert "driving_side" not in osm_text
+    plain = _build(name, junction, tmp_path / "plain")
+    assert plain.returncode == 0, plain.stderr
+    assert "NOTE: traffic side: right-hand (netconvert's default)" in plain.stdout
+    # The user says so: --lefthand.
+    told = _build(name, junction, tmp_path / "told", "--lefthand")
+    assert told.returncode == 2 and told.stderr.count("\n") == 1 and LEFTHAND_REFUSAL in told.stderr
+    assert not (tmp_path / "told").exists()
+    # The data says so: Albany Highway tagged driving_side=left (as Australia's boundary relation is).
+    tagged = tmp_path / f"{name}.osm"
+    tagged.write_text(
+        osm_text.replace(
+            '<tag k="name" v="Albany Highway"/>',
+            '<tag k="name" v="Albany Highway"/><tag k="driving_side" v="left"/>',
+            1,
+        ),
+        encoding="utf-8",
+    )
+    assert 'k="driving_side"' in tagged.read_text(encoding="utf-8")
+    from_data = _build(name, junction, tmp_path / "data", osm=tagged)
+    assert from_data.returncode == 2 and from_data.stderr.count("\n") == 1, from_data.stderr
+    assert LEFTHAND_REFUSAL in from_data.stderr and not (tmp_path / "data").exists()
+
+
+# --- a plain SUMO network without geo-reference ------------------------------------------------------------
+# The sixth junction: a SUMO network without geo-reference, built with tools/build_network.py --net NET.
+# Its tests go here, as for the OSM junctions above: it builds, its light controls the junction's links,
+# and every hosted combination runs (test_every_hosted_combination_runs_with_signals_and_roadside_detection).
+
+
+# --- every hosted combination runs (slow) ------------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [name for name in HOSTING if name != "aguascalientes_convencion"])
+def test_every_hosted_combination_runs_with_signals_and_roadside_detection(built, tmp_path, name):
+    site = built[name]
+    hosted = _hosted(site)
+    out = tmp_path / "run"
+    proc = _run(
+        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "1",
+        "--workers", "1", "--site", str(site.folder), "--out", str(out), timeout=900,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    # Every combination the build hosts runs. The build stages 20 seeds of each combination, the batch the
+    # seeds it runs, so a combination one of whose 20 seeds cannot be staged may still run here.
+    assert hosted <= set(zip(episodes["scenario"], episodes["approach"], strict=True))
+    for _, conditions in episodes.groupby(["scenario", "approach"])["condition"]:
+        assert sorted(conditions) == ["sv", "v2i"]  # one pair per combination
+    assert (episodes["status"] == "ok").all() and (episodes["error"] == "").all(), episodes["error"].tolist()
+    # The signals are staged: the ego has its light's state at the conflict, and so has the pedestrian
+    # everywhere but mid-block (jaywalking crosses where no signal stands: docs/engine.md).
+    assert (episodes["ego_signal"] != "none").all(), episodes[["scenario", "approach", "ego_signal"]]
+    at_signals = episodes[episodes["scenario"] != "jaywalking"]
+    assert (at_signals["ped_signal"] != "none").all(), at_signals[["scenario", "approach", "ped_signal"]]
+    # Under V2I the roadside camera is the first to detect the pedestrian in some episode.
+    v2i = episodes[episodes["condition"] == "v2i"]
+    assert (v2i["detected_by"] == "roadside").any(), v2i["detected_by"].tolist()
