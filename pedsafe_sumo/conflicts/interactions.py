@@ -28,6 +28,7 @@ from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import first_polyline_crossing
 from pedsafe_sumo.safety.interaction import interaction_measures
+from pedsafe_sumo.safety.proximity import drac_steps_mps2
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
 #: Columns of the per-step buffer of an open interaction, in the log contract's names.
@@ -73,10 +74,18 @@ ROW_COLUMNS = (
     "ttc_time_s",
     "ttc_x_m",
     "ttc_y_m",
+    "ttc_speed_mps",
     "pet_s",
+    "pet_time_s",
     "pet_x_m",
     "pet_y_m",
+    "pet_speed_mps",
     "drac_mps2",
+    "drac_time_s",
+    "drac_x_m",
+    "drac_y_m",
+    "drac_speed_mps",
+    "encounter_type",
     "md_m",
     "tmd_s",
     "cs_mps",
@@ -192,6 +201,31 @@ class InteractionTracker:
         self.emit(interaction_row(key[0], key[1], record, self.place))
 
 
+#: SUMO's SSM encounter type codes (SSM device documentation, "Encounter types") used for a vehicle and
+#: a person: the vehicle comes up behind a person on its own path (no crossing of the two paths).
+FOLLOWING_FOLLOWER = 2
+#: The two centre paths cross and the vehicle reaches the crossing point first.
+CROSSING_LEADER = 10
+#: The two centre paths cross and the person reaches the crossing point first.
+CROSSING_FOLLOWER = 11
+#: The type SUMO gives a PET: both have passed the conflict area.
+BOTH_LEFT_CONFLICT_AREA = 17
+
+
+def _nearest_step(x_m: np.ndarray, y_m: np.ndarray, point: tuple[float, float]) -> int:
+    """The first step at which the track (x_m, y_m) is nearest to `point`."""
+    return int(np.argmin(np.hypot(x_m - point[0], y_m - point[1])))
+
+
+def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -> int:
+    """SUMO's encounter type of the interaction's TTC and DRAC: who reaches the crossing of the two
+    centre paths first, or FOLLOWING_FOLLOWER when the paths do not cross (the person on the car's path)."""
+    if path_crossing is None:
+        return FOLLOWING_FOLLOWER
+    vehicle_first = _nearest_step(ex, ey, path_crossing) <= _nearest_step(px, py, path_crossing)
+    return CROSSING_LEADER if vehicle_first else CROSSING_FOLLOWER
+
+
 def interaction_row(
     vehicle_id: str, person_id: str, record: _Open, place: PlaceLookup | None
 ) -> dict[str, Any]:
@@ -203,19 +237,38 @@ def interaction_row(
     k = m.min_clearance_step
     x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
     lane_id, crossing_id = place(x_m, y_m) if place is not None else ("", "")
-    crossing = (
-        None
-        if m.collision
-        else first_polyline_crossing(
-            log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
-        )
-    )
+    vehicle_speed = table[:, len(_STEP_COLUMNS)]
+    ex, ey, px, py = log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
+    path_crossing = first_polyline_crossing(ex, ey, px, py)
+    # The encroachment point: where the two met for a contact, else where the centre paths cross.
+    point: tuple[float, float] | None
     if m.collision:
-        crossing = (float(log[steplog.PED_X][m.contact_step]), float(log[steplog.PED_Y][m.contact_step]))
-    has_pet = math.isfinite(m.pet_s)
+        point = (float(px[m.contact_step]), float(py[m.contact_step]))
+    else:
+        point = path_crossing if math.isfinite(m.pet_s) else None
+    pet_step = None
+    if m.collision:
+        pet_step = m.contact_step
+    elif point is not None:
+        pet_step = max(_nearest_step(ex, ey, point), _nearest_step(px, py, point))
+    drac_step = None
+    if math.isfinite(m.drac_mps2):
+        drac = drac_steps_mps2(log)
+        if m.contact_step is not None:
+            drac = drac[: m.contact_step + 1]
+        drac_step = int(np.nanargmax(drac))
+    encounter_type = math.nan
+    if m.ttc_step is not None or drac_step is not None:
+        encounter_type = float(_encounter_type(ex, ey, px, py, path_crossing))
 
     def at(step: int | None) -> float:
         return float(t[step]) if step is not None else math.nan
+
+    def speed_at(step: int | None) -> float:
+        return float(vehicle_speed[step]) if step is not None else math.nan
+
+    def person_at(step: int | None) -> tuple[float, float]:
+        return (float(px[step]), float(py[step])) if step is not None else (math.nan, math.nan)
 
     return {
         "vehicle_id": vehicle_id,
@@ -238,12 +291,20 @@ def interaction_row(
         "contact_time_s": at(m.contact_step),
         "ttc_s": m.ttc_s,
         "ttc_time_s": at(m.ttc_step),
-        "ttc_x_m": float(log[steplog.PED_X][m.ttc_step]) if m.ttc_step is not None else math.nan,
-        "ttc_y_m": float(log[steplog.PED_Y][m.ttc_step]) if m.ttc_step is not None else math.nan,
+        "ttc_x_m": person_at(m.ttc_step)[0],
+        "ttc_y_m": person_at(m.ttc_step)[1],
+        "ttc_speed_mps": speed_at(m.ttc_step),
         "pet_s": m.pet_s,
-        "pet_x_m": crossing[0] if has_pet and crossing else math.nan,
-        "pet_y_m": crossing[1] if has_pet and crossing else math.nan,
+        "pet_time_s": at(pet_step),
+        "pet_x_m": point[0] if point is not None else math.nan,
+        "pet_y_m": point[1] if point is not None else math.nan,
+        "pet_speed_mps": speed_at(pet_step),
         "drac_mps2": m.drac_mps2,
+        "drac_time_s": at(drac_step),
+        "drac_x_m": person_at(drac_step)[0],
+        "drac_y_m": person_at(drac_step)[1],
+        "drac_speed_mps": speed_at(drac_step),
+        "encounter_type": encounter_type,
         "md_m": m.md_m,
         "tmd_s": m.tmd_s,
         "cs_mps": m.cs_mps,
