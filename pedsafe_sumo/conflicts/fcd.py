@@ -18,7 +18,7 @@ from __future__ import annotations
 import gzip
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,10 +114,12 @@ def _users(elements: list[ET.Element], place_attr: str, path: Path, time_s: floa
 
 
 def _open(path: Path):
+    """(the stream to parse, the file under it: its position is how far the reading has come)."""
     try:
+        raw = open(path, "rb")
         if path.suffix == ".gz":
-            return gzip.open(path, "rb")
-        return open(path, "rb")
+            return gzip.GzipFile(fileobj=raw, mode="rb"), raw
+        return raw, raw
     except FileNotFoundError:
         raise FcdError(f"FCD file not found: {path}") from None
     except IsADirectoryError:
@@ -126,10 +128,13 @@ def _open(path: Path):
         raise FcdError(f"cannot read FCD file {path}: {exc.strerror or exc}") from None
 
 
-def read_fcd(path: str | Path) -> Iterator[FcdStep]:
-    """Yield the timesteps of an FCD file in order; FcdError on a file that is not FCD or is broken."""
+def read_fcd(path: str | Path, progress: Callable[[int], None] | None = None) -> Iterator[FcdStep]:
+    """Yield the timesteps of an FCD file in order; FcdError on a file that is not FCD or is broken.
+
+    `progress(bytes)`, if given, is called after every timestep with how many bytes of the file (as
+    stored: compressed for .gz) have been read so far."""
     path = Path(path)
-    handle = _open(path)
+    handle, raw = _open(path)
     last_time_s = -math.inf
     root: ET.Element | None = None
     try:
@@ -156,6 +161,8 @@ def read_fcd(path: str | Path) -> Iterator[FcdStep]:
                 _users(persons, "edge", path, time_s),
             )
             root.clear()  # the timestep and everything before it: memory stays flat
+            if progress is not None:
+                progress(raw.tell())
             yield step
         if root is None:
             raise FcdError(f"{path} is empty")
@@ -165,3 +172,4 @@ def read_fcd(path: str | Path) -> Iterator[FcdStep]:
         raise FcdError(f"cannot read FCD file {path}: {exc}") from None
     finally:
         handle.close()
+        raw.close()
