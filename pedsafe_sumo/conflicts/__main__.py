@@ -131,12 +131,16 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         else None
     )
 
+    counts = {"collisions": 0, "geometry_artefacts": 0}
+
     def emit(row):
+        counts["collisions"] += bool(row["collision"])
+        counts["geometry_artefacts"] += bool(row["geometry_artefact"])
         table.write(row)
         if ssm is not None:
             ssm.write(row)
 
-    tracker = InteractionTracker(radius_m, sizes, emit, place)
+    tracker = InteractionTracker(radius_m, sizes, emit, place, place.meeting if place is not None else None)
     started = time.perf_counter()
     # Over the bytes of the file (as stored), shown on stderr only once a run has lasted PROGRESS_DELAY_S.
     bar = tqdm(
@@ -171,6 +175,7 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         "fcd_rows": tracker.vehicle_rows + tracker.person_rows,
         "interactions": tracker.interactions,
         "ssm_kept": ssm.kept if ssm is not None else 0,
+        **counts,
         "seconds": time.perf_counter() - started,
     }
 
@@ -186,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
         rate = summary["fcd_rows"] / summary["seconds"] if summary["seconds"] > 0 else math.inf
         print(
             f"{args.fcd}: {summary['steps']} timesteps, {summary['fcd_rows']} FCD rows, "
-            f"{summary['interactions']} interactions -> {args.out}"
+            f"{summary['interactions']} interactions ({summary['collisions']} collisions, "
+            f"{summary['geometry_artefacts']} geometry artefacts) -> {args.out}"
             + (f", {summary['ssm_kept']} in {args.ssm}" if args.ssm is not None else "")
             + f" ({summary['seconds']:.1f} s, {rate:,.0f} FCD rows/s)"
         )

@@ -8,6 +8,7 @@ What is read, per `<timestep time="..">`:
 - `<vehicle id x y angle type speed [lane] [length] [width]>`: x, y the middle of the front bumper,
   angle in degrees clockwise from north (SUMO's conventions; `--fcd-output.geo false`, the default).
 - `<person id x y angle type speed [edge] [length] [width]>`: a walking person; x, y taken as its centre.
+  Its edge is `edge`, else the edge of its `lane` where the file gives one instead.
   A person riding a vehicle (attribute `vehicle`) is not walking and is skipped.
 `length`/`width` attributes (written by `--fcd-output.params length,width` for road users carrying
 such parameters) take precedence over the sizes of the road user's type. Containers are ignored.
@@ -88,7 +89,10 @@ def _users(elements: list[ET.Element], place_attr: str, path: Path, time_s: floa
         a = e.attrib
         ids.append(a.get("id", ""))
         types.append(a.get("type", ""))
-        places.append(a.get(place_attr, ""))
+        place = a.get(place_attr)
+        if place is None and place_attr == "edge" and "lane" in a:
+            place = a["lane"].rpartition("_")[0]  # a person's lane: its edge is the id without "_<index>"
+        places.append(place or "")
         try:  # the fast path; the checks below name the attribute when it fails
             x[i], y[i], angle[i] = float(a["x"]), float(a["y"]), float(a["angle"])
             speed[i] = float(a.get("speed", 0.0))

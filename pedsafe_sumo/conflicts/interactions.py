@@ -68,7 +68,9 @@ ROW_COLUMNS = (
     "vehicle_speed_mps",
     "person_speed_mps",
     "min_clearance_m",
+    "meeting",
     "collision",
+    "geometry_artefact",
     "contact_time_s",
     "ttc_s",
     "ttc_time_s",
@@ -102,8 +104,9 @@ STRING_COLUMNS = (
     "person_edge",
     "lane_id",
     "crossing_id",
+    "meeting",
 )
-BOOL_COLUMNS = ("collision", "conflict")
+BOOL_COLUMNS = ("collision", "geometry_artefact", "conflict")
 
 
 @dataclass
@@ -120,6 +123,9 @@ class _Open:
 
 #: Finds the lane and the crossing at a point: (x_m, y_m) -> (lane_id, crossing_id); "" where none.
 PlaceLookup = Callable[[float, float], tuple[str, str]]
+#: Whether the network lets them meet: (vehicle lane, person edge) -> (kind of place, True / False / None
+#: for not known), `pedsafe_sumo.conflicts.meeting.MeetingRules`.
+MeetingLookup = Callable[[str, str], tuple[str, "bool | None"]]
 
 
 class InteractionTracker:
@@ -134,11 +140,13 @@ class InteractionTracker:
         sizes: SizeBook,
         emit: Callable[[dict[str, Any]], None],
         place: PlaceLookup | None = None,
+        meeting: MeetingLookup | None = None,
     ) -> None:
         self.radius_m = radius_m
         self.sizes = sizes
         self.emit = emit
         self.place = place
+        self.meeting = meeting
         self.open: dict[tuple[str, str], _Open] = {}
         self.steps = 0
         self.vehicle_rows = 0
@@ -198,7 +206,7 @@ class InteractionTracker:
     def _close(self, key: tuple[str, str]) -> None:
         record = self.open.pop(key)
         self.interactions += 1
-        self.emit(interaction_row(key[0], key[1], record, self.place))
+        self.emit(interaction_row(key[0], key[1], record, self.place, self.meeting))
 
 
 #: SUMO's SSM encounter type codes (SSM device documentation, "Encounter types") used for a vehicle and
@@ -227,7 +235,11 @@ def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -
 
 
 def interaction_row(
-    vehicle_id: str, person_id: str, record: _Open, place: PlaceLookup | None
+    vehicle_id: str,
+    person_id: str,
+    record: _Open,
+    place: PlaceLookup | None,
+    meeting: MeetingLookup | None = None,
 ) -> dict[str, Any]:
     """The output row of one finished interaction (ROW_COLUMNS)."""
     table = np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH)
@@ -257,6 +269,10 @@ def interaction_row(
         if m.contact_step is not None:
             drac = drac[: m.contact_step + 1]
         drac_step = int(np.nanargmax(drac))
+    # Judged where they touched first, else at the minimum clearance: a contact is a collision only where
+    # the network lets the two meet (docs/conflicts.md, "Where vehicles and persons meet").
+    judged = m.contact_step if m.contact_step is not None else k
+    meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
     encounter_type = math.nan
     if m.ttc_step is not None or drac_step is not None:
         encounter_type = float(_encounter_type(ex, ey, px, py, path_crossing))
@@ -287,7 +303,9 @@ def interaction_row(
         "vehicle_speed_mps": float(table[k, len(_STEP_COLUMNS)]),
         "person_speed_mps": float(table[k, len(_STEP_COLUMNS) + 1]),
         "min_clearance_m": m.min_clearance_m,
-        "collision": m.collision,
+        "meeting": meeting_kind,
+        "collision": m.collision and may_meet is not False,
+        "geometry_artefact": m.collision and may_meet is False,
         "contact_time_s": at(m.contact_step),
         "ttc_s": m.ttc_s,
         "ttc_time_s": at(m.ttc_step),

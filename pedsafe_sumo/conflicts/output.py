@@ -188,6 +188,7 @@ def ssm_conflict(row: dict[str, Any]) -> ElementTree.Element:
                 "position": _position(row["x_m"], row["y_m"]),
                 "value": str(r["min_clearance_m"]),
                 "collision": flag[bool(row["collision"])],
+                "geometryArtefact": flag[bool(row["geometry_artefact"])],
             },
         ),
         (

@@ -40,7 +40,7 @@ EXPECTED_SSM = """<?xml version="1.0" encoding="UTF-8"?>
         <minTTC time="1.50" position="10.00,-2.25" type="11" value="0.80" speed="3.00"/>
         <maxDRAC time="1.00" position="9.00,-2.50" type="11" value="5.25" speed="4.00"/>
         <PET time="NA" position="NA" type="NA" value="NA" speed="NA"/>
-        <minClearance time="2.00" position="11.00,-2.00" value="0.125" collision="true"/>
+        <minClearance time="2.00" position="11.00,-2.00" value="0.125" collision="true" geometryArtefact="false"/>
         <amini time="NA" md="NA" tmd="0.300" cs="4.000" probability="0.1235" conflict="false"/>
     </conflict>
 </SSMLog>
