@@ -94,6 +94,9 @@ ROW_COLUMNS = (
     "conflict_probability",
     "conflict",
     "conflict_time_s",
+    "fcd_period_s",
+    "vehicle_turn_deg",
+    "uncertain",
 )
 STRING_COLUMNS = (
     "vehicle_id",
@@ -106,7 +109,16 @@ STRING_COLUMNS = (
     "crossing_id",
     "meeting",
 )
-BOOL_COLUMNS = ("collision", "geometry_artefact", "conflict")
+BOOL_COLUMNS = ("collision", "geometry_artefact", "conflict", "uncertain")
+
+#: Above this FCD period the measures that extrapolate at constant velocity (TTC, DRAC, the Amini
+#: conflict) are not trusted for a turning vehicle. Stated assumption: a car at 14 m/s on a 10 m turning
+#: radius drifts d^2 / (2 R) from its path when extrapolated straight over d: 0.39 m after 0.2 s, under
+#: half a car width (0.9 m), but 9.8 m after 1 s.
+COARSE_PERIOD_S = 0.2
+#: A vehicle whose heading changes by more than this over the interaction is turning (stated
+#: assumption: lane changes and curve-following of a straight road stay below it).
+TURN_DEG = 10.0
 
 
 @dataclass
@@ -273,6 +285,11 @@ def interaction_row(
     # the network lets the two meet (docs/conflicts.md, "Where vehicles and persons meet").
     judged = m.contact_step if m.contact_step is not None else k
     meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
+    # On coarse FCD a turning vehicle extrapolated straight makes conflicts that are not there: flagged.
+    period_s = float(np.median(np.diff(t))) if len(t) > 1 else math.nan
+    turn_deg = float(np.degrees(np.ptp(np.unwrap(log[steplog.EGO_YAW]))))
+    extrapolated = m.conflict or math.isfinite(m.ttc_s)
+    uncertain = bool(not m.collision and extrapolated and period_s > COARSE_PERIOD_S and turn_deg > TURN_DEG)
     encounter_type = math.nan
     if m.ttc_step is not None or drac_step is not None:
         encounter_type = float(_encounter_type(ex, ey, px, py, path_crossing))
@@ -329,4 +346,7 @@ def interaction_row(
         "conflict_probability": m.conflict_probability,
         "conflict": m.conflict,
         "conflict_time_s": at(m.conflict_step),
+        "fcd_period_s": period_s,
+        "vehicle_turn_deg": turn_deg,
+        "uncertain": uncertain,
     }

@@ -200,6 +200,7 @@ def ssm_conflict(row: dict[str, Any]) -> ElementTree.Element:
                 "cs": str(r["cs_mps"]),
                 "probability": _value(row["conflict_probability"], 4),
                 "conflict": flag[bool(row["conflict"])],
+                "uncertain": flag[bool(row["uncertain"])],
             },
         ),
     )

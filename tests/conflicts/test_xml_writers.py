@@ -41,7 +41,7 @@ EXPECTED_SSM = """<?xml version="1.0" encoding="UTF-8"?>
         <maxDRAC time="1.00" position="9.00,-2.50" type="11" value="5.25" speed="4.00"/>
         <PET time="NA" position="NA" type="NA" value="NA" speed="NA"/>
         <minClearance time="2.00" position="11.00,-2.00" value="0.125" collision="true" geometryArtefact="false"/>
-        <amini time="NA" md="NA" tmd="0.300" cs="4.000" probability="0.1235" conflict="false"/>
+        <amini time="NA" md="NA" tmd="0.300" cs="4.000" probability="0.1235" conflict="false" uncertain="false"/>
     </conflict>
 </SSMLog>
 """  # noqa: E501
