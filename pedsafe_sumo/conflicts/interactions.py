@@ -237,6 +237,16 @@ def _nearest_step(x_m: np.ndarray, y_m: np.ndarray, point: tuple[float, float]) 
     return int(np.argmin(np.hypot(x_m - point[0], y_m - point[1])))
 
 
+def _turn_deg(yaw_rad: np.ndarray) -> float:
+    """How far the heading ranges over the steps, deg: the spread of the summed step-to-step turns
+    (each taken the short way round, so crossing +-180 deg is no turn)."""
+    if len(yaw_rad) < 2:
+        return 0.0
+    step = (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
+    heading = np.concatenate(([0.0], np.cumsum(step)))
+    return math.degrees(float(heading.max() - heading.min()))
+
+
 def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -> int:
     """SUMO's encounter type of the interaction's TTC and DRAC: who reaches the crossing of the two
     centre paths first, or FOLLOWING_FOLLOWER when the paths do not cross (the person on the car's path)."""
@@ -286,8 +296,8 @@ def interaction_row(
     judged = m.contact_step if m.contact_step is not None else k
     meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
     # On coarse FCD a turning vehicle extrapolated straight makes conflicts that are not there: flagged.
-    period_s = float(np.median(np.diff(t))) if len(t) > 1 else math.nan
-    turn_deg = float(np.degrees(np.ptp(np.unwrap(log[steplog.EGO_YAW]))))
+    period_s = float(t[-1] - t[0]) / (len(t) - 1) if len(t) > 1 else math.nan
+    turn_deg = _turn_deg(log[steplog.EGO_YAW])
     extrapolated = m.conflict or math.isfinite(m.ttc_s)
     uncertain = bool(not m.collision and extrapolated and period_s > COARSE_PERIOD_S and turn_deg > TURN_DEG)
     encounter_type = math.nan
