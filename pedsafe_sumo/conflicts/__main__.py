@@ -6,7 +6,8 @@
 
 Every pair of a vehicle and a walking person that come within the interaction radius gives one row
 per interaction (docs/conflicts.md): TTC, PET, DRAC, Amini MD/TMD/CS and its conflict flag, the
-minimum clearance, speeds, place and times. The file is read one timestep at a time. Bad input ends
+minimum clearance, speeds, place and times. The file is read one timestep at a time; a run that lasts
+more than a few seconds shows a progress bar over the file's bytes on stderr. Bad input ends
 in one line on stderr and exit status 2; an earlier output of the same name is left as it was.
 """
 
@@ -17,6 +18,8 @@ import math
 import sys
 import time
 from pathlib import Path
+
+from tqdm import tqdm
 
 from pedsafe_sumo.cli import OneLineParser, check_range
 from pedsafe_sumo.conflicts.fcd import FcdError, read_fcd
@@ -32,6 +35,8 @@ from pedsafe_sumo.settings import UsageError
 #: Every vehicle-pedestrian pair within the radius is followed step by step: a kilometre is beyond any
 #: sight line at a junction, and a larger radius only makes every pair of the file an interaction.
 MAX_RADIUS_M = 1000.0
+#: A run shorter than this shows no progress bar: a few seconds is when waiting without news starts.
+PROGRESS_DELAY_S = 3.0
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -66,7 +71,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--params", type=Path, metavar="FILE.toml", help="parameter file laid over the defaults"
     )
-    parser.add_argument("--quiet", action="store_true", help="no summary on stdout")
+    parser.add_argument(
+        "--quiet", action="store_true", help="no summary on stdout and no progress bar on stderr"
+    )
     return parser.parse_args(argv)
 
 
@@ -124,17 +131,37 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         else None
     )
 
+    counts = {"collisions": 0, "geometry_artefacts": 0}
+
     def emit(row):
+        counts["collisions"] += bool(row["collision"])
+        counts["geometry_artefacts"] += bool(row["geometry_artefact"])
         table.write(row)
         if ssm is not None:
             ssm.write(row)
 
-    tracker = InteractionTracker(radius_m, sizes, emit, place)
+    tracker = InteractionTracker(radius_m, sizes, emit, place, place.meeting if place is not None else None)
     started = time.perf_counter()
+    # Over the bytes of the file (as stored), shown on stderr only once a run has lasted PROGRESS_DELAY_S.
+    bar = tqdm(
+        total=args.fcd.stat().st_size,
+        unit="B",
+        unit_scale=True,
+        desc=args.fcd.name,
+        delay=PROGRESS_DELAY_S,
+        mininterval=1.0,
+        disable=args.quiet,
+        file=sys.stderr,
+    )
+
+    def advance(position: int) -> None:
+        bar.update(position - bar.n)
+
     try:
-        for step in read_fcd(args.fcd):
-            tracker.step(step)
-        tracker.finish()
+        with bar:
+            for step in read_fcd(args.fcd, progress=advance):
+                tracker.step(step)
+            tracker.finish()
     except BaseException:
         table.abort()
         if ssm is not None:
@@ -148,6 +175,7 @@ def run(args: argparse.Namespace) -> dict[str, float]:
         "fcd_rows": tracker.vehicle_rows + tracker.person_rows,
         "interactions": tracker.interactions,
         "ssm_kept": ssm.kept if ssm is not None else 0,
+        **counts,
         "seconds": time.perf_counter() - started,
     }
 
@@ -163,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
         rate = summary["fcd_rows"] / summary["seconds"] if summary["seconds"] > 0 else math.inf
         print(
             f"{args.fcd}: {summary['steps']} timesteps, {summary['fcd_rows']} FCD rows, "
-            f"{summary['interactions']} interactions -> {args.out}"
+            f"{summary['interactions']} interactions ({summary['collisions']} collisions, "
+            f"{summary['geometry_artefacts']} geometry artefacts) -> {args.out}"
             + (f", {summary['ssm_kept']} in {args.ssm}" if args.ssm is not None else "")
             + f" ({summary['seconds']:.1f} s, {rate:,.0f} FCD rows/s)"
         )

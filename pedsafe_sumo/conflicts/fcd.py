@@ -8,6 +8,7 @@ What is read, per `<timestep time="..">`:
 - `<vehicle id x y angle type speed [lane] [length] [width]>`: x, y the middle of the front bumper,
   angle in degrees clockwise from north (SUMO's conventions; `--fcd-output.geo false`, the default).
 - `<person id x y angle type speed [edge] [length] [width]>`: a walking person; x, y taken as its centre.
+  Its edge is `edge`, else the edge of its `lane` where the file gives one instead.
   A person riding a vehicle (attribute `vehicle`) is not walking and is skipped.
 `length`/`width` attributes (written by `--fcd-output.params length,width` for road users carrying
 such parameters) take precedence over the sizes of the road user's type. Containers are ignored.
@@ -18,7 +19,7 @@ from __future__ import annotations
 import gzip
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -88,7 +89,10 @@ def _users(elements: list[ET.Element], place_attr: str, path: Path, time_s: floa
         a = e.attrib
         ids.append(a.get("id", ""))
         types.append(a.get("type", ""))
-        places.append(a.get(place_attr, ""))
+        place = a.get(place_attr)
+        if place is None and place_attr == "edge" and "lane" in a:
+            place = a["lane"].rpartition("_")[0]  # a person's lane: its edge is the id without "_<index>"
+        places.append(place or "")
         try:  # the fast path; the checks below name the attribute when it fails
             x[i], y[i], angle[i] = float(a["x"]), float(a["y"]), float(a["angle"])
             speed[i] = float(a.get("speed", 0.0))
@@ -114,10 +118,12 @@ def _users(elements: list[ET.Element], place_attr: str, path: Path, time_s: floa
 
 
 def _open(path: Path):
+    """(the stream to parse, the file under it: its position is how far the reading has come)."""
     try:
+        raw = open(path, "rb")
         if path.suffix == ".gz":
-            return gzip.open(path, "rb")
-        return open(path, "rb")
+            return gzip.GzipFile(fileobj=raw, mode="rb"), raw
+        return raw, raw
     except FileNotFoundError:
         raise FcdError(f"FCD file not found: {path}") from None
     except IsADirectoryError:
@@ -126,10 +132,13 @@ def _open(path: Path):
         raise FcdError(f"cannot read FCD file {path}: {exc.strerror or exc}") from None
 
 
-def read_fcd(path: str | Path) -> Iterator[FcdStep]:
-    """Yield the timesteps of an FCD file in order; FcdError on a file that is not FCD or is broken."""
+def read_fcd(path: str | Path, progress: Callable[[int], None] | None = None) -> Iterator[FcdStep]:
+    """Yield the timesteps of an FCD file in order; FcdError on a file that is not FCD or is broken.
+
+    `progress(bytes)`, if given, is called after every timestep with how many bytes of the file (as
+    stored: compressed for .gz) have been read so far."""
     path = Path(path)
-    handle = _open(path)
+    handle, raw = _open(path)
     last_time_s = -math.inf
     root: ET.Element | None = None
     try:
@@ -156,6 +165,8 @@ def read_fcd(path: str | Path) -> Iterator[FcdStep]:
                 _users(persons, "edge", path, time_s),
             )
             root.clear()  # the timestep and everything before it: memory stays flat
+            if progress is not None:
+                progress(raw.tell())
             yield step
         if root is None:
             raise FcdError(f"{path} is empty")
@@ -165,3 +176,4 @@ def read_fcd(path: str | Path) -> Iterator[FcdStep]:
         raise FcdError(f"cannot read FCD file {path}: {exc}") from None
     finally:
         handle.close()
+        raw.close()

@@ -28,6 +28,7 @@ from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import first_polyline_crossing
 from pedsafe_sumo.safety.interaction import interaction_measures
+from pedsafe_sumo.safety.proximity import drac_steps_mps2
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
 #: Columns of the per-step buffer of an open interaction, in the log contract's names.
@@ -67,22 +68,35 @@ ROW_COLUMNS = (
     "vehicle_speed_mps",
     "person_speed_mps",
     "min_clearance_m",
+    "meeting",
     "collision",
+    "geometry_artefact",
     "contact_time_s",
     "ttc_s",
     "ttc_time_s",
     "ttc_x_m",
     "ttc_y_m",
+    "ttc_speed_mps",
     "pet_s",
+    "pet_time_s",
     "pet_x_m",
     "pet_y_m",
+    "pet_speed_mps",
     "drac_mps2",
+    "drac_time_s",
+    "drac_x_m",
+    "drac_y_m",
+    "drac_speed_mps",
+    "encounter_type",
     "md_m",
     "tmd_s",
     "cs_mps",
     "conflict_probability",
     "conflict",
     "conflict_time_s",
+    "fcd_period_s",
+    "vehicle_turn_deg",
+    "uncertain",
 )
 STRING_COLUMNS = (
     "vehicle_id",
@@ -93,8 +107,18 @@ STRING_COLUMNS = (
     "person_edge",
     "lane_id",
     "crossing_id",
+    "meeting",
 )
-BOOL_COLUMNS = ("collision", "conflict")
+BOOL_COLUMNS = ("collision", "geometry_artefact", "conflict", "uncertain")
+
+#: Above this FCD period the measures that extrapolate at constant velocity (TTC, DRAC, the Amini
+#: conflict) are not trusted for a turning vehicle. Stated assumption: a car at 14 m/s on a 10 m turning
+#: radius drifts d^2 / (2 R) from its path when extrapolated straight over d: 0.39 m after 0.2 s, under
+#: half a car width (0.9 m), but 9.8 m after 1 s.
+COARSE_PERIOD_S = 0.2
+#: A vehicle whose heading changes by more than this over the interaction is turning (stated
+#: assumption: lane changes and curve-following of a straight road stay below it).
+TURN_DEG = 10.0
 
 
 @dataclass
@@ -111,6 +135,9 @@ class _Open:
 
 #: Finds the lane and the crossing at a point: (x_m, y_m) -> (lane_id, crossing_id); "" where none.
 PlaceLookup = Callable[[float, float], tuple[str, str]]
+#: Whether the network lets them meet: (vehicle lane, person edge) -> (kind of place, True / False / None
+#: for not known), `pedsafe_sumo.conflicts.meeting.MeetingRules`.
+MeetingLookup = Callable[[str, str], tuple[str, "bool | None"]]
 
 
 class InteractionTracker:
@@ -125,11 +152,13 @@ class InteractionTracker:
         sizes: SizeBook,
         emit: Callable[[dict[str, Any]], None],
         place: PlaceLookup | None = None,
+        meeting: MeetingLookup | None = None,
     ) -> None:
         self.radius_m = radius_m
         self.sizes = sizes
         self.emit = emit
         self.place = place
+        self.meeting = meeting
         self.open: dict[tuple[str, str], _Open] = {}
         self.steps = 0
         self.vehicle_rows = 0
@@ -189,11 +218,50 @@ class InteractionTracker:
     def _close(self, key: tuple[str, str]) -> None:
         record = self.open.pop(key)
         self.interactions += 1
-        self.emit(interaction_row(key[0], key[1], record, self.place))
+        self.emit(interaction_row(key[0], key[1], record, self.place, self.meeting))
+
+
+#: SUMO's SSM encounter type codes (SSM device documentation, "Encounter types") used for a vehicle and
+#: a person: the vehicle comes up behind a person on its own path (no crossing of the two paths).
+FOLLOWING_FOLLOWER = 2
+#: The two centre paths cross and the vehicle reaches the crossing point first.
+CROSSING_LEADER = 10
+#: The two centre paths cross and the person reaches the crossing point first.
+CROSSING_FOLLOWER = 11
+#: The type SUMO gives a PET: both have passed the conflict area.
+BOTH_LEFT_CONFLICT_AREA = 17
+
+
+def _nearest_step(x_m: np.ndarray, y_m: np.ndarray, point: tuple[float, float]) -> int:
+    """The first step at which the track (x_m, y_m) is nearest to `point`."""
+    return int(np.argmin(np.hypot(x_m - point[0], y_m - point[1])))
+
+
+def _turn_deg(yaw_rad: np.ndarray) -> float:
+    """How far the heading ranges over the steps, deg: the spread of the summed step-to-step turns
+    (each taken the short way round, so crossing +-180 deg is no turn)."""
+    if len(yaw_rad) < 2:
+        return 0.0
+    step = (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
+    heading = np.concatenate(([0.0], np.cumsum(step)))
+    return math.degrees(float(heading.max() - heading.min()))
+
+
+def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -> int:
+    """SUMO's encounter type of the interaction's TTC and DRAC: who reaches the crossing of the two
+    centre paths first, or FOLLOWING_FOLLOWER when the paths do not cross (the person on the car's path)."""
+    if path_crossing is None:
+        return FOLLOWING_FOLLOWER
+    vehicle_first = _nearest_step(ex, ey, path_crossing) <= _nearest_step(px, py, path_crossing)
+    return CROSSING_LEADER if vehicle_first else CROSSING_FOLLOWER
 
 
 def interaction_row(
-    vehicle_id: str, person_id: str, record: _Open, place: PlaceLookup | None
+    vehicle_id: str,
+    person_id: str,
+    record: _Open,
+    place: PlaceLookup | None,
+    meeting: MeetingLookup | None = None,
 ) -> dict[str, Any]:
     """The output row of one finished interaction (ROW_COLUMNS)."""
     table = np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH)
@@ -203,19 +271,47 @@ def interaction_row(
     k = m.min_clearance_step
     x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
     lane_id, crossing_id = place(x_m, y_m) if place is not None else ("", "")
-    crossing = (
-        None
-        if m.collision
-        else first_polyline_crossing(
-            log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
-        )
-    )
+    vehicle_speed = table[:, len(_STEP_COLUMNS)]
+    ex, ey, px, py = log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
+    path_crossing = first_polyline_crossing(ex, ey, px, py)
+    # The encroachment point: where the two met for a contact, else where the centre paths cross.
+    point: tuple[float, float] | None
     if m.collision:
-        crossing = (float(log[steplog.PED_X][m.contact_step]), float(log[steplog.PED_Y][m.contact_step]))
-    has_pet = math.isfinite(m.pet_s)
+        point = (float(px[m.contact_step]), float(py[m.contact_step]))
+    else:
+        point = path_crossing if math.isfinite(m.pet_s) else None
+    pet_step = None
+    if m.collision:
+        pet_step = m.contact_step
+    elif point is not None:
+        pet_step = max(_nearest_step(ex, ey, point), _nearest_step(px, py, point))
+    drac_step = None
+    if math.isfinite(m.drac_mps2):
+        drac = drac_steps_mps2(log)
+        if m.contact_step is not None:
+            drac = drac[: m.contact_step + 1]
+        drac_step = int(np.nanargmax(drac))
+    # Judged where they touched first, else at the minimum clearance: a contact is a collision only where
+    # the network lets the two meet (docs/conflicts.md, "Where vehicles and persons meet").
+    judged = m.contact_step if m.contact_step is not None else k
+    meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
+    # On coarse FCD a turning vehicle extrapolated straight makes conflicts that are not there: flagged.
+    period_s = float(t[-1] - t[0]) / (len(t) - 1) if len(t) > 1 else math.nan
+    turn_deg = _turn_deg(log[steplog.EGO_YAW])
+    extrapolated = m.conflict or math.isfinite(m.ttc_s)
+    uncertain = bool(not m.collision and extrapolated and period_s > COARSE_PERIOD_S and turn_deg > TURN_DEG)
+    encounter_type = math.nan
+    if m.ttc_step is not None or drac_step is not None:
+        encounter_type = float(_encounter_type(ex, ey, px, py, path_crossing))
 
     def at(step: int | None) -> float:
         return float(t[step]) if step is not None else math.nan
+
+    def speed_at(step: int | None) -> float:
+        return float(vehicle_speed[step]) if step is not None else math.nan
+
+    def person_at(step: int | None) -> tuple[float, float]:
+        return (float(px[step]), float(py[step])) if step is not None else (math.nan, math.nan)
 
     return {
         "vehicle_id": vehicle_id,
@@ -234,20 +330,33 @@ def interaction_row(
         "vehicle_speed_mps": float(table[k, len(_STEP_COLUMNS)]),
         "person_speed_mps": float(table[k, len(_STEP_COLUMNS) + 1]),
         "min_clearance_m": m.min_clearance_m,
-        "collision": m.collision,
+        "meeting": meeting_kind,
+        "collision": m.collision and may_meet is not False,
+        "geometry_artefact": m.collision and may_meet is False,
         "contact_time_s": at(m.contact_step),
         "ttc_s": m.ttc_s,
         "ttc_time_s": at(m.ttc_step),
-        "ttc_x_m": float(log[steplog.PED_X][m.ttc_step]) if m.ttc_step is not None else math.nan,
-        "ttc_y_m": float(log[steplog.PED_Y][m.ttc_step]) if m.ttc_step is not None else math.nan,
+        "ttc_x_m": person_at(m.ttc_step)[0],
+        "ttc_y_m": person_at(m.ttc_step)[1],
+        "ttc_speed_mps": speed_at(m.ttc_step),
         "pet_s": m.pet_s,
-        "pet_x_m": crossing[0] if has_pet and crossing else math.nan,
-        "pet_y_m": crossing[1] if has_pet and crossing else math.nan,
+        "pet_time_s": at(pet_step),
+        "pet_x_m": point[0] if point is not None else math.nan,
+        "pet_y_m": point[1] if point is not None else math.nan,
+        "pet_speed_mps": speed_at(pet_step),
         "drac_mps2": m.drac_mps2,
+        "drac_time_s": at(drac_step),
+        "drac_x_m": person_at(drac_step)[0],
+        "drac_y_m": person_at(drac_step)[1],
+        "drac_speed_mps": speed_at(drac_step),
+        "encounter_type": encounter_type,
         "md_m": m.md_m,
         "tmd_s": m.tmd_s,
         "cs_mps": m.cs_mps,
         "conflict_probability": m.conflict_probability,
         "conflict": m.conflict,
         "conflict_time_s": at(m.conflict_step),
+        "fcd_period_s": period_s,
+        "vehicle_turn_deg": turn_deg,
+        "uncertain": uncertain,
     }

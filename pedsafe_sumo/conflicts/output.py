@@ -16,7 +16,12 @@ from xml.etree import ElementTree
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pedsafe_sumo.conflicts.interactions import BOOL_COLUMNS, ROW_COLUMNS, STRING_COLUMNS
+from pedsafe_sumo.conflicts.interactions import (
+    BOOL_COLUMNS,
+    BOTH_LEFT_CONFLICT_AREA,
+    ROW_COLUMNS,
+    STRING_COLUMNS,
+)
 
 #: Rows per Parquet row group.
 ROW_GROUP_ROWS = 4096
@@ -108,6 +113,11 @@ def _value(value: float, digits: int = 2) -> str:
     return "NA" if not math.isfinite(value) else f"{value:.{digits}f}"
 
 
+def _code(value: float) -> str:
+    """An SSM encounter type code as SUMO writes it (an integer), "NA" where there is none."""
+    return "NA" if not math.isfinite(value) else str(int(value))
+
+
 def _position(x_m: float, y_m: float) -> str:
     return "NA" if not (math.isfinite(x_m) and math.isfinite(y_m)) else f"{x_m:.2f},{y_m:.2f}"
 
@@ -139,17 +149,38 @@ def ssm_conflict(row: dict[str, Any]) -> ElementTree.Element:
             "foeType": str(row["person_type"]),
         },
     )
+    encounter = _code(row["encounter_type"])
     children = (
         (
             "minTTC",
             {
                 "time": _value(row["ttc_time_s"]),
                 "position": _position(row["ttc_x_m"], row["ttc_y_m"]),
+                "type": encounter if math.isfinite(row["ttc_s"]) else "NA",
                 "value": _value(row["ttc_s"]),
+                "speed": _value(row["ttc_speed_mps"]),
             },
         ),
-        ("maxDRAC", {"value": _value(row["drac_mps2"])}),
-        ("PET", {"position": _position(row["pet_x_m"], row["pet_y_m"]), "value": _value(row["pet_s"])}),
+        (
+            "maxDRAC",
+            {
+                "time": _value(row["drac_time_s"]),
+                "position": _position(row["drac_x_m"], row["drac_y_m"]),
+                "type": encounter if math.isfinite(row["drac_mps2"]) else "NA",
+                "value": _value(row["drac_mps2"]),
+                "speed": _value(row["drac_speed_mps"]),
+            },
+        ),
+        (
+            "PET",
+            {
+                "time": _value(row["pet_time_s"]),
+                "position": _position(row["pet_x_m"], row["pet_y_m"]),
+                "type": str(BOTH_LEFT_CONFLICT_AREA) if math.isfinite(row["pet_s"]) else "NA",
+                "value": _value(row["pet_s"]),
+                "speed": _value(row["pet_speed_mps"]),
+            },
+        ),
         (
             "minClearance",
             {
@@ -157,6 +188,7 @@ def ssm_conflict(row: dict[str, Any]) -> ElementTree.Element:
                 "position": _position(row["x_m"], row["y_m"]),
                 "value": str(r["min_clearance_m"]),
                 "collision": flag[bool(row["collision"])],
+                "geometryArtefact": flag[bool(row["geometry_artefact"])],
             },
         ),
         (
@@ -168,6 +200,7 @@ def ssm_conflict(row: dict[str, Any]) -> ElementTree.Element:
                 "cs": str(r["cs_mps"]),
                 "probability": _value(row["conflict_probability"], 4),
                 "conflict": flag[bool(row["conflict"])],
+                "uncertain": flag[bool(row["uncertain"])],
             },
         ),
     )
@@ -180,8 +213,8 @@ class SsmWriter(_Staged):
     """Interactions in the layout of SUMO's SSM device output (`--device.ssm.file`).
 
     One `<conflict begin end ego foe>` per kept interaction, the vehicle as ego and the person as foe,
-    with SUMO's `minTTC`, `maxDRAC` and `PET` elements (time, position "x,y", value; "NA" where the
-    measure does not exist) and two more for the pedestrian measures: `minClearance` and `amini`
+    with SUMO's `minTTC`, `maxDRAC` and `PET` elements (time, position "x,y", type, value, speed; "NA"
+    where the measure does not exist) and two more for the pedestrian measures: `minClearance` and `amini`
     (MD, TMD, CS, probability and the conflict flag). An interaction is kept when it meets one of the
     thresholds or has a conflict or a contact.
     """

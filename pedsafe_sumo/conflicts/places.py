@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import sumolib
 
+from pedsafe_sumo.conflicts.meeting import MeetingRules
 from pedsafe_sumo.sumo_net import read_net
 
 #: Search radius around the point for lanes, m: wider than any lane, so a point on a lane finds it.
@@ -32,6 +33,7 @@ class PlaceFinder:
             raise NetError(f"cannot read network {path}: {exc}") from None
         if not self.net.getEdges():
             raise NetError(f"network {path} has no edges")
+        self.meeting = MeetingRules(self.net)
         # Without the rtree package, sumolib's getNeighboringLanes falls back to a brute-force search
         # that first appends every lane of the net to a list it keeps (Net._allLanes) on every call:
         # about 1 kB per interaction on Xueqing (135 lanes), 47 MB over the 43,330 interactions of an

@@ -17,11 +17,16 @@ passes (t = 0.5 to 2.0 s) and walks on from t = 2.5 s, reaching y = 0 at t = 4.5
   (difference 0.5 <= 3 s: a candidate). MD = |dp x dv| / |dv| = |20 * 1 - 2.5 * 10| / sqrt(101) = 0.49752,
   TMD = -(dp.dv) / |dv|^2 = 202.5 / 101 = 2.00495 s, CS = 10 m/s,
   p = sigmoid(4.327 - 2.898 MD - 3.067 TMD + 0.376 * 10) = 0.62152 >= 0.425: a conflict at t = 0.
+- SSM fields: the only step with a TTC is t = 0, so minTTC and maxDRAC are both at t = 0, at the walker's
+  position (20, -2.5), car speed 10 m/s. The car's centre is nearest the path crossing (20, 0) at t = 2.0 s,
+  the walker at t = 4.5 s: the car is first, SUMO's type 10 (CROSSING_LEADER). The PET's time is the
+  step the second one (the walker) is there, t = 4.5 s, car speed 10 m/s, type 17 (BOTH_LEFT_CONFLICT_AREA).
 
 The stander stands at (40, 0) on the car's path: contact when the front face reaches 39.75 m (centre
 37.75 m, t = 3.775 s), first logged at t = 4.0 s (clearance -1 - 0.25 = -1.25 m). TTC at t = 3.5 s is
-(5 - 2.25) / 10 = 0.275 s, so DRAC = 10 / 0.55 = 18.18 m/s2; TTC 0 at the contact step; PET 0; no
-conflict (a standing pedestrian has no path).
+(5 - 2.25) / 10 = 0.275 s, so DRAC = 10 / 0.55 = 18.18 m/s2 (its largest, at t = 3.5 s, the stander at
+(40, 0)); TTC 0 at the contact step; PET 0 at the contact, t = 4.0 s, at (40, 0); no conflict (a standing
+pedestrian has no path). The paths never cross (the stander does not move): type 2 (FOLLOWING_FOLLOWER).
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import xml.etree.ElementTree as ET
 
 import pandas as pd
 import pytest
+import sumolib.xml
 from fcd_files import TYPES_XML, stander, walker, write_fcd
 
 from pedsafe_sumo.conflicts.__main__ import main
@@ -104,6 +110,73 @@ def test_ssm_xml_holds_the_same_measures(scene, tmp_path):
     assert walker_c.find("maxDRAC").get("value") == "2.82"
     assert walker_c.find("amini").get("conflict") == "true"
     assert conflicts["stander"].find("minClearance").get("collision") == "true"
+
+
+#: The attributes SUMO's SSM device documents on each measure element of a <conflict>.
+SSM_MEASURE_ATTRIBUTES = ("time", "position", "type", "value", "speed")
+
+
+def test_ssm_xml_reads_as_sumos_ssm_output(scene, tmp_path):
+    """Read the way a script written for SUMO's SSM device reads its output: sumolib.xml.parse on
+    'conflict', every documented attribute of minTTC, maxDRAC and PET, values worked out above."""
+    fcd, types = scene
+    ssm = tmp_path / "out.ssm.xml"
+    assert run(fcd, "--out", tmp_path / "out.csv", "--types", types, "--ssm", ssm) == 0
+    read = {}
+    for conflict in sumolib.xml.parse(str(ssm), "conflict"):
+        measures = {}
+        for tag in ("minTTC", "maxDRAC", "PET"):
+            element = getattr(conflict, tag)[0]
+            measures[tag] = {name: element.getAttribute(name) for name in SSM_MEASURE_ATTRIBUTES}
+        read[conflict.foe] = (conflict.begin, conflict.end, conflict.ego, measures)
+    begin, end, ego, walker_m = read["walker"]
+    assert (begin, end, ego) == ("0.00", "5.00", "car")
+    assert walker_m["minTTC"] == {
+        "time": "0.00",
+        "position": "20.00,-2.50",
+        "type": "10",
+        "value": "1.77",
+        "speed": "10.00",
+    }
+    assert walker_m["maxDRAC"] == {
+        "time": "0.00",
+        "position": "20.00,-2.50",
+        "type": "10",
+        "value": f"{10 / 3.55:.2f}",
+        "speed": "10.00",
+    }
+    assert walker_m["PET"] == {
+        "time": "4.50",
+        "position": "20.00,0.00",
+        "type": "17",
+        "value": "2.05",
+        "speed": "10.00",
+    }
+    _, _, _, stander_m = read["stander"]
+    assert stander_m["minTTC"] == {
+        "time": "4.00",
+        "position": "40.00,0.00",
+        "type": "2",
+        "value": "0.00",
+        "speed": "10.00",
+    }
+    assert stander_m["maxDRAC"] == {
+        "time": "3.50",
+        "position": "40.00,0.00",
+        "type": "2",
+        "value": f"{10 / 0.55:.2f}",
+        "speed": "10.00",
+    }
+    assert stander_m["PET"] == {
+        "time": "4.00",
+        "position": "40.00,0.00",
+        "type": "17",
+        "value": "0.00",
+        "speed": "10.00",
+    }
+    # the numbers as a script would convert them
+    assert float(walker_m["maxDRAC"]["value"]) == pytest.approx(2.82, abs=1e-9)
+    assert int(stander_m["PET"]["type"]) == 17
 
 
 def test_sizes_from_element_attributes_and_defaults(tmp_path):

@@ -37,11 +37,11 @@ EXPECTED_SSM = """<?xml version="1.0" encoding="UTF-8"?>
 <!-- pedsafe_sumo.conflicts: pedestrian-vehicle interactions (docs/conflicts.md) -->
 <SSMLog>
     <conflict begin="1.00" end="NA" ego="car&lt;&amp;&quot;'" foe="ped" egoType="passenger" foeType="DEFAULT_PEDTYPE">
-        <minTTC time="1.50" position="10.00,-2.25" value="0.80"/>
-        <maxDRAC value="5.25"/>
-        <PET position="NA" value="NA"/>
-        <minClearance time="2.00" position="11.00,-2.00" value="0.125" collision="true"/>
-        <amini time="NA" md="NA" tmd="0.300" cs="4.000" probability="0.1235" conflict="false"/>
+        <minTTC time="1.50" position="10.00,-2.25" type="11" value="0.80" speed="3.00"/>
+        <maxDRAC time="1.00" position="9.00,-2.50" type="11" value="5.25" speed="4.00"/>
+        <PET time="NA" position="NA" type="NA" value="NA" speed="NA"/>
+        <minClearance time="2.00" position="11.00,-2.00" value="0.125" collision="true" geometryArtefact="false"/>
+        <amini time="NA" md="NA" tmd="0.300" cs="4.000" probability="0.1235" conflict="false" uncertain="false"/>
     </conflict>
 </SSMLog>
 """  # noqa: E501
@@ -118,7 +118,13 @@ def test_ssm_writer_gives_the_file_of_sumos_layout(tmp_path):
         ttc_x_m=10.0,
         ttc_y_m=-2.25,
         ttc_s=0.8,
+        ttc_speed_mps=3.0,
         drac_mps2=5.25,
+        drac_time_s=1.0,
+        drac_x_m=9.0,
+        drac_y_m=-2.5,
+        drac_speed_mps=4.0,
+        encounter_type=11.0,
         time_s=2.0,
         x_m=11.0,
         y_m=-2.0,
