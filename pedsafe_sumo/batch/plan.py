@@ -153,6 +153,11 @@ def prepare(args: argparse.Namespace) -> Plan:
     # skipped, when one cannot be staged.
     named = protocol is not None or (scenario != "all" and arguments["approach"] != "all")
     if recorded is None:
+        # A new run is bounded before its episodes are staged (the check stages every one of them).
+        total, count_text = episode_count(
+            scenarios, conditions, arguments, _sampler_identity(arguments, scenarios)
+        )
+        check_run_count(total, args.max_runs, count_text)
         scenarios, specs, unstageable = stageable_units(site, params, specs, scenarios, arguments, named)
     else:  # a resumed run skips what its start skipped (the site's files are checked to be the same)
         unstageable = recorded.get("skipped_unstageable", {})

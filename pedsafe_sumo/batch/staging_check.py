@@ -76,7 +76,10 @@ def unstageable_units(
     """Unit -> why one of its episodes cannot be staged (the first seed that fails), for the units of
     `specs` over episodes 0..`episodes`-1 of run `run_seed`. Says so when it is expected to take longer
     than PROGRESS_AFTER_S, then every PROGRESS_EVERY_S how far it is."""
-    runner = EpisodeRunner(site, params, BaselineStack)  # no episode runs: no stack is started
+    try:
+        runner = EpisodeRunner(site, params, BaselineStack)  # no episode runs: no stack is started
+    except ValueError as exc:  # the site's own approach cannot be read: no episode of it can be staged
+        return {unit: str(exc) for unit in specs}
     try:
         # Internal lanes too: a turning scenario may stage a vehicle inside the junction.
         net = read_net(str(site.file("net.xml")), withInternal=True)

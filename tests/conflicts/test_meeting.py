@@ -25,6 +25,7 @@ from matplotlib.path import Path as PolygonPath
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.conflicts.__main__ import main
+from pedsafe_sumo.sumo_net import read_net
 
 NET = REPO_ROOT / "networks" / "xueqing" / "xueqing.net.xml"
 TURN = ":11799850922_0_0"
@@ -39,7 +40,7 @@ TYPES = (
 
 @pytest.fixture(scope="module")
 def net():
-    return sumolib.net.readNet(str(NET), withInternal=True, withPedestrianConnections=True)
+    return read_net(NET, withInternal=True, withPedestrianConnections=True)
 
 
 def navi_angle_deg(dx: float, dy: float) -> float:
