@@ -30,6 +30,15 @@ from pedsafe_sumo.scenarios.walkways import polyline_length_m, shape_between
 #: the ego's signal run, they appear this much later than the run's start would allow at the earliest,
 #: so that the window of start times is an interval, not an instant (a thousandth of a step) [s].
 SIGNAL_FIT_MARGIN_S = 1e-3
+#: Approach staging, ped_signal_hold "step_off": how long after the planned step-off the pedestrian's
+#: signal still shows `ped_signal` [s]. Measured: SUMO's step-off lags the plan by 0.05-0.15 s (1-3
+#: steps); without the hold, 4 of 100 right_turn episodes of protocol approach-v2 stepped off on red just
+#: after their walk ended. 0.5 s covers that lag several times over.
+STEP_OFF_HOLD_S = 0.5
+#: Approach staging: when no point of the cycle fits even with the pedestrian appearing as late as the
+#: ego's longest signal run allows, later appearances along the same walk-in are tried in these steps [s]
+#: (the walk signal inside the ego's green can be the tighter bound: a step-off held past the walk's end).
+APPEAR_LATER_STEP_S = 0.25
 
 
 def draw_episode(
@@ -197,6 +206,15 @@ def _fit_approach(
             required = _required_signals(spec, later, junction, ego_link, ped_link, until_s, leaders)
             if cycle_start_windows(junction.program, required, until_s):
                 return later, required
+    # Later still, along the same walk-in, until a point of the cycle fits or the walk-in is used up.
+    base = later if later is not None else setup
+    appear_s = base.pedestrian.appear_time_s + APPEAR_LATER_STEP_S
+    while (later_still := appear_later(spec, base, appear_s)) is not None:
+        for leaders in (True, False) if _leaders(setup) else (True,):
+            required = _required_signals(spec, later_still, junction, ego_link, ped_link, until_s, leaders)
+            if cycle_start_windows(junction.program, required, until_s):
+                return later_still, required
+        appear_s += APPEAR_LATER_STEP_S
     if later is not None:
         setup = later
     return setup, _required_signals(spec, setup, junction, ego_link, ped_link, until_s)
@@ -234,6 +252,11 @@ def _required_signals(
     if ped_link != NO_LINK:
         step_off_s = min(step_off_time_s(setup.pedestrian), until_s)
         ped_until_s = until_s if spec.ped_signal_hold == "conflict" else step_off_s
+        if spec.ped_signal_hold == "step_off" and spec.staging == "approach":
+            # SUMO's pedestrian steps off up to 3 steps after the planned moment: their signal holds a
+            # little past it, so that they really step off on it. (The fixed staging, which protocol
+            # paper-v7 runs, holds it at the planned moment only.)
+            ped_until_s = min(step_off_s + STEP_OFF_HOLD_S, until_s)
         required[ped_link] = (spec.ped_signal, step_off_s, ped_until_s)
     # A vehicle coming the other way through the junction (left_turn's oncoming vehicle) has green too,
     # from its stop line on (from the start in the fixed staging, which starts it on the junction).

@@ -12,14 +12,16 @@ import numpy as np
 import pytest
 import sumolib
 
+from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.control.reference import ReferenceStack
 from pedsafe_sumo.network.sites import get_site
 from pedsafe_sumo.params import load_params
+from pedsafe_sumo.protocol import load_protocol
 from pedsafe_sumo.sampling.draws import Draws
 from pedsafe_sumo.scenarios.geometry import load_approach, load_turn
 from pedsafe_sumo.scenarios.hosting import staging_problem
 from pedsafe_sumo.scenarios.oncoming import load_oncoming
-from pedsafe_sumo.scenarios.signals import load_junction_signals
+from pedsafe_sumo.scenarios.signals import colour_of, load_junction_signals
 from pedsafe_sumo.scenarios.specs import get_scenario
 from pedsafe_sumo.scenarios.staging import draw_episode, stage_signals
 from pedsafe_sumo.sumo_net import read_net
@@ -419,3 +421,40 @@ def test_a_slow_ego_s_leader_crosses_on_the_previous_phase_only_when_no_green_ho
             walk = program.colour(ped_link, (start_s + step_off_s) % program.cycle_s) == "green"
             assert not (holds and walk), f"seed {seed}: cycle start {start_s:.1f} s would hold the leader's"
     assert dropped == 20
+
+
+#: Seeds of protocol approach-v2's right_turn episodes 12, 17, 31 and 58, whose pedestrian stepped off in
+#: SUMO 1-3 steps after the planned moment, after their walk signal had ended, when the signal was held
+#: only to the planned moment.
+LATE_STEP_OFF_SEEDS = (3476010160, 2885966179, 3733510537, 3237545260)
+
+
+@pytest.mark.slow
+def test_the_pedestrian_steps_off_on_walk_though_sumo_steps_them_off_late():
+    """Approach staging, ped_signal_hold "step_off": their signal shows walk from the planned step-off
+    through the STEP_OFF_HOLD_S (0.5 s) after it, and at the step SUMO starts them moving from the kerb."""
+    from pedsafe_sumo.sim.episode import EpisodeRunner  # the engine: only for this test
+
+    protocol = load_protocol(REPO_ROOT / "protocols" / "approach-v2.toml")
+    spec = protocol.specs()["right_turn"]
+    assert spec.staging == "approach" and spec.ped_signal_hold == "step_off"
+    runner = EpisodeRunner(get_site("xueqing"), protocol.params(), ReferenceStack)
+    try:
+        for seed in LATE_STEP_OFF_SEEDS:
+            setup = runner.draw_setup(spec, seed)
+            planned_s = _at_kerb_s(setup) + setup.pedestrian.start_delay_s
+            colours: list[tuple[float, str, float]] = []
+
+            def hook(api, row, colours=colours, setup=setup):
+                state = api.trafficlight.getRedYellowGreenState(setup.signals.tls_id)
+                colour = colour_of(state[setup.signals.ped_link_index])
+                speed_mps = math.hypot(float(row["ped_vx_mps"]), float(row["ped_vy_mps"]))
+                colours.append((float(row["time_s"]), colour, speed_mps))
+
+            runner.run(spec, "sv", seed, setup=setup, on_step=hook)
+            window = [(t, c) for t, c, _ in colours if planned_s - 1e-6 <= t <= planned_s + 0.5 - 1e-6]
+            assert window and all(c == "green" for _, c in window), (seed, planned_s, window)
+            moving = [(t, c) for t, c, v in colours if t >= planned_s - 1e-6 and v > 0.1]
+            assert moving and moving[0][1] == "green", (seed, planned_s, moving[:3])
+    finally:
+        runner.close()
