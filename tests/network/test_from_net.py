@@ -135,6 +135,9 @@ def test_a_crossing_batch_on_a_plain_network_runs_with_its_signals(ingolstadt_si
     assert len(rows) == 4
     assert rows["error"].isna().all() or (rows["error"].fillna("") == "").all(), rows["error"].tolist()
     assert (rows["ego_signal"] != "none").all() and (rows["ego_signal"] == "green").all()
+    # The site's roadside camera, placed by the build, is what first detects the pedestrian under V2I.
+    v2i = rows[rows["condition"] == "v2i"]
+    assert (v2i["detected_by"] == "roadside").any(), v2i["detected_by"].tolist()
     # Every other command on the run and the site: report, replay, conflicts on the replay's FCD.
     report = _run("-m", "pedsafe_sumo.report", str(run))
     assert report.returncode == 0, report.stderr
