@@ -86,6 +86,36 @@ class BuildReport:
     signal_nodes: list | None = None
 
 
+def stage_poles_and_views(
+    stage: Path,
+    name: str,
+    net,
+    group,
+    junction,
+    rsu_watch_arm: str,
+    rsu_corner: str | None,
+    hosting_scorer,
+) -> tuple[str, list, dict]:
+    """The site's roadside poles (one per approach), sumo-gui view and SUMO configuration written into
+    `stage` around `junction`: (the corner of the watched approach's pole, the poles, the approaches'
+    info). A junction several lights control is refused first (BuildError): it cannot be staged (one
+    program per episode), and the poles' scorer stages the scenarios."""
+    rsu_corner = rsu_corner or kerb_corner(leg_named(junction_legs(group), rsu_watch_arm))
+    approaches = approach_nodes(net, group, rsu_watch_arm, junction)
+    several = junctions_problem(
+        stage / f"{name}.net.xml", [junction.getID(), *(n.getID() for n in approaches.values())]
+    )
+    if several:
+        raise BuildError(several)
+    rsu_units, approach_info = place_approach_poles(
+        stage, name, net, approaches, rsu_corner, rsu_watch_arm, f"{name}.poly.xml", hosting_scorer
+    )
+    write_rsu(stage / f"{name}.rsu.add.xml", rsu_units)
+    write_view(stage / f"{name}.view.xml", junction.getCoord())
+    write_sumocfg(stage / f"{name}.sumocfg", name)
+    return rsu_corner, rsu_units, approach_info
+
+
 def build_site(
     osm_path: Path,
     center_lat: float,
@@ -135,21 +165,9 @@ def build_site(
         dropped_underground = convert_polygons(stage, net_file, staged_osm.name, poly_file)
         net = _read_network(stage / net_file, net_from or net_file)
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)
-        rsu_corner = rsu_corner or kerb_corner(leg_named(junction_legs(group), rsu_watch_arm))
-        approaches = approach_nodes(net, group, rsu_watch_arm, junction)
-        # A junction several lights control cannot be staged (one program per episode): refused before the
-        # poles are placed (their scorer stages the scenarios).
-        several = junctions_problem(
-            stage / net_file, [junction.getID(), *(n.getID() for n in approaches.values())]
+        rsu_corner, rsu_units, approach_info = stage_poles_and_views(
+            stage, name, net, group, junction, rsu_watch_arm, rsu_corner, hosting_scorer
         )
-        if several:
-            raise BuildError(several)
-        rsu_units, approach_info = place_approach_poles(
-            stage, name, net, approaches, rsu_corner, rsu_watch_arm, poly_file, hosting_scorer
-        )
-        write_rsu(stage / rsu_file, rsu_units)
-        write_view(stage / f"{name}.view.xml", junction.getCoord())
-        write_sumocfg(stage / f"{name}.sumocfg", name)
         products = [net_file, poly_file, rsu_file, f"{name}.view.xml", f"{name}.sumocfg"]
         finish_products(stage, products, net_file, derived=(poly_file, rsu_file))
         defaults = lane_defaults(

@@ -32,19 +32,15 @@ from pathlib import Path
 import sumolib
 
 from pedsafe_sumo.network.approaches import (
-    approach_nodes,
     choose_approach,
     junction_legs,
-    kerb_corner,
-    leg_named,
     signal_group,
 )
-from pedsafe_sumo.network.build import BuildReport
+from pedsafe_sumo.network.build import BuildReport, stage_poles_and_views
 from pedsafe_sumo.network.errors import BuildError
-from pedsafe_sumo.network.poles import HostingScorer, place_approach_poles, write_rsu
-from pedsafe_sumo.network.site_files import commit_staged, relative_to, write_sumocfg, write_view
+from pedsafe_sumo.network.poles import HostingScorer
+from pedsafe_sumo.network.site_files import commit_staged, relative_to
 from pedsafe_sumo.network.sites import DERIVED_MARKER, content_digest, derived_marker
-from pedsafe_sumo.network.traffic_lights import junctions_problem
 from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand
 from pedsafe_sumo.sumo_net import read_net
 
@@ -116,19 +112,9 @@ def build_site_from_net(
             raise BuildError(walkways)
         _stage_polygons(stage / poly_file, polygons, polygons_text)
         junction, rsu_watch_arm = _approach(net, group, rsu_watch_arm)
-        rsu_corner = rsu_corner or kerb_corner(leg_named(junction_legs(group), rsu_watch_arm))
-        approaches = approach_nodes(net, group, rsu_watch_arm, junction)
-        several = junctions_problem(
-            stage / net_file, [junction.getID(), *(n.getID() for n in approaches.values())]
+        rsu_corner, rsu_units, approach_info = stage_poles_and_views(
+            stage, name, net, group, junction, rsu_watch_arm, rsu_corner, hosting_scorer
         )
-        if several:
-            raise BuildError(several)
-        rsu_units, approach_info = place_approach_poles(
-            stage, name, net, approaches, rsu_corner, rsu_watch_arm, poly_file, hosting_scorer
-        )
-        write_rsu(stage / rsu_file, rsu_units)
-        write_view(stage / f"{name}.view.xml", junction.getCoord())
-        write_sumocfg(stage / f"{name}.sumocfg", name)
         marker = derived_marker(stage / net_file)
         for derived in (poly_file, rsu_file):
             _insert_marker(stage / derived, marker)
