@@ -46,8 +46,8 @@ def _edges(net: ET.Element) -> dict[str, tuple[str, str, int]]:
 def test_the_build_from_the_extract_gives_the_committed_network(tmp_path):
     out = tmp_path / NAME
     proc = subprocess.run(
-        [sys.executable, str(TOOL), "--osm", str(SOURCE), f"--center={CENTRE[0]},{CENTRE[1]}", "--radius", "220",
-         "--name", NAME, "--out", str(out), "--osm-out", str(tmp_path / f"{NAME}.osm")],
+        [sys.executable, str(TOOL), "--osm", str(SOURCE), f"--center={CENTRE[0]},{CENTRE[1]}",
+         "--radius", "220", "--name", NAME, "--out", str(out), "--osm-out", str(tmp_path / f"{NAME}.osm")],
         capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -82,7 +82,7 @@ def test_the_junction_is_where_osm_puts_its_signals_and_one_light_controls_its_l
     finally:
         libsumo.close()
     main = min(junctions, key=lambda j: math.dist(junctions[j], (x, y)))
-    # the signal nodes span a divided-road junction about 60 m across: its cluster is within 20 m of their centre
+    # the signal nodes span a divided-road junction ~60 m across: its cluster is within 20 m of their centre
     assert math.dist(junctions[main], (x, y)) < 20.0
     assert main == json.loads((FOLDER / f"{NAME}.site.json").read_text())["main_junction"]
     assert len(controlling) == 1
