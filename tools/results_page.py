@@ -1,0 +1,215 @@
+"""Write a study's results page (Markdown, with figures) from its protocol runs and sensitivity sweeps.
+
+    python tools/results_page.py --run "Xueqing, reference=results/paper-v8-xueqing" \\
+        --run "Xueqing, human driver=results/paper-v8-xueqing-human" \\
+        --sweep results/paper-v8-xueqing-reaction --sweep results/paper-v8-xueqing-deceleration \\
+        --out docs/results.md --figures docs/figures/results
+
+For each run (LABEL=DIR, a batch run directory, finished or not: a run still going is read from its
+finished chunks and the page says how far it is): Table I beside the paper's (the paper's three
+scenarios), whether each collision interval meets the study's precision target (half-width under a third
+of the rate, or under 0.005), the paired SV/V2I tests, the first-detection and impact-speed figures, the
+injury curves, and the paper's four qualitative findings on its point estimates. For each sweep
+(python -m pedsafe_sumo.sweep's --out): the findings in each combination, so that every verdict on the
+page shows the settings under which it holds. Nothing on the page is typed by hand: rerun the tool when
+the runs have grown.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from pedsafe_sumo.report.__main__ import draw_figure  # noqa: E402
+from pedsafe_sumo.report.findings import FINDINGS, paper_findings  # noqa: E402
+from pedsafe_sumo.report.impact import AGES_AT_REST, eq4_at_rest  # noqa: E402
+from pedsafe_sumo.report.rundir import ReportError, RunDirectory, load_run  # noqa: E402
+from pedsafe_sumo.safety.stats import paired_mcnemar, table_one  # noqa: E402
+
+#: The paper's Table I (collision, injury, conflict), read from its LaTeX source.
+PAPER_TABLE_ONE = {
+    ("crossing", "sv"): (0.23, 0.0506, 0.25),
+    ("crossing", "v2i"): (0.0075, 0.00195, 0.05),
+    ("jaywalking", "sv"): (0.38, 0.11, 0.28),
+    ("jaywalking", "v2i"): (0.0079, 0.0028, 0.04),
+    ("background_blending", "sv"): (0.062, 0.0017, 0.31),
+    ("background_blending", "v2i"): (0.0, 0.0, 0.003),
+}
+#: The study's precision target for a collision rate's 95% interval.
+RELATIVE_HALF_WIDTH = 1 / 3
+ABSOLUTE_HALF_WIDTH = 0.005
+FINDING_WORDS = {
+    "v2i_safer_everywhere": "V2I is safer than SV in every scenario",
+    "jaywalking_most_dangerous": "jaywalking is the most dangerous of the paper's three scenarios (SV)",
+    "blending_safest": "background blending is the safest of them (SV)",
+    "v2i_beyond_13m_in_90pct": "V2I first detects the pedestrian beyond 13 m in 90% of episodes",
+}
+
+
+def read_run(run_dir: Path) -> tuple[RunDirectory, dict]:
+    """The run as the report reads it (a run still going: from its finished chunks) and its run.json."""
+    info = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+    return load_run(run_dir, partial=not (run_dir / "episodes.parquet").is_file()), info
+
+
+def meets_target(rate: float, low: float, high: float) -> bool:
+    half = (high - low) / 2
+    return half < ABSOLUTE_HALF_WIDTH or (rate > 0 and half < RELATIVE_HALF_WIDTH * rate)
+
+
+def _interval(rate: float, low: float, high: float, digits: int = 4) -> str:
+    return f"{rate:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def table_one_markdown(episodes: pd.DataFrame) -> str:
+    table = table_one(episodes)
+    has_severe = "mais3f_mean" in table.columns and table["mais3f_mean"].notna().any()
+    head = ["scenario", "condition", "n", "collision [95%]", "paper", "target met", "injury eq. 4", "paper"]
+    head += ["MAIS3+F"] if has_severe else []
+    head += ["conflict [95%]", "paper"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, row in table.iterrows():
+        paper = PAPER_TABLE_ONE.get((row["scenario"], row["condition"]))
+        cells = [
+            row["scenario"], row["condition"].upper(), f"{int(row['n']):,}",
+            _interval(row["collision_rate"], row["collision_low"], row["collision_high"]),
+            f"{paper[0]:g}" if paper else "",
+            "yes" if meets_target(row["collision_rate"], row["collision_low"], row["collision_high"])
+            else "no",
+            f"{row['injury_mean']:.4f}", f"{paper[1]:g}" if paper else "",
+        ]  # fmt: skip
+        if has_severe:
+            cells.append(f"{row['mais3f_mean']:.4f}" if not math.isnan(row["mais3f_mean"]) else "")
+        cells += [
+            _interval(row["conflict_rate"], row["conflict_low"], row["conflict_high"], 3),
+            f"{paper[2]:g}" if paper else "",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def paired_markdown(episodes: pd.DataFrame) -> str:
+    if set(episodes["condition"]) != {"sv", "v2i"}:
+        return "One condition only: no paired test."
+    lines = [
+        "| scenario | outcome | pairs | SV only | V2I only | p (exact McNemar) |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for outcome in ("collision", "conflict"):
+        for _, row in paired_mcnemar(episodes, outcome).iterrows():
+            lines.append(
+                f"| {row['scenario']} | {outcome} | {int(row['n_pairs']):,} | {int(row['sv_only'])} | "
+                f"{int(row['v2i_only'])} | {row['p_value']:.3g} |"
+            )
+    return "\n".join(lines)
+
+
+def findings_markdown(runs: dict[str, pd.DataFrame]) -> str:
+    head = ["finding", *runs]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    verdicts = {label: paper_findings(episodes) for label, episodes in runs.items()}
+    for finding in FINDINGS:
+        cells = [FINDING_WORDS[finding]]
+        for label in runs:
+            value = verdicts[label][finding]
+            cells.append("n/a" if math.isnan(value) else ("holds" if value else "fails"))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def sweep_markdown(sweep_dir: Path) -> str:
+    findings = pd.read_csv(sweep_dir / "findings.csv")
+    head = ["combination", *[f for f in FINDINGS if f in findings.columns]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, row in findings.iterrows():
+        cells = [str(row["run"])]
+        for finding in head[1:]:
+            value = row[finding]
+            cells.append("n/a" if pd.isna(value) else ("holds" if value else "fails"))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def figures_of(run: RunDirectory, slug: str, figures_dir: Path, page_dir: Path) -> list[str]:
+    """The report's figures of one run, written under figures_dir; Markdown image lines."""
+    lines = []
+    for name in ("first_detection_distance", "impact_speed", "injury_vs_speed"):
+        path = figures_dir / f"{slug}_{name}.png"
+        if draw_figure(run, name, path) is not None:
+            lines.append(f"![{name.replace('_', ' ')}]({Path(os.path.relpath(path, page_dir))})")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--run", action="append", default=[], metavar="LABEL=DIR", required=True)
+    parser.add_argument("--sweep", action="append", default=[], type=Path, metavar="DIR")
+    parser.add_argument("--out", type=Path, required=True, help="the Markdown page to write")
+    parser.add_argument("--figures", type=Path, required=True, help="folder of the page's figures")
+    parser.add_argument("--title", default="Results")
+    args = parser.parse_args(argv)
+    runs: dict[str, tuple[Path, RunDirectory, dict]] = {}
+    for text in args.run:
+        label, sep, folder = text.partition("=")
+        if not sep or not Path(folder).is_dir():
+            print(
+                f"error: --run needs LABEL=DIR with an existing run directory, got '{text}'", file=sys.stderr
+            )
+            return 2
+        try:
+            run, info = read_run(Path(folder))
+        except (ReportError, OSError, json.JSONDecodeError) as exc:
+            print(f"error: {folder}: {exc}", file=sys.stderr)
+            return 2
+        runs[label] = (Path(folder), run, info)
+    args.figures.mkdir(parents=True, exist_ok=True)
+    page_dir = args.out.parent
+    young, old = eq4_at_rest()
+    out = [f"# {args.title}", ""]
+    out += [
+        "Made by `tools/results_page.py` from the run directories below: every number is read from the runs.",
+        f"The paper's eq. 4 gives an injury probability of {young:.3f} (age {AGES_AT_REST[0]:.0f}) to {old:.3f} "
+        f"(age {AGES_AT_REST[1]:.0f}) at an "
+        "impact speed of 0 km/h: its column counts a touch as an injury of that probability. The MAIS3+F "
+        "column is the second injury model (docs/safety_indexes.md).",
+        "",
+    ]
+    for label, (folder, run, info) in runs.items():
+        episodes = run.episodes
+        protocol = info.get("protocol", {})
+        total = info.get("episodes_total")
+        done = len(episodes)
+        state = (
+            "complete" if (folder / "episodes.parquet").is_file() else f"running: {done:,} of {total:,} rows"
+        )
+        out += [f"## {label}", ""]
+        out += [
+            f"Protocol `{protocol.get('name', '(none)')}` (SHA-256 `{protocol.get('sha256', '')[:12]}`), "
+            f"stack `{info.get('algorithm', '')}`, site `{info.get('site', '')}`: {state}.",
+            "",
+            table_one_markdown(episodes),
+            "",
+            paired_markdown(episodes),
+            "",
+        ]
+        slug = "".join(c if c.isalnum() else "_" for c in label.lower()).strip("_")
+        out += [*figures_of(run, slug, args.figures, page_dir), ""]
+    findings = findings_markdown({label: run.episodes for label, (_, run, _) in runs.items()})
+    out += ["## The paper's findings", "", findings, ""]
+    for sweep_dir in args.sweep:
+        out += [f"### Sensitivity: `{sweep_dir.name}`", "", sweep_markdown(sweep_dir), ""]
+    args.out.write_text("\n".join(out), encoding="utf-8")
+    print(f"written: {args.out} and {len(list(args.figures.glob('*.png')))} figure(s) in {args.figures}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
