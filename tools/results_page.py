@@ -176,9 +176,9 @@ def main(argv: list[str] | None = None) -> int:
     out = [f"# {args.title}", ""]
     out += [
         "Made by `tools/results_page.py` from the run directories below: every number is read from the runs.",
-        f"The paper's eq. 4 gives an injury probability of {young:.3f} (age {AGES_AT_REST[0]:.0f}) to {old:.3f} "
-        f"(age {AGES_AT_REST[1]:.0f}) at an "
-        "impact speed of 0 km/h: its column counts a touch as an injury of that probability. The MAIS3+F "
+        f"The paper's eq. 4 gives an injury probability of {young:.3f} (age {AGES_AT_REST[0]:.0f}) to "
+        f"{old:.3f} (age {AGES_AT_REST[1]:.0f}) at an impact speed of 0 km/h: its column counts a touch "
+        "as an injury of that probability. The MAIS3+F "
         "column is the second injury model (docs/safety_indexes.md).",
         "",
     ]
