@@ -1,5 +1,5 @@
-"""What limits importance sampling's efficiency on a scenario, measured on a plain Monte Carlo run's own rows
-(issue 17, item 3). Two numbers per scenario and condition, no SUMO run:
+"""What limits importance sampling's efficiency on a scenario, measured on a plain Monte Carlo run's own rows.
+Two numbers per scenario and condition, no SUMO run:
 
 1. `proposal`: the efficiency of a fixed proposal q (the final stage's of an IS run) per final-stage
    episode, P(1 - P) / Var_q(w f), with Var_q(w f) = E_q[w^2 f^2] - P^2 = E_p[w f^2] - P^2 estimated on the

@@ -1,4 +1,4 @@
-"""Importance sampling against plain Monte Carlo (issue 17, item 3): per scenario and condition, the IS
+"""Importance sampling against plain Monte Carlo: per scenario and condition, the IS
 estimate of a run made with --sampler is and the MC estimate of a reference run, their 95% intervals,
 whether they agree, and the efficiency (episodes MC needs for the IS interval's half-width h,
 p(1 - p)(1.96 / h)^2 with p the IS estimate, over the episodes IS ran, pilots included; and over the

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Write the Xueqing dual-ring signal plan tried for issue 14 item 6 (not adopted; docs/demand_validation.md).
+"""Write the Xueqing dual-ring signal plan tried as an alternative to the real one (not adopted;
+docs/demand_validation.md).
 
     python research/xueqing_dual_ring_plan.py networks/xueqing/xueqing.net.xml dual.tll.xml
     cd networks/xueqing && sumo -c xueqing.sumocfg --end 1800 \

@@ -1,5 +1,5 @@
 """Do the intervals of the joint family's estimators hold the truth as often as they say, on the real
-episodes? (issue 17, session 8). Offline, no SUMO.
+episodes? Offline, no SUMO.
 
 The population: a plain MC run's SV rows of one scenario (v5_full: 10,000), taken as the nominal law
 itself (its empirical distribution), so that the truth is known exactly: the rows' mean collision. A

@@ -1,5 +1,5 @@
-"""Can the pilot rows alone tell which fit of pi_hat makes the better proposal? (issue 17, session 10;
-offline, no SUMO.)
+"""Can the pilot rows alone tell which fit of pi_hat makes the better proposal? (Offline,
+no SUMO.)
 
 At stage s of an IS run made with many pilot stages (`--is-family joint`), two fits of pi_hat on the
 pooled SV rows of stages 0..s-1 are candidates: the sampler's (every row counts 1) and the one weighted

@@ -1,6 +1,7 @@
-"""Would a guard against pi_hat's underrated regions pay? (issue 17, session 13; offline, no SUMO.)
+"""Would a guard against pi_hat's underrated regions pay? (Offline, no SUMO.)
 
-Session 12's live runs lost most of their efficiency, in one seed of four, to one or two collisions drawn
+The live runs with the V2I-aware proposals (EXPERIMENTS.md, "why V2I gains less") lost most of their
+efficiency, in one seed of four, to one or two collisions drawn
 where the fitted pi_hat is 0.001-0.008: their weights (0.3-2.5) are 10-50 times a typical collision's, and
 the squared weight is what the variance adds up. The sampler's proposal (sampling/joint.py) is
 

@@ -1,5 +1,5 @@
 """Would a joint proposal learned from the pilots beat the product family? Measured on a plain Monte Carlo
-run's own rows (issue 17, session 6 joint17, item 1), no SUMO.
+run's own rows, no SUMO.
 
 The proposal over the scenario's proposable inputs x (the `nominal` families recorded in sampler_inputs)
 is q = lambda p + (1 - lambda) p sqrt(pi_hat(x)) / E_p[sqrt(pi_hat)] (lambda = 0.1, the sampler's
@@ -46,7 +46,7 @@ NO_TTC_SCORE = -1000.0
 
 
 #: `--ridge cv`: the penalties it chooses from (a log grid around the sampler's 1, spanning the values the
-#: session-6 table looked at), fixed before the measurement, and its folds.
+#: ridge table of EXPERIMENTS.md looked at), fixed before the measurement, and its folds.
 RIDGE_GRID = (0.1, 0.3, 1.0, 3.0, 10.0)
 CV_FOLDS = 5
 
@@ -148,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         "--with-sex",
         action="store_true",
         help="add the pedestrian's sex (ped_female, drawn but not proposed by the sampler; its nominal "
-        "from defaults.toml) to the inputs the proposal and pi_hat cover (session 7 item 4's lead)",
+        "from defaults.toml) to the inputs the proposal and pi_hat cover (a lead of is_within_episode.py)",
     )
     args = parser.parse_args(argv)
     rows = pd.read_parquet(args.mc_run / "episodes.parquet")

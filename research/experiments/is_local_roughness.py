@@ -1,5 +1,5 @@
 """How rough is the SV collision as a function of the inputs? The ceiling of a proposal at a resolution
-(issue 17, session 8). SUMO, small.
+SUMO, small.
 
 research/experiments/is_within_episode.py found the SV collision almost decided by the proposable inputs x
 (re-run with fresh everything else, 13-20 of 20 collision episodes collide every time) and put the

@@ -1,5 +1,5 @@
 """How far a proposal learned from episodes can reach, by the number of episodes it learns from and by the
-model class, with and without pi_hat as a control variate (issue 17, session 8). Offline, no SUMO.
+model class, with and without pi_hat as a control variate. Offline, no SUMO.
 
 On a plain Monte Carlo run's SV rows (v5_full: 10,000 per scenario), pi_hat is fitted on N rows drawn at
 random (a nominal pilot of N episodes; a pilot drawn from a proposal holds more collisions per episode, so

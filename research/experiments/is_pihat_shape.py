@@ -1,5 +1,5 @@
 """Shaping pi_hat at pilot size: physical features, a product-then-joint hybrid, and a guard against a pilot
-without collisions, at the cost of the 2-stage pilot (issue 17, session 7 pihat17). Offline, no SUMO.
+without collisions, at the cost of the 2-stage pilot. Offline, no SUMO.
 
 Machinery of research/experiments/is_joint_pilot.py (same rows, replicate blocks, rejection step and held-out
 estimator): on a plain Monte Carlo run's SV rows, a pilot is simulated from the rows (a nominal stage takes
@@ -14,7 +14,7 @@ Variants, fixed before any score was looked at:
 
 - `ridge1`: the baseline, is_joint_pilot's `2-stage`: 200 nominal rows, pi_hat, 200 rows from that joint
   proposal, pi_hat refitted on the 400 pooled. Pilot cost 400.
-- `physics` (item 1a): the same pilot, the design extended by three physical features of x (each
+- `physics`: the same pilot, the design extended by three physical features of x (each
   standardised by its moments on the scenario's rows, nominal draws, and entering the design as further
   continuous inputs: their squares and their products with every continuous input and each other): the
   ego's speed v (m/s), the pedestrian's time per metre 1/w (s/m) and the braking margin (`braking_margin_s`)
@@ -35,13 +35,13 @@ Variants, fixed before any score was looked at:
   scale) and w = exp(log_mu + log_sigma z) of the age group's lognormal (sampling/draws.py) are functions
   of x: the sampler could compute them at draw time. Checked against the rows' ego_initial_speed_mps and
   ped_speed_mps (printed).
-- `hybrid` (item 1b): stage 0 of 200 nominal rows; if it holds at least K_COLLISIONS SV collisions, stage
+- `hybrid`: stage 0 of 200 nominal rows; if it holds at least K_COLLISIONS SV collisions, stage
   1 is the joint stage of `ridge1`; else stage 1 is the product family's cross-entropy stage (the
   sampler's own update, sampling.stages.cross_entropy_update: TTC score, screened inputs, spread floor
   sqrt(1/2), elite 10%, defensive share 0.1), drawn by rejection. The final proposal: joint (pi_hat on
   the 400 pooled) if the pooled pilot holds at least K_COLLISIONS collisions, else the product's next
   cross-entropy update from stage 1. Pilot cost 400.
-- `adaptive` (item 1c): stage 0 of nominal rows in chunks of ADAPTIVE_CHUNK until it holds
+- `adaptive`: stage 0 of nominal rows in chunks of ADAPTIVE_CHUNK until it holds
   ADAPTIVE_MIN_COLLISIONS SV collisions (at most ADAPTIVE_MAX rows), then a joint stage of 200, pi_hat
   refitted on the pooled rows. Pilot cost: stage 0's rows + 200, counted per replicate.
 - `physics+adaptive`: both.
@@ -60,7 +60,7 @@ Added AFTER the first table (post hoc, so not a fair competitor: chosen with the
   A guard against an empty first pilot that costs no episode. Cost 400.
 
 With pilots: efficiency per final episode x n / (n + pilot cost), n final pairs (300, 1,000, 2,000). The
-goal of issue 17 is 10x with pilots on every SV collision rate.
+goal is 10x with pilots on every SV collision rate.
 
     OMP_NUM_THREADS=1 nice -n 10 .venv/bin/python research/experiments/is_pihat_shape.py V5_FULL
 """

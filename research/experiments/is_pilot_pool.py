@@ -1,4 +1,4 @@
-"""What more pilot stages buy a `--is-family joint` proposal, stage by stage (issue 17, session 10).
+"""What more pilot stages buy a `--is-family joint` proposal, stage by stage.
 Offline, no SUMO: it reads IS runs made with many pilot stages and a plain Monte Carlo run.
 
 For each IS run (its scenario's proposals in run.json) and each stage s, the proposal of stage s was fitted

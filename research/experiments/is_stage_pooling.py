@@ -1,7 +1,8 @@
 """The estimate of an importance-sampling run with its later pilot stages pooled into the final stage
-(issue 17, session 10; Table I's estimator since session 11, `--is-pool-from`).
+(Table I's estimator with `--is-pool-from`, sampling/pooling.py).
 
-Table I estimates from the final stage only (report/tables.py). Each stage t's weighted mean (1/n_t) sum
+Without pooling (`--is-pool-from` at the final stage) Table I estimates from the final stage only
+(report/tables.py). Each stage t's weighted mean (1/n_t) sum
 w_i f_i is unbiased given the stages before it, so a combination with weights fixed in advance is too.
 Here every episode of stages `first`..K counts once (the stages' means weighted by their sizes; plain IS,
 no control variate), with variance sum_t n_t s_t^2 / N^2 (s_t^2 the sample variance of w f in stage t) and
@@ -44,7 +45,7 @@ def pooled_estimate(
     rows: pd.DataFrame, first: int, proposals: list[str] | None = None
 ) -> tuple[float, float, int]:
     """(estimate, 95% half-width, episodes used) of stages >= first of one scenario and condition, each
-    stage weighted by its size: Table I's estimator since session 11 (sampling.pooling)."""
+    stage weighted by its size: Table I's estimator with `--is-pool-from` (sampling.pooling)."""
     used = rows[rows["sampler_stage"] >= first]
     stages = [stage_rows(stage, proposals) for _, stage in used.groupby("sampler_stage")]
     estimate = pool(stages).estimate
@@ -59,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--each",
         action="store_true",
-        help="also each stage alone, with its efficiency per episode of that stage (session 11)",
+        help="also each stage alone, with its efficiency per episode of that stage",
     )
     args = parser.parse_args(argv)
     stored = json.loads((args.run / "run.json").read_text())["sampler_proposals"] if args.control else {}

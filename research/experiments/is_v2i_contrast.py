@@ -1,5 +1,5 @@
-"""What decides V2I's collision inside SV's region, and what the V2I factor gains (issue 17, session 12;
-offline, no SUMO).
+"""What decides V2I's collision inside SV's region, and what the V2I factor gains (offline,
+no SUMO).
 
 For the final stage of each importance-sampling run given (runs made with `--is-v2i-factor none`, whose
 final stage drew from the proposal of SV alone):

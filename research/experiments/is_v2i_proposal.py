@@ -1,4 +1,4 @@
-"""Would a proposal aimed at V2I's collisions too gain on V2I? (issue 17, session 12; offline, no SUMO.)
+"""Would a proposal aimed at V2I's collisions too gain on V2I? (Offline, no SUMO.)
 
 The sampler's joint proposal is q ∝ p (lambda + (1 - lambda) sqrt(pi_sv) / c), pi_sv a ridge logistic of
 the SV collision on the pilots' inputs (sampling/joint.py). For two rates P_sv and P_v2i from one draw, the
@@ -10,8 +10,8 @@ given x). This tool fits pi_v2i on the same pilot rows with the same design and 
 
 for alpha = 1 (the sampler's, a check: its pi_sv must equal the stored one), 1/2, the relative-variance
 rule alpha = m_v2i^2 / (m_sv^2 + m_v2i^2) (m = E_p[pi_hat] on nominal draws) and 0 (V2I alone); and
-(session 13) "factor + v2i-only", the V2I factor plus a fit of the V2I-only collisions inside h, and
-(session 14) "mixture v2i-only", that fit as a mixture component of its own with a share mu of the draws.
+"factor + v2i-only", the V2I factor plus a fit of the V2I-only collisions inside h, and
+"mixture v2i-only", that fit as a mixture component of its own with a share mu of the draws.
 
 Scoring without new episodes: the run's final stage drew x from its proposal q with weights w = p/q, so
 for any q' with weights w' = p/q' (q' > 0 where q is: the defensive share keeps q >= lambda p)
@@ -47,7 +47,7 @@ from pedsafe_sumo.sampling.stages import _inputs_and_nominal  # noqa: E402
 
 #: Nominal draws for c_alpha and m (a relative error of about 1e-3 on c, as the sampler's NORM_DRAWS / 2.5).
 NOMINAL_DRAWS = 400_000
-#: Shares of the draws given to the V2I-only mixture component (session 14).
+#: Shares of the draws given to the V2I-only mixture component.
 MIXTURE_SHARES = (0.05, 0.1, 0.2)
 
 

@@ -1,4 +1,4 @@
-"""Why V2I gains less than SV under a proposal fitted on SV's collisions (issue 17, session 11; offline).
+"""Why V2I gains less than SV under a proposal fitted on SV's collisions (offline).
 
 For the final stage of each importance-sampling run given: how many pairs collide under SV and under V2I,
 the median weight and SV pi_hat at each kind of collision, and the relative variance per episode of w f

@@ -1,4 +1,4 @@
-"""How random is the SV collision once the proposable inputs are fixed? (issue 17, session 7 joint17, item 4)
+"""How random is the SV collision once the proposable inputs are fixed?
 
 Importance sampling over the episode's proposable inputs x (ego speed, walking speed, offsets, gaps, age
 group, risk type, occluder classes: the `nominal` families a row's sampler_inputs records) cannot remove
