@@ -27,7 +27,8 @@ Model card: docs/human_driver.md. In short:
 - **Signals**: the signal head as the onboard camera reads it (within its visibility distance); every
   signal change takes effect 1.0 s after it was shown (ITE's perception-reaction time for the yellow
   change interval). At a yellow's onset it stops when v t + v^2 / (2 a) <= the distance to the line
-  (t = 1.0 s, a = 3.0 m/s^2), else goes through; at red it stops at the comfortable deceleration.
+  (t = 1.0 s, a = 3.0 m/s^2), else goes through; a red seen first (no yellow before it) is stopped for
+  when v t + v^2 / (2 x 0.774 g) fits; a stop follows the comfortable deceleration.
 
 Its parameters are class attributes (a subclass changes them); it reads neither `reaction_time_s` nor
 `max_decel_mps2` of the setup config, which the parameter file's [algorithm] section sets for the
