@@ -92,7 +92,8 @@ def test_deceleration_follows_the_jerk_limited_ramp():
 
 def test_it_sees_with_its_eyes_only():
     driver = make_driver(5)
-    assert driver.sensors() == ["onboard_camera", "route"]
+    # the camera is its only detection source; the world feeds: route, crosswalks, the signal ahead
+    assert driver.sensors() == ["onboard_camera", "route", "road_map", "traffic_light"]
     # a pedestrian reported by V2I or LiDAR only is not in the driver's world
     for source in ("v2i", "onboard_lidar"):
         steps = drive(make_driver(5), 0.5, distance_m=30.0, source=source, end_s=3.0)
