@@ -17,7 +17,12 @@ Model card: docs/human_driver.md. In short:
   0.774 g = 7.59 m/s^2 in 0.6 s, the emergency braking of the competent and careful human driver of UN
   Regulation No. 157 (ALKS), Annex 4, Appendix 3; it asks no more than the deceleration that stops the
   car 2 m short of the pedestrian (like the reference stack) and falls back at once when less is needed.
-- **Resuming**: once no threat has been seen for 0.5 s, back to the cruise speed at 2 m/s^2.
+- **Memory**: a pedestrian the driver has seen and who goes out of sight (behind a vehicle, or lost
+  against a background of their own colour) is kept in mind for MEMORY_S (2 s), moved on at the velocity
+  last seen, and stays a threat while so predicted; a threat already noticed keeps its reaction under
+  way through the gap rather than starting it over.
+- **Resuming**: once no threat has been seen or remembered for 0.5 s, back to the cruise speed at
+  2 m/s^2.
 - **Crosswalks**: yields to a pedestrian it sees on a crosswalk its path crosses, until they are across
   its corridor, and to one at the crosswalk's kerb while the crosswalk may show walk (its own green is
   permissive, SUMO's 'g': a turn); the same reaction time and braking as any pedestrian threat. Source:
@@ -77,6 +82,13 @@ from pedsafe_sumo.control.reference import (
     predict_threat_on_path,
 )
 
+#: How long a pedestrian seen and then out of sight is kept in mind [s]. Assumption: drivers keep the
+#: position of a road user who has just left their view for seconds (Gugerty 1997, "Situation awareness
+#: during driving: explicit and implicit knowledge in dynamic spatial memory", J. Exp. Psychol. Applied
+#: 3(1):42-66: recall of recently seen cars' locations stays well above chance for several seconds);
+#: 2 s is the reference stack's own track memory (control/kalman_tracker.py), so neither baseline
+#: forgets a pedestrian sooner than the other.
+MEMORY_S = 2.0
 #: Lognormal perception-reaction time: median 0.9 s, 75th percentile 1.2 s (Johansson & Rumar 1971,
 #: surprise condition); sigma of ln RT = ln(1.2 / 0.9) / 0.6745 = 0.28768 / 0.67449 = 0.42652.
 REACTION_MEDIAN_S = 0.9
@@ -233,6 +245,7 @@ class HumanDriverStack(Agent):
     signal_reaction_s = SIGNAL_REACTION_S
     comfortable_decel_mps2 = COMFORTABLE_DECEL_MPS2
     signal_visibility_m = SIGNAL_VISIBILITY_M
+    memory_s = MEMORY_S
 
     def setup(self, config: dict[str, Any]) -> None:
         self.cruise_speed_mps = float(config["initial_speed_mps"])
@@ -258,6 +271,8 @@ class HumanDriverStack(Agent):
         self._last_threat_s: float | None = None
         self._last_gap_m = math.inf
         self._decel_mps2 = 0.0  # deceleration applied in the last step [m/s^2]
+        #: pedestrian id -> (time last seen [s], their state then): what the driver keeps in mind
+        self._last_seen: dict[str, tuple[float, TrackedPedestrian]] = {}
         self._paths = PlannedPathCache()
         self._spans_of: tuple[PlannedPath | None, list[CrosswalkSpan], PathArrays | None] = (None, [], None)
         #: ped id -> side of the path (sign of the lateral offset) where the driver first saw them.
@@ -311,6 +326,27 @@ class HumanDriverStack(Agent):
                 return Threat(ped.ped_id, gap_m=gap_m, time_s=0.0)
         return None
 
+    def _with_remembered(self, tracked: list[TrackedPedestrian], time_s: float) -> list[TrackedPedestrian]:
+        """The pedestrians seen now, and those seen within memory_s and out of sight now, moved on at
+        the velocity last seen."""
+        for ped in tracked:
+            self._last_seen[ped.ped_id] = (time_s, ped)
+        seen_now = {ped.ped_id for ped in tracked}
+        remembered = []
+        for ped_id, (seen_s, ped) in list(self._last_seen.items()):
+            if ped_id in seen_now:
+                continue
+            age_s = time_s - seen_s
+            if age_s > self.memory_s + 1e-9:
+                del self._last_seen[ped_id]
+                continue
+            remembered.append(
+                TrackedPedestrian(
+                    ped_id, ped.x_m + ped.vx_mps * age_s, ped.y_m + ped.vy_mps * age_s, ped.vx_mps, ped.vy_mps
+                )
+            )
+        return [*tracked, *remembered]
+
     def run_step(self, observation: Observation, time_s: float) -> Command:
         path = self._paths.of(observation)
         ego = observation.ego
@@ -329,7 +365,7 @@ class HumanDriverStack(Agent):
         )
         # eyes only: whatever else might arrive is not the driver's
         seen = [p for p in observation.pedestrians if p.source == "onboard_camera"]
-        tracked = self.tracker.update(seen, time_s)
+        tracked = self._with_remembered(self.tracker.update(seen, time_s), time_s)
         spans, arrays = self._spans(path, observation.road_map, ego.width_m / 2 + self.lateral_margin_m)
         threats = []
         for ped in tracked:

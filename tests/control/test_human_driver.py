@@ -117,3 +117,42 @@ def test_loadable_by_its_spec():
     cls = load_agent_class("pedsafe_sumo.control.human:HumanDriverStack")
     assert cls is HumanDriverStack
     assert isinstance(make_driver(1).run_step(Observation(EgoState(0, 0, 0, 5.0, 4.5, 1.8)), 0.0), Command)
+
+
+def _walk_then_hide(driver, hide_s: float, end_s: float, lateral_m: float = -6.0):
+    """Ego on the x axis at SPEED; a pedestrian 60 m ahead walks towards its path (from y = lateral_m,
+    1.4 m/s along +y), seen until `hide_s`, then out of sight. Returns (t, command) per step."""
+    x, speed, steps = 0.0, SPEED, []
+    ped_x, ped_y0 = 60.0, lateral_m
+    for k in range(int(round(end_s / DT))):
+        t = k * DT
+        peds = (PerceivedPedestrian("p", ped_x, ped_y0 + 1.4 * t, "onboard_camera"),) if t < hide_s else ()
+        command = driver.run_step(Observation(EgoState(x, 0.0, 0.0, speed, 4.5, 1.8), peds, DT), t)
+        steps.append((t, command))
+        x += command.target_speed_mps * DT
+        speed = command.target_speed_mps
+    return steps
+
+
+def test_a_pedestrian_who_goes_out_of_sight_is_kept_in_mind_and_braked_for():
+    # Seen for 0.2 s walking at 1.4 m/s from 6 m beside the lane: at 0.15 s they are 5.8 m from the lane
+    # centre, 4.4 m from the corridor's edge (0.9 m half width + 0.5 m margin = 1.4 m): 3.1 s away at
+    # 1.4 m/s, inside the 4 s horizon; the ego (front 57.75 m away at 14 m/s, 4.1 s) has not passed by
+    # then: a threat from 0.05 s (the second position gives the velocity). Hidden from 0.2 s on, the
+    # driver still brakes once the reaction time has run (seed 3: 0.85 s), though nobody is in sight.
+    # Without the memory the threat would clear 0.5 s after 0.15 s, before the reaction completes.
+    seed = 3
+    reaction = drawn_reaction_time(seed)
+    assert 0.15 + 0.5 < DT + reaction
+    steps = _walk_then_hide(make_driver(seed), hide_s=0.2, end_s=2.5)
+    braking = [t for t, c in steps if c.info.get("braking")]
+    assert braking and braking[0] == pytest.approx(DT + math.ceil(reaction / DT - 1e-9) * DT, abs=1e-9)
+
+
+def test_a_pedestrian_out_of_sight_for_longer_than_the_memory_is_forgotten():
+    driver = make_driver(3)
+    driver.memory_s = 0.2
+    # hidden after 0.1 s: the threat (noticed at 0.05 s) is forgotten at 0.05 + 0.2 s, cleared 0.5 s
+    # later (0.75 s); the reaction (0.85 s) never completes: the driver never brakes
+    steps = _walk_then_hide(driver, hide_s=0.1, end_s=2.5)
+    assert not [t for t, c in steps if c.info.get("braking")]
