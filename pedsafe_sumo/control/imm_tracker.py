@@ -9,7 +9,7 @@ Two motion models share the state (x, y, vx, vy) [m, m/s]:
 
 Each step (Blom and Bar-Shalom, "The interacting multiple model algorithm for systems with Markovian
 switching coefficients", IEEE Trans. Automatic Control 33(8), 1988; Bar-Shalom, Li and Kirubarajan,
-"Estimation with Applications to Tracking and Navigation", Wiley 2001, section 11.6.6):
+"Estimation with Applications to Tracking and Navigation", Wiley 2001, section 11.6):
 
 1. mixing: each model starts from the estimates of both, weighted by the probability that the person was
    in the other one a step ago given they are in this one now (Markov switching, SWITCH per step below);

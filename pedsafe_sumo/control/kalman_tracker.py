@@ -1,4 +1,7 @@
-"""The baseline stack's tracker: one constant-velocity Kalman filter per pedestrian, with memory.
+"""The baseline stack's constant-velocity tracker: one Kalman filter per pedestrian, with memory.
+
+The stack runs it under `[algorithm] tracker_motion_model = "cv"`; its motion model is also the walking
+model of the IMM tracker (control/imm_tracker.py), the default.
 
 State per track: world position and velocity (x, y, vx, vy) [m, m/s] and its 4 x 4 covariance. Motion
 model: the continuous white-noise acceleration model (Bar-Shalom, Li and Kirubarajan, "Estimation with
