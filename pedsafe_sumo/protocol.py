@@ -169,6 +169,8 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "vehicle.physical_limits": False,
         "vehicle.max_decel_mps2": 9.0,
         "vehicle.max_accel_mps2": 4.0,
+        # The reference stack's tracker: the constant-velocity Kalman filter alone.
+        "algorithm.tracker_motion_model": "cv",
     },
 }
 

@@ -1,14 +1,16 @@
 """The baseline AD stack (`--algorithm reference`): a Kalman tracker with memory, a corridor planner that
 brakes only for pedestrians in or predicted into its path, yielding at crosswalks, and signal compliance.
 
-- Tracker (control/kalman_tracker.py): a constant-velocity Kalman filter per pedestrian, its measurement
-  noise the sensors' stated noise (V2I 0.2 m, its 0.1 s latency in the measurement model; onboard
-  positions nearly exact), its process noise a stated acceleration spectral density; a track is
-  predicted on for `track_memory_s` (2 s) after its last detection, then dropped.
-- Pedestrians (control/baseline_planner.py): a track whose velocity is told apart from standing (95 %,
-  under its covariance) is moved ahead at that velocity for `horizon_s`, the corridor widened by one
-  standard deviation of the predicted position; a standing track is a threat only where it stands
-  inside the corridor.
+- Tracker (`tracker_motion_model`): "imm" (control/imm_tracker.py) an interacting multiple model filter
+  per pedestrian, walking (constant velocity) and standing models; "cv" (control/kalman_tracker.py) the
+  constant-velocity Kalman filter alone. Measurement noise: the sensors' stated noise (V2I 0.2 m, its
+  0.1 s latency in the measurement model; onboard positions nearly exact); process noise: a stated
+  acceleration spectral density; a track is predicted on for `track_memory_s` (2 s) after its last
+  detection, then dropped.
+- Pedestrians (control/baseline_planner.py): a track told moving (its velocity apart from standing at
+  99.9 % under its covariance; under "imm" also the standing model the less probable) is moved ahead
+  at that velocity for `horizon_s`, the corridor widened by one standard deviation of the predicted
+  position; a standing track is a threat only where it stands inside the corridor.
 - Crosswalks: a pedestrian on a crosswalk the path crosses who walks towards the corridor or stands
   in it, or one on it or at its kerb while it may show walk (the ego's own green is permissive,
   SUMO's 'g', for the crosswalk's signal; an unsignalised crosswalk), is a threat at the crosswalk,
@@ -38,6 +40,7 @@ from pedsafe_sumo.control.baseline_planner import (
     path_threat,
     straight_path,
 )
+from pedsafe_sumo.control.imm_tracker import ImmTracker
 from pedsafe_sumo.control.kalman_tracker import TRACK_MEMORY_S, KalmanTracker, Track
 from pedsafe_sumo.control.reference import (
     CLEAR_HOLD_S,
@@ -50,6 +53,9 @@ from pedsafe_sumo.control.reference import (
     planned_path,
 )
 
+#: The tracker's motion models (`tracker_motion_model` of [algorithm]): "cv" one constant-velocity Kalman
+#: filter (control/kalman_tracker.py), "imm" walking and standing models (control/imm_tracker.py).
+TRACKER_MOTION_MODELS = ("cv", "imm")
 #: Comfortable deceleration for a signal stop [m/s2]: 10 ft/s2 (3.05 m/s2), the deceleration of ITE's
 #: yellow change interval Y = t + v / (2a + 2Gg) (Institute of Transportation Engineers, "Determining
 #: Vehicle Signal Change and Clearance Intervals", 1994; ITE Traffic Engineering Handbook), rounded down.
@@ -84,7 +90,15 @@ class BaselineStack(Agent):
         self.clear_hold_s = float(config.get("clear_hold_s", CLEAR_HOLD_S))
         comfortable = float(config.get("comfortable_decel_mps2", COMFORTABLE_DECEL_MPS2))
         self.signals = SignalPolicy(comfortable, self.max_decel_mps2, STOP_LINE_SHORT_M)
-        self.tracker = KalmanTracker(memory_s=float(config.get("track_memory_s", TRACK_MEMORY_S)))
+        memory_s = float(config.get("track_memory_s", TRACK_MEMORY_S))
+        # A config without the key (a run.json written before the parameter existed) ran the
+        # constant-velocity tracker.
+        motion_model = str(config.get("tracker_motion_model", "cv"))
+        if motion_model not in TRACKER_MOTION_MODELS:
+            raise ValueError(f"tracker_motion_model must be one of {', '.join(TRACKER_MOTION_MODELS)}")
+        self.tracker: KalmanTracker | ImmTracker = (
+            ImmTracker(memory_s=memory_s) if motion_model == "imm" else KalmanTracker(memory_s=memory_s)
+        )
         self._threat_since_s: float | None = None
         self._last_threat_s: float | None = None
         self._last_gap_m = math.inf

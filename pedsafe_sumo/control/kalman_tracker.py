@@ -1,4 +1,7 @@
-"""The baseline stack's tracker: one constant-velocity Kalman filter per pedestrian, with memory.
+"""The baseline stack's constant-velocity tracker: one Kalman filter per pedestrian, with memory.
+
+The stack runs it under `[algorithm] tracker_motion_model = "cv"`; its motion model is also the walking
+model of the IMM tracker (control/imm_tracker.py), the default.
 
 State per track: world position and velocity (x, y, vx, vy) [m, m/s] and its 4 x 4 covariance. Motion
 model: the continuous white-noise acceleration model (Bar-Shalom, Li and Kirubarajan, "Estimation with
@@ -60,7 +63,11 @@ TRACK_MEMORY_S = 2.0
 #: walker's second exact onboard position passes it (1.4 m/s against a standard deviation of about 0.3).
 MOVING_CHI2 = 13.816
 
-_V2I_SOURCE = "v2i"
+#: A track whose standing model (control/imm_tracker.py) is the more probable is not moving: the
+#: maximum a posteriori model.
+STANDING_PROBABILITY_THRESHOLD = 0.5
+
+V2I_SOURCE = "v2i"
 
 
 @dataclass(frozen=True)
@@ -76,10 +83,16 @@ class Track:
     covariance: np.ndarray
     #: Seconds since its last measurement (0 when measured this step).
     unseen_s: float
+    #: Probability that the person stands still (the IMM tracker's standing model, control/imm_tracker.py);
+    #: 0 from the constant-velocity tracker, which has no such model.
+    standing_probability: float = 0.0
 
     @property
     def moving(self) -> bool:
-        """Whether the velocity differs from zero at 99.9 % (Mahalanobis distance under its covariance)."""
+        """Whether the velocity differs from zero at 99.9 % (Mahalanobis distance under its covariance),
+        the standing model, where there is one, being the less probable."""
+        if self.standing_probability > STANDING_PROBABILITY_THRESHOLD:
+            return False
         v = np.array([self.vx_mps, self.vy_mps])
         cov = self.covariance[2:, 2:]
         try:
@@ -94,7 +107,7 @@ class Track:
         return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
 
 
-def _transition(dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+def transition(dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     f = np.eye(4)
     f[0, 2] = f[1, 3] = dt_s
     q = np.zeros((4, 4))
@@ -126,7 +139,7 @@ class KalmanTracker:
     def _measurement(self, source: str) -> tuple[np.ndarray, float]:
         h = np.zeros((2, 4))
         h[0, 0] = h[1, 1] = 1.0
-        if source == _V2I_SOURCE:
+        if source == V2I_SOURCE:
             h[0, 2] = h[1, 3] = -self.v2i_latency_s
             return h, self.v2i_sigma_m
         return h, self.onboard_sigma_m
@@ -137,7 +150,7 @@ class KalmanTracker:
         for kept in self._tracks.values():
             dt = time_s - kept[2]
             if dt > 0:
-                f, q = _transition(dt)
+                f, q = transition(dt)
                 kept[0] = f @ kept[0]
                 kept[1] = f @ kept[1] @ f.T + self.accel_psd * q
                 kept[2] = time_s

@@ -14,9 +14,19 @@ ALGORITHM_UPPER_BOUNDS: Bounds = {
 }
 
 
+#: Allowed values of the [algorithm] keys that are words, not numbers (control/baseline.py reads it).
+ALGORITHM_CHOICES: dict[str, tuple[str, ...]] = {"tracker_motion_model": ("cv", "imm")}
+
+
 @register_validator("algorithm")
 def validate_algorithm(section: dict[str, Any], where: str) -> None:
     for key, value in section.items():
+        if key in ALGORITHM_CHOICES:
+            if value not in ALGORITHM_CHOICES[key]:
+                raise ParameterError(
+                    f"{where}.{key} must be one of {', '.join(ALGORITHM_CHOICES[key])}, got {value!r}"
+                )
+            continue
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise ParameterError(f"{where}.{key} must be a finite number, got {value!r}")
     if section["reaction_time_s"] < 0:

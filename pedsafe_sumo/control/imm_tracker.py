@@ -1,0 +1,204 @@
+"""The baseline stack's manoeuvre-aware tracker: an interacting multiple model (IMM) filter per pedestrian.
+
+Two motion models share the state (x, y, vx, vy) [m, m/s]:
+
+- walking: the constant-velocity model of control/kalman_tracker.py (continuous white-noise acceleration,
+  q = ACCEL_PSD_M2PS3), a V2I position measuring x - latency * v;
+- standing: the velocity held at 0 (F = diag(1, 1, 0, 0)), the position wandering by a tiny random walk
+  (STANDING_POSITION_PSD_M2PS); a V2I position measures x, the person having been there `latency` ago too.
+
+Each step (Blom and Bar-Shalom, "The interacting multiple model algorithm for systems with Markovian
+switching coefficients", IEEE Trans. Automatic Control 33(8), 1988; Bar-Shalom, Li and Kirubarajan,
+"Estimation with Applications to Tracking and Navigation", Wiley 2001, section 11.6):
+
+1. mixing: each model starts from the estimates of both, weighted by the probability that the person was
+   in the other one a step ago given they are in this one now (Markov switching, SWITCH per step below);
+2. model-conditioned prediction and update (Joseph form), with each model's own measurement matrix;
+3. model probabilities from the innovations' Gaussian likelihoods;
+4. combined estimate: the probability-weighted mean and covariance (with the spread of the means).
+
+The planner reads the combined estimate (Track) and the standing model's probability
+(Track.standing_probability): a track is moving when the walking model is the more probable and the
+combined velocity differs from zero at 99.9 % (Track.moving). Object permanence as the constant-velocity
+tracker: a track not measured is predicted on for `memory_s`, then dropped. Docs: docs/baseline_stack.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+from pedsafe_sumo.control.agent import PerceivedPedestrian
+from pedsafe_sumo.control.kalman_tracker import (
+    ACCEL_PSD_M2PS3,
+    INITIAL_SPEED_SIGMA_MPS,
+    ONBOARD_POSITION_SIGMA_M,
+    TRACK_MEMORY_S,
+    V2I_LATENCY_S,
+    V2I_POSITION_SIGMA_M,
+    V2I_SOURCE,
+    Track,
+    transition,
+)
+
+#: Mean time a pedestrian walks before stopping, and stands before walking on [s]. Assumption: walking
+#: outdoors comes in bouts of tens of steps with rests between them of seconds to tens of seconds
+#: (Orendurff et al. 2008, "How humans walk: bout duration, steps per bout, and rest duration",
+#: J. Rehabil. Res. Dev. 45(7)); 10 s for each, a round value of that order, not fitted to any scenario.
+#: The per-step switch probability is dt / mean sojourn (0.005 at 20 Hz), so the chain's stationary
+#: probability of standing, the prior of a new track, is 0.5.
+MEAN_WALK_S = 10.0
+MEAN_STAND_S = 10.0
+#: Position random walk of a standing person [m2/s]: 1e-4 lets the position drift by sqrt(1e-4 t),
+#: 1 cm over 1 s, the order of quiet standing's postural sway (centre-of-pressure excursions of millimetres
+#: to a centimetre or two: Prieto et al. 1996, IEEE Trans. Biomed. Eng. 43(9)). It keeps the standing
+#: model's position from freezing once converged; the simulated pedestrians stand exactly still.
+STANDING_POSITION_PSD_M2PS = 1e-4
+_WALK, _STAND = 0, 1
+
+
+def _standing_transition(dt_s: float, psd_m2ps: float) -> tuple[np.ndarray, np.ndarray]:
+    f = np.diag([1.0, 1.0, 0.0, 0.0])
+    q = np.diag([psd_m2ps * dt_s, psd_m2ps * dt_s, 0.0, 0.0])
+    return f, q
+
+
+def _log_gaussian(innovation: np.ndarray, s: np.ndarray) -> float:
+    sign, logdet = np.linalg.slogdet(s)
+    if sign <= 0:
+        return -math.inf
+    mahalanobis = float(innovation @ np.linalg.solve(s, innovation))
+    return -0.5 * (mahalanobis + logdet + len(innovation) * math.log(2 * math.pi))
+
+
+class _ImmTrack:
+    """One pedestrian's two model-conditioned estimates and the models' probabilities."""
+
+    def __init__(self, x_m: float, y_m: float, sigma_m: float, time_s: float, walk_prior: float) -> None:
+        state = np.array([x_m, y_m, 0.0, 0.0])
+        self.states = [state.copy(), state.copy()]
+        self.covs = [
+            np.diag([sigma_m**2, sigma_m**2, INITIAL_SPEED_SIGMA_MPS**2, INITIAL_SPEED_SIGMA_MPS**2]),
+            np.diag([sigma_m**2, sigma_m**2, 0.0, 0.0]),
+        ]
+        self.probs = np.array([walk_prior, 1.0 - walk_prior])
+        self.time_s = time_s
+        self.seen_s = time_s
+
+    def combined(self) -> tuple[np.ndarray, np.ndarray]:
+        x = self.probs[0] * self.states[0] + self.probs[1] * self.states[1]
+        p = np.zeros((4, 4))
+        for j in (_WALK, _STAND):
+            d = self.states[j] - x
+            p += self.probs[j] * (self.covs[j] + np.outer(d, d))
+        return x, p
+
+
+class ImmTracker:
+    """Walking/standing IMM filters by pedestrian id, kept `memory_s` after their last measurement."""
+
+    def __init__(
+        self,
+        memory_s: float = TRACK_MEMORY_S,
+        accel_psd_m2ps3: float = ACCEL_PSD_M2PS3,
+        standing_psd_m2ps: float = STANDING_POSITION_PSD_M2PS,
+        mean_walk_s: float = MEAN_WALK_S,
+        mean_stand_s: float = MEAN_STAND_S,
+        v2i_sigma_m: float = V2I_POSITION_SIGMA_M,
+        onboard_sigma_m: float = ONBOARD_POSITION_SIGMA_M,
+        v2i_latency_s: float = V2I_LATENCY_S,
+    ) -> None:
+        self.memory_s = memory_s
+        self.accel_psd = accel_psd_m2ps3
+        self.standing_psd = standing_psd_m2ps
+        self.mean_walk_s = mean_walk_s
+        self.mean_stand_s = mean_stand_s
+        self.v2i_sigma_m = v2i_sigma_m
+        self.onboard_sigma_m = onboard_sigma_m
+        self.v2i_latency_s = v2i_latency_s
+        self._tracks: dict[str, _ImmTrack] = {}
+
+    def switching(self, dt_s: float) -> np.ndarray:
+        """Markov matrix [from, to] over `dt_s`: leave walking with dt / mean walk, standing with dt /
+        mean stand (capped at 1)."""
+        walk_to_stand = min(dt_s / self.mean_walk_s, 1.0)
+        stand_to_walk = min(dt_s / self.mean_stand_s, 1.0)
+        return np.array([[1.0 - walk_to_stand, walk_to_stand], [stand_to_walk, 1.0 - stand_to_walk]])
+
+    def _predict(self, track: _ImmTrack, dt_s: float) -> None:
+        switch = self.switching(dt_s)
+        predicted = switch.T @ track.probs  # c_j = sum_i p_ij mu_i
+        models = (transition(dt_s), _standing_transition(dt_s, self.standing_psd))
+        states, covs = [], []
+        for j, (f, q) in enumerate(models):
+            weights = switch[:, j] * track.probs / predicted[j] if predicted[j] > 0 else track.probs
+            x0 = weights[0] * track.states[0] + weights[1] * track.states[1]
+            p0 = np.zeros((4, 4))
+            for i in (_WALK, _STAND):
+                d = track.states[i] - x0
+                p0 += weights[i] * (track.covs[i] + np.outer(d, d))
+            scale = self.accel_psd if j == _WALK else 1.0
+            states.append(f @ x0)
+            covs.append(f @ p0 @ f.T + scale * q)
+        track.states, track.covs, track.probs = states, covs, predicted
+
+    def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> None:
+        v2i = source == V2I_SOURCE
+        sigma = self.v2i_sigma_m if v2i else self.onboard_sigma_m
+        r = sigma * sigma * np.eye(2)
+        log_likelihoods = np.zeros(2)
+        for j in (_WALK, _STAND):
+            h = np.zeros((2, 4))
+            h[0, 0] = h[1, 1] = 1.0
+            if v2i and j == _WALK:
+                h[0, 2] = h[1, 3] = -self.v2i_latency_s
+            x, p = track.states[j], track.covs[j]
+            s = h @ p @ h.T + r
+            innovation = z - h @ x
+            gain = p @ h.T @ np.linalg.inv(s)
+            i_kh = np.eye(4) - gain @ h
+            track.states[j] = x + gain @ innovation
+            track.covs[j] = i_kh @ p @ i_kh.T + gain @ r @ gain.T
+            log_likelihoods[j] = _log_gaussian(innovation, s)
+        weighted = log_likelihoods + np.log(np.maximum(track.probs, 1e-300))
+        weighted -= weighted.max()
+        probs = np.exp(weighted)
+        track.probs = probs / probs.sum()
+
+    def update(self, pedestrians: Iterable[PerceivedPedestrian], time_s: float) -> list[Track]:
+        """Mix and predict every track to `time_s`, fold in this step's positions, drop tracks unseen for
+        longer than the memory; the combined tracks, in order of first sighting."""
+        for kept in self._tracks.values():
+            dt = time_s - kept.time_s
+            if dt > 0:
+                self._predict(kept, dt)
+                kept.time_s = time_s
+        walk_prior = self.mean_walk_s / (self.mean_walk_s + self.mean_stand_s)
+        for ped in pedestrians:
+            track = self._tracks.get(ped.ped_id)
+            if track is None:
+                sigma = self.v2i_sigma_m if ped.source == V2I_SOURCE else self.onboard_sigma_m
+                self._tracks[ped.ped_id] = _ImmTrack(ped.x_m, ped.y_m, sigma, time_s, walk_prior)
+                continue
+            self._update(track, np.array([ped.x_m, ped.y_m]), ped.source)
+            track.seen_s = time_s
+        for ped_id in [k for k, t in self._tracks.items() if time_s - t.seen_s > self.memory_s + 1e-9]:
+            del self._tracks[ped_id]
+        out = []
+        for ped_id, t in self._tracks.items():
+            x, p = t.combined()
+            out.append(
+                Track(
+                    ped_id,
+                    float(x[0]),
+                    float(x[1]),
+                    float(x[2]),
+                    float(x[3]),
+                    p,
+                    time_s - t.seen_s,
+                    standing_probability=float(t.probs[_STAND]),
+                )
+            )
+        return out
