@@ -73,6 +73,7 @@ from pedsafe_sumo.network.traffic_side import (
     network_is_lefthand,
     network_keep_side,
     osm_drives_left,
+    side_problem,
 )
 from pedsafe_sumo.sumo_net import read_net
 
@@ -176,6 +177,9 @@ def build_site(
             )
         dropped_underground = convert_polygons(stage, net_file, staged_osm.name, poly_file)
         net = _read_network(stage / net_file, net_from or net_file)
+        side = side_problem(net, stage / net_file, str(net_from or net_file))
+        if side:
+            raise BuildError(side)
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)
         rsu_corner, rsu_units, approach_info = stage_poles_and_views(
             stage, name, net, group, junction, rsu_watch_arm, rsu_corner, hosting_scorer

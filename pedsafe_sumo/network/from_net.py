@@ -42,7 +42,7 @@ from pedsafe_sumo.network.errors import BuildError
 from pedsafe_sumo.network.poles import HostingScorer
 from pedsafe_sumo.network.site_files import commit_staged, relative_to
 from pedsafe_sumo.network.sites import DERIVED_MARKER, content_digest, derived_marker
-from pedsafe_sumo.network.traffic_side import network_is_lefthand
+from pedsafe_sumo.network.traffic_side import network_is_lefthand, side_problem
 from pedsafe_sumo.sumo_net import read_net
 
 #: What a network without sidewalks or crosswalks needs, in the words of netconvert's own options.
@@ -104,6 +104,9 @@ def build_site_from_net(
         # A network built for left-hand traffic keeps its side: the scenarios are staged mirrored on it.
         lefthand_reason = 'the network says lefthand="true"' if network_is_lefthand(stage / net_file) else ""
         net = _read(stage / net_file, net_path)
+        side = side_problem(net, stage / net_file, str(net_path))
+        if side:
+            raise BuildError(side)
         centre_xy = _centre(net, net_path, junction_id, at_xy)
         group = signal_group(net, centre_xy)
         walkways = walkway_problem(net, group, net_path)

@@ -24,6 +24,7 @@ What the data says about the side:
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -48,6 +49,14 @@ TRAFFIC_SIDE_NOTE = (
     "the junction's traffic keeps left (UK, Ireland, Japan, India, South Africa, Hong Kong, ...) unless "
     "the data says driving_side=left or the junction lies in Australia or New Zealand: there, rebuild "
     "with --lefthand."
+)
+
+
+#: What a batch on a left-hand site prints once: how the scenarios' names read there.
+LEFTHAND_MEANING = (
+    "site {site} keeps left (left-hand traffic): every scenario is staged mirrored; right_turn is the "
+    "near-side turn (a LEFT turn here, from the kerb lane across the kerb-side crosswalk), left_turn the "
+    "far-side turn (a RIGHT turn here, from the median lane across oncoming traffic)"
 )
 
 
@@ -106,3 +115,43 @@ def lefthand_region(lat: float, lon: float) -> str | None:
         if south <= lat <= north and west <= lon <= east:
             return name
     return None
+
+
+def drawn_keep_side(net) -> float | None:
+    """The side a sumolib network draws its traffic on: where lane 0 (the kerb-side lane) of its roads
+    lies beside lane 1, seen along the direction of travel (right: KEEP_RIGHT, left: KEEP_LEFT), by the
+    majority of its roads of two lanes or more; None when it has none."""
+    votes = 0
+    for edge in net.getEdges(withInternal=False):
+        if edge.getFunction() or edge.getLaneNumber() < 2:
+            continue
+        kerb, next_lane = edge.getLane(0).getShape(), edge.getLane(1).getShape()
+        (ax, ay), (bx, by) = next_lane[0], next_lane[-1]
+        if math.dist((ax, ay), (bx, by)) < 1e-6:
+            continue
+        mx, my = (
+            kerb[len(kerb) // 2]
+            if len(kerb) > 2
+            else ((kerb[0][0] + kerb[-1][0]) / 2, (kerb[0][1] + kerb[-1][1]) / 2)
+        )
+        # The cross product of travel and the step to the kerb lane: negative when it lies to the right.
+        cross = (bx - ax) * (my - ay) - (by - ay) * (mx - ax)
+        votes += -1 if cross > 0 else 1
+    if votes == 0:
+        return None
+    return KEEP_RIGHT if votes > 0 else KEEP_LEFT
+
+
+def side_problem(net, net_file: Path, shown: str) -> str | None:
+    """Why the network's lefthand attribute and the side its lanes are drawn on disagree (one line: a
+    network marked lefthand="true" by hand over a right-hand drawing, or the reverse), or None."""
+    said = network_keep_side(net_file)
+    drawn = drawn_keep_side(net)
+    if drawn is None or drawn == said:
+        return None
+    says = 'says lefthand="true"' if said < 0 else "says right-hand traffic (no lefthand attribute)"
+    draws = "right" if drawn > 0 else "left"
+    return (
+        f"{shown} {says} but draws the kerb-side lane of its roads on the {draws} of travel: rebuild it "
+        "with netconvert (--lefthand for left-hand traffic) so that both agree"
+    )
