@@ -28,7 +28,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import sumolib
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.network.sites import resolve_site
@@ -500,13 +499,15 @@ def test_every_hosted_combination_on_the_left_hand_junction_runs_on_the_kerb_sid
     assert (episodes["error"] == "").all(), episodes["error"].tolist()
     assert (episodes["ego_signal"] != "none").all(), episodes[["scenario", "approach", "ego_signal"]]
     net = read_net(str(site.file("net.xml")))
-    steps = pd.concat(pd.read_parquet(f) for f in sorted((out / "steplogs").glob("*.parquet")))
+    # A step log per unit and chunk: SCENARIO@ARM-....parquet.
+    steps = pd.concat(
+        pd.read_parquet(f).assign(approach=f.name.split("@")[1].split("-")[0])
+        for f in sorted((out / "steplogs").glob("*@*.parquet"))
+    )
     checked = 0
-    for (scenario, condition, seed), log in steps.groupby(["scenario", "condition", "seed"]):
+    for (scenario, arm, _, seed), log in steps.groupby(["scenario", "approach", "condition", "seed"]):
         log = log.sort_values("time_s")
-        row = episodes[(episodes["scenario"] == scenario) & (episodes["condition"] == condition)
-                       & (episodes["seed"] == seed)].iloc[0]  # fmt: skip
-        approach = load_approach(site, row["approach"])
+        approach = load_approach(site, arm)
         first = log.iloc[0]
         ego = (first["ego_x_m"], first["ego_y_m"], first["ego_yaw_rad"])
         edge = net.getEdge(approach.edge_id)
@@ -520,17 +521,15 @@ def test_every_hosted_combination_on_the_left_hand_junction_runs_on_the_kerb_sid
         assert oncoming and all(_left_of(ego, s[len(s) // 2]) < 0 for s in oncoming), (scenario, seed)
         walked = log[log["ped_x_m"].notna()]
         assert _left_of(ego, (walked.iloc[0]["ped_x_m"], walked.iloc[0]["ped_y_m"])) > 0, (scenario, seed)
-        # The ego's lane: the approach lane its first position lies on; the pedestrian reaches its centre.
+        # The ego's lane: the approach lane its first position lies on. The pedestrian starts beside it on the
+        # kerb side and reaches its centre line, continued straight over the crosswalk at the stop line.
         lane = min(
             range(len(approach.lane_ids)),
-            key=lambda k: abs(_left_of(approach.pose(k, approach.lane_lengths_m[k]), ego[:2])),
+            key=lambda k: abs(_left_of(approach.pose(k, approach.lane_lengths_m[k] - 1.0), ego[:2])),
         )
-        shape = [p for ln, _ in approach.through_paths[lane] for p in ln]
-        gaps = [
-            math.dist(p, sumolib.geomhelper.positionAtShapeOffset(
-                shape, sumolib.geomhelper.polygonOffsetWithMinimumDistanceToPoint(p, shape)))
-            for p in zip(walked["ped_x_m"], walked["ped_y_m"], strict=True)
-        ]  # fmt: skip
-        assert gaps[0] > approach.lane_width_m / 2 and min(gaps) < approach.lane_width_m / 2, (scenario, seed)
+        stop_line = approach.pose(lane, approach.lane_lengths_m[lane] - 1.0)
+        offsets = [_left_of(stop_line, p) for p in zip(walked["ped_x_m"], walked["ped_y_m"], strict=True)]
+        half_m = approach.lane_width_m / 2
+        assert offsets[0] > half_m and min(abs(o) for o in offsets) < half_m, (scenario, seed, offsets[0])
         checked += 1
     assert checked == len(episodes)
