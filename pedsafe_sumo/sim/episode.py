@@ -57,7 +57,6 @@ from pedsafe_sumo.control.timeout import DEFAULT_AGENT_TIMEOUT_S, check_timeout_
 from pedsafe_sumo.demand.sampling import traffic_distributions
 from pedsafe_sumo.demand.vehicles import speed_limit_scale
 from pedsafe_sumo.network.sites import Site
-from pedsafe_sumo.network.traffic_side import network_keep_side
 from pedsafe_sumo.perception import (
     EgoPose,
     Pedestrians,
@@ -183,7 +182,7 @@ class EpisodeRunner:
 
     def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
         """The onboard sensors and the roadside poles the scenario names (built once per set of poles)."""
-        side = network_keep_side(self.site.file("net.xml"))  # the scenario's turn names a side's turn
+        side = self.approach.keep_side  # the scenario's turn names the near- or far-side turn
         ids = approach_unit_ids(spec.roadside_unit_ids, spec.approach, self._site_arm, spec.turn, side)
         if ids not in self._suites:
             unknown = [i for i in ids if i not in self.roadside_units]
