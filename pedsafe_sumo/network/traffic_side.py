@@ -60,6 +60,14 @@ LEFTHAND_MEANING = (
 )
 
 
+#: The Euro NCAP suite on a left-hand site (pedsafe_sumo/ncap/staging.py stages its nearside pedestrian
+#: from the right of travel and its nearside turn as a right turn): refused in one line.
+NCAP_LEFTHAND_REFUSAL = (
+    "site {site} keeps left (left-hand traffic): the Euro NCAP tests are staged for right-hand traffic only "
+    "(nearside from the right of travel); the scenarios (batch, episode) are staged mirrored there"
+)
+
+
 def lefthand_note(reason: str) -> str:
     """The build summary's line on a network built for left-hand traffic, and why."""
     return (

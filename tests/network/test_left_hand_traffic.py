@@ -264,3 +264,16 @@ def test_in_sumo_every_scenario_starts_as_the_mirror_of_its_right_hand_run(pair,
     present = r["ped_x_m"].notna()
     assert np.allclose(2 * cx - r["ped_x_m"][present], lh["ped_x_m"][present], atol=MIRROR_TOL_M)
     assert np.allclose(r["ped_y_m"][present], lh["ped_y_m"][present], atol=MIRROR_TOL_M)
+
+
+def test_the_euro_ncap_suite_is_refused_on_a_left_hand_site_in_one_line(pair, tmp_path):
+    _, left = pair
+    proc = subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.ncap", "--site", str(left), "--out", str(tmp_path / "ncap")],
+        capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert (
+        "keeps left (left-hand traffic): the Euro NCAP tests are staged for right-hand traffic" in proc.stderr
+    )
+    assert not (tmp_path / "ncap").exists()
