@@ -33,6 +33,7 @@ from pedsafe_sumo.io.outputs import check_output_dir, probe_output_dir
 from pedsafe_sumo.io.step_logs import KEEP_EVENTS
 from pedsafe_sumo.network.approaches import is_leg_name
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, resolve_site, site_reference
+from pedsafe_sumo.network.traffic_side import LEFTHAND_MEANING, network_is_lefthand
 from pedsafe_sumo.params import ParameterError
 from pedsafe_sumo.protocol import Protocol, load_protocol
 from pedsafe_sumo.sampling.stages import (
@@ -126,6 +127,8 @@ def prepare(args: argparse.Namespace) -> Plan:
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     site = resolve_site(arguments["site"])
+    if network_is_lefthand(site.file("net.xml")):
+        print(LEFTHAND_MEANING.format(site=site.name))
     params_file = Path(arguments["params"]) if arguments["params"] else None
     if protocol is not None:
         specs, params = protocol.specs(), protocol.params()

@@ -45,6 +45,7 @@ from pedsafe_sumo.ncap.protocol import LIGHTINGS, NcapError, load_protocol, pars
 from pedsafe_sumo.ncap.staging import spec_for, stage_cell
 from pedsafe_sumo.ncap.suite import NcapRunner, run_cells, score_tests
 from pedsafe_sumo.network.sites import Site, UnknownSiteError, get_site
+from pedsafe_sumo.network.traffic_side import NCAP_LEFTHAND_REFUSAL, network_is_lefthand
 from pedsafe_sumo.params import ParameterError, load_params
 from pedsafe_sumo.sim.connection import SimulatorError
 from pedsafe_sumo.sim.episode import CONDITIONS, DEFAULT_ALGORITHM
@@ -108,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
             raise NcapError(f"--seed must be a whole number, got '{args.seed}'") from None
         check_seed(seed, error=NcapError)
         site = resolve_site(args.site)
+        if network_is_lefthand(site.file("net.xml")):
+            raise NcapError(NCAP_LEFTHAND_REFUSAL.format(site=site.name))
         params = load_params(args.params)
         agent_class = load_agent_class(args.algorithm)
         out = args.out

@@ -14,9 +14,11 @@ Usage (see tools/build_network.py):
     python tools/build_network.py --refresh sites/mysite    # after editing sites/mysite/mysite.net.xml
 
 South of the equator and west of Greenwich the centre is negative, in either spelling
-(`--center -34.6,-58.4`, `--center=-34.6,-58.4`). Networks are built for right-hand traffic: a
-network or OSM data that says left-hand traffic, and `--lefthand`, are refused
-(network.traffic_side); the summary says the build cannot tell the traffic side from OSM data alone.
+(`--center -34.6,-58.4`, `--center=-34.6,-58.4`). The network is built for left-hand traffic
+(netconvert --lefthand) when `--lefthand` says so, when the OSM data says driving_side=left, or when the
+centre lies in a region where all traffic keeps left (network.traffic_side.LEFTHAND_REGIONS); a network
+given with --net keeps its own side (lefthand="true"). Otherwise it is built for right-hand traffic and
+the summary says the build cannot tell the traffic side from OSM data alone.
 
 The folder written is a site (pedsafe_sumo.network.sites): every command takes it as --site DIR. Its
 derived files (site file, poles, polygons) carry the digest of the network they were made from, so a
@@ -43,7 +45,6 @@ from pedsafe_sumo.network.approaches import (
     approach_nodes,
     choose_approach,
     junction_legs,
-    kerb_corner,
     leg_named,
     signal_group,
 )
@@ -57,7 +58,7 @@ from pedsafe_sumo.network.convert import (
     stage_tool_inputs,
 )
 from pedsafe_sumo.network.errors import BuildError
-from pedsafe_sumo.network.poles import HostingScorer, place_approach_poles, write_rsu
+from pedsafe_sumo.network.poles import HostingScorer, place_approach_poles, side_kerb_corner, write_rsu
 from pedsafe_sumo.network.site_files import (
     commit_staged,
     finish_products,
@@ -67,7 +68,13 @@ from pedsafe_sumo.network.site_files import (
     write_view,
 )
 from pedsafe_sumo.network.traffic_lights import junctions_problem
-from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand, osm_drives_left
+from pedsafe_sumo.network.traffic_side import (
+    lefthand_region,
+    network_is_lefthand,
+    network_keep_side,
+    osm_drives_left,
+    side_problem,
+)
 from pedsafe_sumo.sumo_net import read_net
 
 __all__ = ["BuildError", "BuildReport", "build_site"]
@@ -84,6 +91,8 @@ class BuildReport:
     seconds: float
     lane_defaults: dict | None = None
     signal_nodes: list | None = None
+    #: Why the network keeps left ("" when it keeps right): the summary's traffic-side line.
+    lefthand_reason: str = ""
 
 
 def stage_poles_and_views(
@@ -100,7 +109,8 @@ def stage_poles_and_views(
     `stage` around `junction`: (the corner of the watched approach's pole, the poles, the approaches'
     info). A junction several lights control is refused first (BuildError): it cannot be staged (one
     program per episode), and the poles' scorer stages the scenarios."""
-    rsu_corner = rsu_corner or kerb_corner(leg_named(junction_legs(group), rsu_watch_arm))
+    side = network_keep_side(stage / f"{name}.net.xml")
+    rsu_corner = rsu_corner or side_kerb_corner(leg_named(junction_legs(group), rsu_watch_arm), side)
     approaches = approach_nodes(net, group, rsu_watch_arm, junction)
     several = junctions_problem(
         stage / f"{name}.net.xml", [junction.getID(), *(n.getID() for n in approaches.values())]
@@ -133,6 +143,7 @@ def build_site(
     net_from: Path | None = None,
     *,
     hosting_scorer: HostingScorer,
+    lefthand: bool = False,
 ) -> BuildReport:
     """Build the site folder `out_dir` from an OSM file; see the module docstring.
 
@@ -140,7 +151,8 @@ def build_site(
     it is and the polygons (polyconvert over `osm_path`, projected with the network's own geo-reference),
     roadside poles, sumocfg and site file are derived from it. `source_osm` is recorded in the site file
     as where the data came from (default: `osm_path` when it is clipped). `hosting_scorer` judges the
-    pole placements (see :mod:`.poles`)."""
+    pole placements (see :mod:`.poles`). `lefthand`: the user says the junction's traffic keeps left
+    (the build also finds it in the data: module docstring)."""
     started = time.perf_counter()
     if not re.fullmatch(r"[A-Za-z0-9_-]+", name):
         raise BuildError(f"site name '{name}' must be letters, digits, '_' or '-'")
@@ -152,18 +164,22 @@ def build_site(
     with tempfile.TemporaryDirectory(prefix=f"pedsafe_build_{name}_") as tmp:
         stage = Path(tmp)
         staged_osm = _stage_osm(stage / f"{name}.osm", osm_path, center_lat, center_lon, radius_m, clipping)
-        if osm_drives_left(staged_osm):
-            raise BuildError(f"the OSM data of {name} says driving_side=left: {LEFTHAND_REFUSAL}")
         stage_tool_inputs(stage)
         if net_from is not None:
             _stage_network(net_from, stage / net_file)  # the network as the user left it
+            lefthand_reason = (
+                'the network says lefthand="true"' if network_is_lefthand(stage / net_file) else ""
+            )
         else:
-            convert_network(stage, name, staged_osm.name, net_file, patches_dir)
-        if network_is_lefthand(stage / net_file):
-            shown = net_from or net_file
-            raise BuildError(f'{shown} is built for left-hand traffic (lefthand="true"): {LEFTHAND_REFUSAL}')
+            lefthand_reason = _lefthand_reason(lefthand, staged_osm, center_lat, center_lon)
+            convert_network(
+                stage, name, staged_osm.name, net_file, patches_dir, lefthand=bool(lefthand_reason)
+            )
         dropped_underground = convert_polygons(stage, net_file, staged_osm.name, poly_file)
         net = _read_network(stage / net_file, net_from or net_file)
+        side = side_problem(net, stage / net_file, str(net_from or net_file))
+        if side:
+            raise BuildError(side)
         group, junction, rsu_watch_arm = _main_approach(net, center_lat, center_lon, rsu_watch_arm)
         rsu_corner, rsu_units, approach_info = stage_poles_and_views(
             stage, name, net, group, junction, rsu_watch_arm, rsu_corner, hosting_scorer
@@ -217,7 +233,21 @@ def build_site(
         time.perf_counter() - started,
         defaults,
         [n.getID() for n in group],
+        lefthand_reason,
     )
+
+
+def _lefthand_reason(told: bool, staged_osm: Path, center_lat: float, center_lon: float) -> str:
+    """Why the network is built for left-hand traffic, or "" (right-hand): the user's --lefthand, the
+    OSM data's driving_side=left, or the centre's region (network.traffic_side)."""
+    if told:
+        return "--lefthand"
+    if osm_drives_left(staged_osm):
+        return "the OSM data says driving_side=left"
+    region = lefthand_region(center_lat, center_lon)
+    if region is not None:
+        return f"the junction lies in {region}, where all traffic keeps left"
+    return ""
 
 
 def _stage_osm(

@@ -60,7 +60,8 @@ def stage_tool_inputs(stage: Path) -> None:
     shutil.copyfile(NETCONVERT_OPTIONS, stage / NETCONVERT_OPTIONS.name)
 
 
-def _netconvert(stage: Path, osm_name: str, type_files: str, net_file: str) -> None:
+def _netconvert(stage: Path, osm_name: str, type_files: str, net_file: str, lefthand: bool = False) -> None:
+    # --lefthand: SUMO's left-hand traffic (lane 0 still the kerb-side lane, drawn left of travel).
     _run(
         [
             sumo_binary("netconvert"),
@@ -72,6 +73,7 @@ def _netconvert(stage: Path, osm_name: str, type_files: str, net_file: str) -> N
             type_files,
             "--output-file",
             net_file,
+            *(["--lefthand"] if lefthand else []),
         ],
         stage,
         "netconvert",
@@ -99,9 +101,12 @@ def _apply_patches(stage: Path, name: str, net_file: str, patches_dir: Path | No
     return patch_args
 
 
-def convert_network(stage: Path, name: str, osm_name: str, net_file: str, patches_dir: Path | None) -> None:
-    """netconvert over the staged clip, then over the result with the folder's patch files (when any)."""
-    _netconvert(stage, osm_name, TYPE_FILES, net_file)
+def convert_network(
+    stage: Path, name: str, osm_name: str, net_file: str, patches_dir: Path | None, lefthand: bool = False
+) -> None:
+    """netconvert over the staged clip (for left-hand traffic with `lefthand`), then over the result with
+    the folder's patch files (when any; netconvert keeps the network's side)."""
+    _netconvert(stage, osm_name, TYPE_FILES, net_file, lefthand)
     patch_args = _apply_patches(stage, name, net_file, patches_dir)
     if patch_args:
         # SUMO's header now shows only the patch pass: say how the network was made.

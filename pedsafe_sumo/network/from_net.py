@@ -12,9 +12,10 @@ refused until `--refresh` re-derives them. The polygons are the user's, like the
 them into `<name>.poly.xml` (no file: none, so nothing hides a pedestrian but the vehicles), and `--refresh`
 keeps them as they are.
 
-A network the scenarios cannot be staged on is refused in one line: left-hand traffic, a junction that is
-not signalised, one whose approaches have no sidewalk or that has no crosswalk (with the netconvert options
-that add them).
+A network built for left-hand traffic (lefthand="true") keeps its side, and the scenarios are staged
+mirrored on it (network.traffic_side). A network the scenarios cannot be staged on is refused in one
+line: a junction that is not signalised, one whose approaches have no sidewalk or that has no crosswalk
+(with the netconvert options that add them).
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from pedsafe_sumo.network.errors import BuildError
 from pedsafe_sumo.network.poles import HostingScorer
 from pedsafe_sumo.network.site_files import commit_staged, relative_to
 from pedsafe_sumo.network.sites import DERIVED_MARKER, content_digest, derived_marker
-from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand
+from pedsafe_sumo.network.traffic_side import network_is_lefthand, side_problem
 from pedsafe_sumo.sumo_net import read_net
 
 #: What a network without sidewalks or crosswalks needs, in the words of netconvert's own options.
@@ -100,11 +101,12 @@ def build_site_from_net(
     with tempfile.TemporaryDirectory(prefix=f"pedsafe_build_{name}_") as tmp:
         stage = Path(tmp)
         _stage_network(net_path, stage / net_file)
-        if network_is_lefthand(stage / net_file):
-            raise BuildError(
-                f'{net_path} is built for left-hand traffic (lefthand="true"): {LEFTHAND_REFUSAL}'
-            )
+        # A network built for left-hand traffic keeps its side: the scenarios are staged mirrored on it.
+        lefthand_reason = 'the network says lefthand="true"' if network_is_lefthand(stage / net_file) else ""
         net = _read(stage / net_file, net_path)
+        side = side_problem(net, stage / net_file, str(net_path))
+        if side:
+            raise BuildError(side)
         centre_xy = _centre(net, net_path, junction_id, at_xy)
         group = signal_group(net, centre_xy)
         walkways = walkway_problem(net, group, net_path)
@@ -158,6 +160,7 @@ def build_site_from_net(
         time.perf_counter() - started,
         None,
         [n.getID() for n in group],
+        lefthand_reason,
     )
 
 

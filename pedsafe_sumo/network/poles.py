@@ -26,6 +26,7 @@ from pedsafe_sumo.network.approaches import (
 )
 from pedsafe_sumo.network.errors import BuildError
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.network.traffic_side import KEEP_RIGHT, network_keep_side
 
 #: Given the staged site of one approach (its site file names that approach's junction and corner pole),
 #: the function that counts how many of the scenarios staged there a pole pair lets the site host:
@@ -114,6 +115,7 @@ def place_roadside_unit_across(
     abreast_m: float = RSU_ACROSS_ABREAST_M,
     aim_m: float = RSU_ACROSS_AIM_M,
     setback_m: float = RSU_ACROSS_SETBACK_M,
+    side: float = KEEP_RIGHT,
 ) -> dict:
     """Pole on the far sidewalk of one arm, looking across at the approach's stop-line queue.
 
@@ -153,14 +155,15 @@ def place_roadside_unit_across(
         sidewalks = [lane for lane in leaving.getLanes() if lane.getPermissions() == {"pedestrian"}]
     if not sidewalks:
         # A one-way approach, or a leaving road without a sidewalk: the pole stands beyond the far
-        # (left) edge of the approach itself, as far from its kerb lane as the far sidewalk would be.
+        # (median-side: left of travel, right in left-hand traffic, `side`) edge of the approach itself,
+        # as far from its kerb lane as the far sidewalk would be.
         far_lane = vehicle_lanes(approach)[-1]
         x, y = abreast
         heading = sumolib.geomhelper.rotationAtShapeOffset(
             kerb_lane.getShape(), max(kerb_lane.getLength() - abreast_m, 0.0)
         )
-        left_m = (len(vehicle_lanes(approach)) - 0.5) * far_lane.getWidth() + setback_m + 1.0
-        pole = (x - left_m * math.sin(heading), y + left_m * math.cos(heading))
+        median_m = side * ((len(vehicle_lanes(approach)) - 0.5) * far_lane.getWidth() + setback_m + 1.0)
+        pole = (x - median_m * math.sin(heading), y + median_m * math.cos(heading))
         return _pole_aimed_at(pole, before_stop_line(aim_m), "across", watch_arm)
     sidewalk = sidewalks[0]  # lane 0: the outermost
 
@@ -193,9 +196,10 @@ def place_poles(
     """The two poles of one approach, each at the first placement tried where the scenarios that use it
     can be hosted (`hosting_scorer`: its camera sees where their pedestrians start and most of their
     path, past the buildings and trees of the site); the first placement when none is better."""
+    side = network_keep_side(stage / f"{name}.net.xml")
     first = [
         {"id": "rsu_camera_0", **place_roadside_unit(net, junction, corner, arm)},
-        {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, arm)},
+        {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, arm, side=side)},
     ]
     # The scenarios read the main junction and the watched arm from the site file.
     (stage / f"{name}.site.json").write_text(
@@ -214,7 +218,7 @@ def place_poles(
         key=lambda pole: (hosted_count([pole, first[1]], poly_file), -corner_poles.index(pole)),
     )
     across_poles = [
-        {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, arm, setback_m=setback)}
+        {"id": "rsu_camera_1", **place_roadside_unit_across(net, junction, arm, setback_m=setback, side=side)}
         for setback in RSU_ACROSS_SETBACKS_TRIED_M
     ]
     best1 = max(
@@ -222,6 +226,15 @@ def place_poles(
         key=lambda pole: (hosted_count([best0, pole], poly_file), -across_poles.index(pole)),
     )
     return [best0, best1]
+
+
+def side_kerb_corner(leg, side: float) -> str:
+    """The corner the pole watching `leg` stands on: its kerb's. In right-hand traffic
+    approaches.kerb_corner (45 degrees anticlockwise of the leg); in left-hand traffic the kerb lies on
+    the other side of the arriving traffic, 45 degrees clockwise of the leg."""
+    if side > 0:
+        return kerb_corner(leg)
+    return ("NE", "SE", "SW", "NW")[int(((leg.bearing_deg + 45.0) % 360.0) // 90.0)]
 
 
 def place_approach_poles(
@@ -257,7 +270,9 @@ def place_approach_poles(
                     name,
                     net,
                     node,
-                    kerb_corner(leg_named(legs_at(net, node), arm)),
+                    side_kerb_corner(
+                        leg_named(legs_at(net, node), arm), network_keep_side(stage / f"{name}.net.xml")
+                    ),
                     arm,
                     poly_file,
                     hosting_scorer,

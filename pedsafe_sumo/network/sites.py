@@ -29,7 +29,6 @@ from pathlib import Path
 
 from pedsafe_sumo import NETWORKS_DIR, REPO_ROOT
 from pedsafe_sumo.network.traffic_lights import junctions_problem
-from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, network_is_lefthand
 
 OSM_DIR = REPO_ROOT / "osm"
 #: Environment variable naming folders of site folders (<folder>/<site>/<site>.net.xml, ...) searched
@@ -188,9 +187,10 @@ def read_site_file(path: Path, name: str) -> dict:
 
 
 def resolve_site(name_or_path: str | os.PathLike = DEFAULT_SITE, verify: bool = True) -> Site:
-    """The site a --site value names, checked unless verify is False: a network built for left-hand
-    traffic (network.traffic_side) and a junction of the site several traffic lights control
-    (network.traffic_lights) are refused, whatever else changed (no rebuild helps), then verify_site."""
+    """The site a --site value names, checked unless verify is False: a junction of the site several
+    traffic lights control (network.traffic_lights) is refused, whatever else changed (no rebuild
+    helps), then verify_site. A network built for left-hand traffic is staged mirrored
+    (network.traffic_side)."""
     folder = site_folder(name_or_path)
     site_file = _site_file_in(folder)
     name = site_file.name.removesuffix(".site.json")
@@ -213,11 +213,6 @@ def resolve_site(name_or_path: str | os.PathLike = DEFAULT_SITE, verify: bool = 
     except (KeyError, TypeError, ValueError) as exc:
         raise SiteError(f"site {name}: {site_file} lacks a valid {_one_line(exc)}") from None
     if verify:
-        if network_is_lefthand(site.file("net.xml")):
-            raise SiteError(
-                f"site {name}: {site.file('net.xml').name} is built for left-hand traffic "
-                f'(lefthand="true"): {LEFTHAND_REFUSAL}'
-            )
         several = _several_lights(site, info)
         if several:
             raise SiteError(f"site {name}: {several}")

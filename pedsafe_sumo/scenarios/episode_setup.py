@@ -56,10 +56,10 @@ class VehicleSetup:
     #: The ego starting before its approach (approach staging, on the road before it: placements/
     #: straight.py): the approach lane it drives to the junction's stop line on. "": `lane_id` is that lane.
     approach_lane_id: str = ""
-    #: > 0: the vehicle stands parked at the kerb beside `lane_id`, its centre this far to the right of
-    #: the lane's centre (a one-lane approach: placements.straight.kerb_parking_offset_m); SUMO inserts it
-    #: on the lane at `front_pos_m` and parks it in a parking space there (sim/kerb.py). 0: it stands in
-    #: its lane.
+    #: > 0: the vehicle stands parked at the kerb beside `lane_id`, its centre this far towards the kerb
+    #: from the lane's centre (right of travel; left in left-hand traffic), on a one-lane approach
+    #: (placements.straight.kerb_parking_offset_m); SUMO inserts it on the lane at `front_pos_m` and parks
+    #: it in a parking space there (sim/kerb.py). 0: it stands in its lane.
     kerb_offset_m: float = 0.0
     #: SUMO forms it (approach staging, sim/queue.py): it enters its lane upstream before the episode's
     #: start and SUMO's car-following drives it up to a stop at the red stop line, or behind the vehicle

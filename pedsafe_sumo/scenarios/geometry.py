@@ -5,6 +5,14 @@ All three scenarios are staged on the approach of the main junction that the roa
 right, a signalised crosswalk at the stop line). Everything is derived from the network with sumolib,
 never from hard-coded edge ids, so another site built by tools/build_network.py works the same way.
 
+Traffic side: Approach.keep_side (network.traffic_side) is +1 where traffic keeps right and -1 where it
+keeps left (a network built with netconvert --lefthand). Lane indices mean the same on both sides (0 the
+kerb-side lane); every offset across the road is measured towards the median (Approach.across), and the
+turns are named by their side: "right" is the near-side turn from the kerb lane across the kerb-side
+crosswalk (SUMO's "r" in right-hand traffic, "l" in left-hand traffic), "left" the far-side turn from
+the median lane across oncoming traffic (load_turn). So a site in left-hand traffic stages every
+scenario mirrored.
+
 Frames: SUMO network coordinates (x east, y north, metres); headings in radians counter-clockwise
 from +x. Lane positions are metres from the start of the lane, as in SUMO: SUMO moves a vehicle in
 lane-length metres and draws lane position p at p x (drawn length / lane length) along the lane's shape
@@ -27,6 +35,7 @@ import sumolib
 
 from pedsafe_sumo.network.approaches import legs_at
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.network.traffic_side import KEEP_RIGHT, far_turn_letter, near_turn_letter, network_keep_side
 from pedsafe_sumo.scenarios.upstream import UpstreamRoad, connection_lanes, free_through, upstream_road
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
@@ -85,7 +94,8 @@ def path_pos_m(path: LanePath, xy: tuple[float, float]) -> float:
 @dataclass(frozen=True)
 class Approach:
     edge_id: str
-    #: Vehicle lanes from the right (kerb side) to the left (median side).
+    #: Vehicle lanes from the kerb side to the median side (right to left in right-hand traffic, left to
+    #: right in left-hand traffic).
     lane_ids: tuple[str, ...]
     lane_shapes: tuple[tuple[tuple[float, float], ...], ...]
     lane_lengths_m: tuple[float, ...]
@@ -123,6 +133,9 @@ class Approach:
     #: (upstream.UPSTREAM_MAX_M): approach staging starts the ego there when the lane is shorter than its
     #: drawn start distance (placements/straight.py).
     upstream_roads: tuple[UpstreamRoad, ...] = ()
+    #: The side traffic keeps to (network.traffic_side): +1 right-hand (the median lies to the left of
+    #: travel), -1 left-hand (to the right).
+    keep_side: float = KEEP_RIGHT
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -135,13 +148,14 @@ class Approach:
         return x, y, sumolib.geomhelper.rotationAtShapeOffset(shape, offset_m)
 
     def across(self, lane_index: int, pos_m: float, from_offset_m: float, to_offset_m: float):
-        """Two points on the line across the road at a lane position, offsets measured to the left
-        of the centre of `lane_index` (negative: towards the kerb)."""
+        """Two points on the line across the road at a lane position, offsets measured from the centre
+        of `lane_index` towards the median (negative: towards the kerb): to the left of travel in
+        right-hand traffic, to the right in left-hand traffic (keep_side)."""
         x, y, heading = self.pose(lane_index, pos_m)
-        left = (-math.sin(heading), math.cos(heading))
+        median = (-self.keep_side * math.sin(heading), self.keep_side * math.cos(heading))
         return (
-            (x + from_offset_m * left[0], y + from_offset_m * left[1]),
-            (x + to_offset_m * left[0], y + to_offset_m * left[1]),
+            (x + from_offset_m * median[0], y + from_offset_m * median[1]),
+            (x + to_offset_m * median[0], y + to_offset_m * median[1]),
         )
 
 
@@ -194,13 +208,16 @@ def opposite_leg(site: Site, arm: str) -> str:
 _ARMS_CLOCKWISE = ("N", "E", "S", "W")
 
 
-def exit_arm(arm: str, turn: str) -> str:
-    """The arm a `turn` ("left" or "right") from approach `arm` leaves by (right-hand traffic)."""
-    step = {"left": 1, "right": -1}[turn]
+def exit_arm(arm: str, turn: str, side: float = KEEP_RIGHT) -> str:
+    """The arm a `turn` (the scenarios' "left": far-side, or "right": near-side) from approach `arm` leaves
+    by; in left-hand traffic (`side` -1) the far-side turn is a right turn and the near-side one a left."""
+    step = {"left": 1, "right": -1}[turn] * (1 if side > 0 else -1)
     return _ARMS_CLOCKWISE[(_ARMS_CLOCKWISE.index(arm) + step) % 4]
 
 
-def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str, turn: str = "") -> tuple[str, ...]:
+def approach_unit_ids(
+    unit_ids: tuple[str, ...], arm: str, site_arm: str, turn: str = "", side: float = KEEP_RIGHT
+) -> tuple[str, ...]:
     """The poles a scenario's `roadside_units` name on approach `arm`: the site's own approach keeps the
     ids (rsu_camera_0, rsu_camera_1); the build names another approach's poles after its arm
     (rsu_camera_0_E, rsu_camera_1_E: tools/build_network.py). `rsu_camera_K@exit` names pole K of the
@@ -218,7 +235,7 @@ def approach_unit_ids(unit_ids: tuple[str, ...], arm: str, site_arm: str, turn: 
         if own:
             ids.append(pole(own.group(1), arm))
         elif leaving and turn in ("left", "right") and arm in _ARMS_CLOCKWISE:
-            ids.append(pole(leaving.group(1), exit_arm(arm, turn)))
+            ids.append(pole(leaving.group(1), exit_arm(arm, turn, side)))
         else:
             # A pole named otherwise (--set roadside_units=...) is taken as named.
             ids.append(unit)
@@ -307,6 +324,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
             if any(c.getDirection() == "s" and c.getTo() == straight[0] for c in lane.getOutgoing())
         ),
         upstream_roads=tuple(upstream_road(net, lane, follow=free_through) for lane in vehicle_lanes),
+        keep_side=network_keep_side(site.file("net.xml")),
     )
 
 
@@ -361,7 +379,9 @@ def straight_staging_problem(approach: Approach, ego_lane: int | None = None) ->
 class Turn:
     """A turning movement from the watched approach onto another arm of the junction."""
 
-    direction: str  # "right" or "left"
+    #: The scenarios' name of the turn: "right" the near-side turn, "left" the far-side one (the physical
+    #: right and left turns in right-hand traffic, mirrored in left-hand traffic: module docstring).
+    direction: str
     #: Index (kerb to median, as in Approach.lane_ids) of the approach lane the turn starts from.
     lane_index: int
     #: The approach, then the road the ego turns into.
@@ -372,7 +392,7 @@ class Turn:
     #: Length of the approach lane (where the path enters the junction) [m].
     approach_length_m: float
     #: The crosswalk over the road turned into, oriented from the corner nearer the approach's stop
-    #: line ("near": the corner the ego turns around on a right turn) to the other.
+    #: line ("near": the corner the ego turns around on a near-side turn) to the other.
     crosswalk_id: str
     crosswalk_path: tuple[tuple[float, float], tuple[float, float]]
     #: The lane of the road turned into that the path ends on, and the SUMO distance along the path (lane
@@ -383,27 +403,42 @@ class Turn:
     lanes: LanePath = ()
 
 
-#: SUMO's connection directions of the turns (https://sumo.dlr.de/docs/Networks/PlainXML.html).
-_TURN_DIRECTIONS = {"right": "r", "left": "l"}
+#: The turns by the scenarios' names: SUMO's connection direction (https://sumo.dlr.de/docs/Networks/
+#: PlainXML.html) as a function of keep_side, and the change of heading (+1 anticlockwise) in right-hand
+#: traffic (mirrored by keep_side).
+_TURN_DIRECTIONS = {"right": (near_turn_letter, -1.0), "left": (far_turn_letter, 1.0)}
+
+
+def turn_name(direction: str, side: float) -> str:
+    """How a turn the scenarios name `direction` reads on a site keeping to `side`: "right turn" and "left
+    turn" in right-hand traffic; in left-hand traffic the mirror, with the scenarios' name."""
+    if side > 0:
+        return f"{direction} turn"
+    physical = {"right": "left", "left": "right"}[direction]
+    side_name = {"right": "near-side", "left": "far-side"}[direction]
+    return f"{side_name} turn ({physical} turn in left-hand traffic)"
 
 
 @lru_cache(maxsize=32)
 def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
-    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane (right)
-    or the median lane (left), onto the arm whose heading differs by the nearest to 90 degrees; raises
-    ValueError when the approach has no such connection or the arm no crosswalk."""
+    """The `direction` turn of the approach from `arm` (None: the site's own): from the kerb lane ("right":
+    near-side) or the median lane ("left": far-side), onto the arm whose heading differs by the nearest to
+    90 degrees; raises ValueError when the approach has no such connection or the arm no crosswalk."""
     if direction not in _TURN_DIRECTIONS:
         raise ValueError(f"unknown turn '{direction}' (known: {', '.join(_TURN_DIRECTIONS)})")
     approach = load_approach(site, arm)
     net = read_net(str(site.file("net.xml")), withInternal=True)
     lane_index = 0 if direction == "right" else len(approach.lane_ids) - 1
     lane = net.getLane(approach.lane_ids[lane_index])
-    connections = [c for c in lane.getOutgoing() if c.getDirection() == _TURN_DIRECTIONS[direction]]
+    letter_of, turn_sign = _TURN_DIRECTIONS[direction]
+    connections = [c for c in lane.getOutgoing() if c.getDirection() == letter_of(approach.keep_side)]
     if not connections:
-        raise ValueError(f"site {site.name}: no {direction} turn from lane {lane.getID()}")
+        raise ValueError(
+            f"site {site.name}: no {turn_name(direction, approach.keep_side)} from lane {lane.getID()}"
+        )
     (ax, ay), (bx, by) = lane.getShape()[-2:]
     heading_in = math.atan2(by - ay, bx - ax)
-    wanted = -math.pi / 2 if direction == "right" else math.pi / 2
+    wanted = approach.keep_side * turn_sign * math.pi / 2
 
     def turn_error(connection) -> float:
         (px, py), (qx, qy) = connection.getToLane().getShape()[:2]

@@ -149,7 +149,7 @@ def site_hosting(site, specs: dict, params: dict[str, Any], arm: str | None = No
         if problem:
             problems[name] = f"cannot be staged: site {site.name}: {problem}"
             continue
-        ids = approach_unit_ids(spec.roadside_unit_ids, spec_arm, site_arm, spec.turn)
+        ids = approach_unit_ids(spec.roadside_unit_ids, spec_arm, site_arm, spec.turn, approach.keep_side)
         spec = dataclasses.replace(spec, roadside_units=",".join(ids))
         problems[name] = hosting_problem(spec, approach, by_id, params, static, turn)
     return problems

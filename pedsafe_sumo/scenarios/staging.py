@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from pedsafe_sumo.network.traffic_side import KEEP_RIGHT, near_turn_letter
 from pedsafe_sumo.sampling.draws import Draws, as_draws
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, SignalStaging
 from pedsafe_sumo.scenarios.geometry import Approach, Turn
@@ -132,6 +133,7 @@ def stage_signals(
     setup: EpisodeSetup,
     junction: JunctionSignals | None,
     rng: np.random.Generator | Draws,
+    side: float = KEEP_RIGHT,
 ) -> EpisodeSetup:
     """Place the episode in the junction's signal program: a start time in the cycle, drawn uniformly
     (one draw from `rng`) among those at which the ego's signal shows what `spec` requires from the
@@ -141,7 +143,8 @@ def stage_signals(
     `signal_hold_after_s` after the staged conflict. Under approach staging, when that is longer than any
     run of the ego's signal, the pedestrian appears later, part of the way along their walk-in
     (appear_later; _fit_approach). SignalStagingError when the program has no such time (the message says
-    which)."""
+    which). `side`: the site's traffic side (network.traffic_side): the kerb lane's occluder turns by
+    its near-side turn."""
     if junction is None:
         # An unsignalised junction (another site): nobody has a signal, and episodes.parquet says so
         # (ego_signal and ped_signal "none").
@@ -171,7 +174,7 @@ def stage_signals(
         occluder_link_index=(
             oncoming_links[0]
             if oncoming_links
-            else junction.turn_link(setup.parked[0].lane_id, "r")
+            else junction.turn_link(setup.parked[0].lane_id, near_turn_letter(side))
             if setup.parked
             else NO_LINK
         ),

@@ -182,7 +182,8 @@ class EpisodeRunner:
 
     def sensors_for(self, spec: ScenarioSpec) -> SensorSuite:
         """The onboard sensors and the roadside poles the scenario names (built once per set of poles)."""
-        ids = approach_unit_ids(spec.roadside_unit_ids, spec.approach, self._site_arm, spec.turn)
+        side = self.approach.keep_side  # the scenario's turn names the near- or far-side turn
+        ids = approach_unit_ids(spec.roadside_unit_ids, spec.approach, self._site_arm, spec.turn, side)
         if ids not in self._suites:
             unknown = [i for i in ids if i not in self.roadside_units]
             if unknown:
@@ -227,7 +228,7 @@ class EpisodeRunner:
         setup = draw_episode(spec, self.approach, seed, traits, ego_speed_mps, draws, turn, oncoming)
         if spec.approach:
             setup = dataclasses.replace(setup, approach=spec.approach)
-        setup = stage_signals(spec, setup, self.signals, draws)
+        setup = stage_signals(spec, setup, self.signals, draws, self.approach.keep_side)
         if spec.background_traffic:
             background = draw_background(
                 spec, self._site_data, self.params["traffic"], traffic_seq, setup.time_limit_s

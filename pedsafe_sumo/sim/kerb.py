@@ -45,9 +45,10 @@ def parking_area_id(vehicle: VehicleSetup) -> str:
 
 def space_pose(approach: Approach, vehicle: VehicleSetup) -> tuple[float, float, float]:
     """(x, y, heading) where the parked vehicle's front stands: its lane's centre at its front's lane
-    position, moved `kerb_offset_m` to the right; heading in radians counter-clockwise from +x."""
+    position, moved `kerb_offset_m` towards the kerb (to the right of travel; to the left in left-hand
+    traffic, Approach.keep_side); heading in radians counter-clockwise from +x."""
     x, y, heading = approach.pose(approach.lane_ids.index(vehicle.lane_id), vehicle.front_pos_m)
-    offset_m = vehicle.kerb_offset_m
+    offset_m = approach.keep_side * vehicle.kerb_offset_m
     return x + offset_m * math.sin(heading), y - offset_m * math.cos(heading), heading
 
 

@@ -66,12 +66,13 @@ def lane_links(api, lane_id: str) -> tuple[str | None, list[int], dict[str, str]
     return None, [], exits
 
 
-def form_queue(api, queue: tuple[VehicleSetup, ...], add: AddVehicle) -> None:
+def form_queue(api, queue: tuple[VehicleSetup, ...], add: AddVehicle, near_turn: str = "r") -> None:
     """Form `queue` (its head first, all on one lane) in SUMO before the episode's start: red on the
     lane's links, the vehicles in from the lane's start one every ARRIVAL_HEADWAY_S, stepped until all
-    stand still, then the junction's program back. RuntimeError when the queue does not form where it
-    was staged (module docstring). Where no traffic light controls the lane, the head stops for a SUMO
-    stop at its staged front instead of the red."""
+    stand still, then the junction's program back. The head turns by `near_turn` (SUMO's direction of
+    the kerb lane's near-side turn: "r", "l" in left-hand traffic). RuntimeError when the queue does not
+    form where it was staged (module docstring). Where no traffic light controls the lane, the head
+    stops for a SUMO stop at its staged front instead of the red."""
     lane_id = queue[0].lane_id
     edge_id = lane_id.rsplit("_", 1)[0]
     tls, indices, exits = lane_links(api, lane_id)
@@ -83,7 +84,7 @@ def form_queue(api, queue: tuple[VehicleSetup, ...], add: AddVehicle) -> None:
             state[index] = RED
         api.trafficlight.setRedYellowGreenState(tls, "".join(state))
     through = exits.get("s") or next(iter(exits.values()), "")
-    routes = {"queue_right": exits.get("r") or through, "queue_through": through}
+    routes = {"queue_right": exits.get(near_turn) or through, "queue_through": through}
     for route_id, exit_edge in routes.items():
         api.route.add(route_id, [edge_id, exit_edge] if exit_edge else [edge_id])
     start_s = api.simulation.getTime()

@@ -29,6 +29,7 @@ from pedsafe_sumo.behaviour.pedestrian import BehaviourParams
 from pedsafe_sumo.demand.site import load_site as load_demand_site
 from pedsafe_sumo.demand.vehicles import generate_vehicles, route_ids
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.network.traffic_side import near_turn_letter
 from pedsafe_sumo.perception import load_roadside_units, load_static_occluders
 from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS
 from pedsafe_sumo.scenarios.episode_setup import (
@@ -496,6 +497,7 @@ class SumoStaging:
                 lambda api_, vehicle, route_id, depart: add_vehicle(
                     api_, vehicle, route_id, True, depart, upstream=True
                 ),
+                near_turn_letter(approach.keep_side),
             )
             start_s = api.simulation.getTime()
         self.populate(api, setup, approach, start_s)

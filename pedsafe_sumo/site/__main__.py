@@ -11,7 +11,7 @@ from pedsafe_sumo.network.site_paths import check_targets, clip_to_read, source_
 from pedsafe_sumo.network.sites import SITE_HELP, SiteError, UnknownSiteError, resolve_site
 from pedsafe_sumo.network.summary import summarise
 from pedsafe_sumo.network.sumo_inputs import check_site_sumo_files
-from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
+from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE, lefthand_note, network_is_lefthand
 from pedsafe_sumo.scenarios.hosting import hosting_scorer
 from pedsafe_sumo.site.build_command import refresh_from_net
 from pedsafe_sumo.site.staged_hosting import staged_hosting_lines
@@ -63,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
                 description=site.description,
                 source_osm=site.source_osm,
                 hosting_scorer=hosting_scorer,
+                lefthand=network_is_lefthand(site.file("net.xml")),  # a site rebuilt keeps its side
             )
         except (BuildError, UnknownSiteError) as exc:
             parser.exit(2, f"error: {exc}\n")
@@ -71,7 +72,11 @@ def main(argv: list[str] | None = None) -> int:
             f"built {site.directory} from {origin} in {report.seconds:.1f} s "
             f"({len(report.written)} file(s) changed, {len(report.unchanged)} unchanged)"
         )
-        print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
+        print(
+            f"  {lefthand_note(report.lefthand_reason)}"
+            if report.lefthand_reason
+            else f"  NOTE: {TRAFFIC_SIDE_NOTE}"
+        )
     try:  # `sumo-gui -c` (the line "open it" below) reads them
         check_site_sumo_files(site)
     except SiteError as exc:

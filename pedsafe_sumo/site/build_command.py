@@ -20,7 +20,7 @@ from pedsafe_sumo.network.coordinates import NEGATIVE_HELP, parse_lat_lon, with_
 from pedsafe_sumo.network.from_net import build_site_from_net, parse_xy
 from pedsafe_sumo.network.site_paths import check_site_folder, check_targets, clip_to_read, source_to_read
 from pedsafe_sumo.network.sites import SiteError, resolve_site
-from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL, TRAFFIC_SIDE_NOTE
+from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE, lefthand_note, network_is_lefthand
 from pedsafe_sumo.scenarios.hosting import hosting_scorer
 from pedsafe_sumo.site.staged_hosting import staged_hosting_lines
 
@@ -31,7 +31,7 @@ MAX_RADIUS_M = 2000.0
 
 
 #: The options of a build from OpenStreetMap, which a build from a SUMO network (--net) does not take.
-OSM_OPTIONS = ("osm", "center", "radius", "osm_out", "patches", "no_clip", "refresh")
+OSM_OPTIONS = ("osm", "center", "radius", "osm_out", "patches", "no_clip", "refresh", "lefthand")
 #: The options only a build from a SUMO network takes.
 NET_OPTIONS = ("junction", "at", "polygons")
 
@@ -147,13 +147,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--lefthand",
         action="store_true",
-        help="the junction's traffic keeps left (the build cannot tell from OSM data alone): refused, "
-        "left-hand traffic is not supported yet",
+        help="the junction's traffic keeps left: netconvert builds the network for left-hand traffic and the "
+        "scenarios are staged mirrored (found without it where the OSM data says driving_side=left or the "
+        "junction lies in Australia or New Zealand; a network given with --net keeps its own side)",
     )
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(with_negative_values(parser, argv, ["--center", "--at"]))
-    if args.lefthand:
-        parser.exit(2, f"build_network: error: {LEFTHAND_REFUSAL}\n")
     _check_source_options(parser, args)
     try:
         if args.refresh is not None:
@@ -165,9 +164,11 @@ def main(argv: list[str] | None = None) -> int:
     except (BuildError, SiteError) as exc:
         parser.exit(2, f"build_network: error: {exc}\n")
     print(f"built {report.name} in {report.seconds:.1f} s: main junction {report.main_junction}")
-    if args.net is None and not _from_net(report):
+    if report.lefthand_reason:
+        print(f"  {lefthand_note(report.lefthand_reason)}")
+    elif args.net is None and not _from_net(report):
         print(f"  NOTE: {TRAFFIC_SIDE_NOTE}")
-    else:
+    if args.net is not None or _from_net(report):
         print("  no geo-reference: the site lives in the network's own frame (x, y in metres)")
     if report.signal_nodes and len(report.signal_nodes) > 1:
         print(
@@ -328,6 +329,9 @@ def _build(parser, args) -> BuildReport:
         description=args.description if args.description is not None else (site.description if site else ""),
         source_osm=(site.source_osm if same_site else None) if args.no_clip else osm,
         hosting_scorer=hosting_scorer,
+        # A site rebuilt keeps its side.
+        lefthand=args.lefthand
+        or (site is not None and same_site and network_is_lefthand(site.file("net.xml"))),
     )
 
 

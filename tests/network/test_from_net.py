@@ -230,11 +230,13 @@ def test_a_network_without_walkways_is_refused_and_netconverts_options_add_them(
     assert "crossing: hosted" in proc.stdout
 
 
-def test_a_left_hand_network_is_refused(tmp_path):
+def test_a_lefthand_attribute_the_lanes_contradict_is_refused(tmp_path):
+    """RiLSA (right-hand) marked lefthand="true" by hand: its lanes are drawn for right-hand traffic, so the
+    scenarios could be staged on neither side; a network netconvert built with --lefthand is taken."""
     left = tmp_path / "left.net.xml"
     left.write_text(RILSA.read_text(encoding="utf-8").replace("<net ", '<net lefthand="true" ', 1))
     line = _bad(tmp_path, "--net", str(left), "--junction", "0")
-    assert "left-hand traffic is not supported yet" in line
+    assert 'says lefthand="true" but draws the kerb-side lane of its roads on the right of travel' in line
 
 
 def test_polygons_given_are_the_sites_occluders_and_a_refresh_keeps_them(tmp_path):

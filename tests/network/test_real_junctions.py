@@ -1,8 +1,8 @@
 """Real signalised junctions from OpenStreetMap, in four countries (tests/data/osm, ODbL; each folder's
 README names its source and place): each builds into a site whose traffic light controls the junction's
 links; every (scenario, approach) combination the build says it hosts runs with the signals staged and no
-error rows, and the roadside camera detects the pedestrian under V2I. A left-hand junction is refused in
-one line.
+error rows, and the roadside camera detects the pedestrian under V2I. A left-hand junction is found from
+its place (or the data, or --lefthand), built for left-hand traffic and staged mirrored.
 
 | clip | what it exercises |
 |---|---|
@@ -10,7 +10,7 @@ one line.
 | aguascalientes_convencion | one light over a divided road's signal nodes; stub approaches: refused |
 | copenhagen_allegade | a T-junction (one vehicle lane per approach) |
 | seattle_9th_50th | one-lane approaches (9th Avenue NE); one light joined over two junctions |
-| perth_albany | left-hand traffic (Australia): refused |
+| perth_albany | left-hand traffic (Australia): built left-hand, the scenarios staged mirrored |
 
 Building a site takes ~5 s, so the builds and their checks run in the default suite; the batches are slow.
 """
@@ -25,15 +25,22 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from pedsafe_sumo import REPO_ROOT
-from pedsafe_sumo.network.traffic_side import LEFTHAND_REFUSAL
+from pedsafe_sumo.network.sites import resolve_site
+from pedsafe_sumo.network.traffic_side import TRAFFIC_SIDE_NOTE
+from pedsafe_sumo.scenarios.geometry import load_approach, site_approaches
+from pedsafe_sumo.scenarios.specs import get_scenario
+from pedsafe_sumo.scenarios.staging import draw_episode
+from pedsafe_sumo.sumo_net import read_net
 
 DATA = REPO_ROOT / "tests" / "data" / "osm"
 TOOL = REPO_ROOT / "tools" / "build_network.py"
 SCENARIOS = ("crossing", "jaywalking", "background_blending", "right_turn", "left_turn")
+TRAITS = {"age_years": 35.0, "gender": "f", "risk": "unaware", "walking_speed_mps": 1.4}
 
 
 @dataclass(frozen=True)
@@ -294,20 +301,43 @@ def test_a_junction_whose_approaches_are_stub_edges_is_refused_in_one_line(built
 # --- left-hand traffic (default suite) ---------------------------------------------------------------------
 
 
-def test_a_left_hand_junction_is_refused_when_the_data_or_the_user_says_so(tmp_path):
+@pytest.fixture(scope="module")
+def perth(tmp_path_factory) -> Built:
+    """The left-hand junction built as the build finds it: no --lefthand, no driving_side in the data."""
     name, junction = LEFT_HAND
-    # Nothing in the clip says which side traffic keeps to: the build makes a right-hand network and says,
-    # every time, that it cannot tell.
+    folder = tmp_path_factory.mktemp("left") / name
+    proc = _build(name, junction, folder)
+    assert proc.returncode == 0, proc.stderr
+    info = json.loads((folder / f"{name}.site.json").read_text())
+    return Built(folder, proc.stdout, "", info, ET.parse(folder / f"{name}.net.xml").getroot())
+
+
+def _left_of(pose: tuple[float, float, float], xy) -> float:
+    """How far `xy` lies to the left of the line through pose (x, y, heading) along its heading [m]."""
+    x, y, heading = pose
+    return -(xy[0] - x) * math.sin(heading) + (xy[1] - y) * math.cos(heading)
+
+
+def test_a_left_hand_junction_is_found_from_its_place_and_built_left_hand(perth, tmp_path):
+    name, junction = LEFT_HAND
     osm_text = (DATA / name / f"{name}.osm").read_text(encoding="utf-8")
-    assert "driving_side" not in osm_text
-    plain = _build(name, junction, tmp_path / "plain")
-    assert plain.returncode == 0, plain.stderr
-    assert "NOTE: traffic side: right-hand (netconvert's default)" in plain.stdout
-    # The user says so: --lefthand.
+    assert "driving_side" not in osm_text  # the data does not say it: the place does (Australia)
+    assert perth.net.get("lefthand") == "true"
+    assert "traffic side: left-hand (the junction lies in Australia, where all traffic keeps left)" in (
+        perth.build_stdout
+    )
+    assert TRAFFIC_SIDE_NOTE not in perth.build_stdout
+
+    def network(folder: Path) -> str:  # the network from its <net> root on: the header has the build's time
+        text = (folder / f"{name}.net.xml").read_text(encoding="utf-8")
+        return text[text.index("<net ") :]
+
+    net_text = network(perth.folder)
+    # The user says so (--lefthand), or the data (driving_side=left, as Australia's boundary relation
+    # carries it): the same network.
     told = _build(name, junction, tmp_path / "told", "--lefthand")
-    assert told.returncode == 2 and told.stderr.count("\n") == 1 and LEFTHAND_REFUSAL in told.stderr
-    assert not (tmp_path / "told").exists()
-    # The data says so: Albany Highway tagged driving_side=left (as Australia's boundary relation is).
+    assert told.returncode == 0 and "traffic side: left-hand (--lefthand)" in told.stdout, told.stderr
+    assert network(tmp_path / "told") == net_text
     tagged = tmp_path / f"{name}.osm"
     tagged.write_text(
         osm_text.replace(
@@ -317,10 +347,99 @@ def test_a_left_hand_junction_is_refused_when_the_data_or_the_user_says_so(tmp_p
         ),
         encoding="utf-8",
     )
-    assert 'k="driving_side"' in tagged.read_text(encoding="utf-8")
     from_data = _build(name, junction, tmp_path / "data", osm=tagged)
-    assert from_data.returncode == 2 and from_data.stderr.count("\n") == 1, from_data.stderr
-    assert LEFTHAND_REFUSAL in from_data.stderr and not (tmp_path / "data").exists()
+    assert from_data.returncode == 0, from_data.stderr
+    assert "traffic side: left-hand (the OSM data says driving_side=left)" in from_data.stdout
+
+
+def test_on_the_left_hand_junction_the_kerb_lies_left_of_travel_on_every_approach(perth):
+    """From the network's drawing: on every approach the sidewalk and the kerb-side lane (lane 0) lie left
+    of the direction of travel, the median lane right of the kerb lane, the oncoming carriageway right."""
+    site = resolve_site(str(perth.folder))
+    net = read_net(str(site.file("net.xml")))
+    arms = list(site_approaches(site))
+    assert len(arms) >= 3
+    for arm in arms:
+        approach = load_approach(site, arm)
+        assert approach.keep_side == -1.0
+        pos_m = approach.lane_lengths_m[-1] / 2
+        pose = approach.pose(len(approach.lane_ids) - 1, pos_m)  # the median lane
+        kerb = approach.pose(0, approach.lane_lengths_m[0] / 2)
+        sidewalk = approach.sidewalk_shape[len(approach.sidewalk_shape) // 2]
+        assert _left_of(pose, sidewalk) > 0, arm
+        if len(approach.lane_ids) > 1:
+            assert _left_of(pose, kerb[:2]) > 0.5 * approach.lane_width_m, arm
+        edge = net.getEdge(approach.edge_id)
+        oncoming = [
+            e
+            for e in edge.getToNode().getOutgoing()
+            if e.getToNode() == edge.getFromNode() and e.getFunction() == ""
+        ]
+        for other in oncoming:
+            for lane in other.getLanes():
+                if lane.allows("passenger"):
+                    shape = lane.getShape()
+                    assert _left_of(pose, shape[len(shape) // 2]) < 0, (arm, lane.getID())
+
+
+def _footprint(approach, vehicle):
+    """Corners of a staged vehicle, its front at its lane position, moved to the kerb by kerb_offset_m."""
+    fx, fy, heading = approach.pose(approach.lane_ids.index(vehicle.lane_id), vehicle.front_pos_m)
+    ux, uy = math.cos(heading), math.sin(heading)
+    lx, ly = -uy, ux
+    kerb_m = -approach.keep_side * vehicle.kerb_offset_m  # to the left of travel in left-hand traffic
+    fx, fy = fx + kerb_m * lx, fy + kerb_m * ly
+    rx, ry = fx - vehicle.size.length_m * ux, fy - vehicle.size.length_m * uy
+    half = vehicle.size.width_m / 2
+    return [(fx + half * lx, fy + half * ly), (fx - half * lx, fy - half * ly),
+            (rx - half * lx, ry - half * ly), (rx + half * lx, ry + half * ly)]  # fmt: skip
+
+
+def _crosses(p, q, corners) -> bool:
+    def orient(u, v, w):
+        return (v[0] - u[0]) * (w[1] - u[1]) - (v[1] - u[1]) * (w[0] - u[0])
+
+    return any(
+        orient(p, q, a) * orient(p, q, b) < 0 and orient(a, b, p) * orient(a, b, q) < 0
+        for a, b in zip(corners, corners[1:] + corners[:1])
+    )
+
+
+@pytest.mark.parametrize("name", ["crossing", "background_blending"])
+def test_on_the_left_hand_junction_the_pedestrian_starts_at_the_kerb_hidden_as_the_scenario_says(perth, name):
+    """Staged on every approach that hosts it: the pedestrian starts left of the ego (its kerb side), their
+    path crosses the ego's lane, and a staged vehicle stands between them and the ego's front (crossing:
+    the waiting queue hides them) or right behind them on the ego's line of sight (background_blending)."""
+    site = resolve_site(str(perth.folder))
+    arms = [arm or perth.info["rsu_watch_arm"] for scenario, arm in _hosted(perth) if scenario == name]
+    assert arms, perth.build_stdout
+    spec = get_scenario(name)
+    checked = 0
+    for arm in arms:
+        approach = load_approach(site, arm)
+        for seed in range(8):
+            setup = draw_episode(spec, approach, seed, TRAITS, 8.0, np.random.default_rng(seed))
+            index = approach.lane_ids.index(setup.ego.lane_id)
+            front_m = setup.ego.front_pos_m + setup.ego.speed_mps * setup.pedestrian.start_delay_s
+            eye = approach.pose(index, min(front_m, approach.lane_lengths_m[index]))
+            start, end = setup.pedestrian.path_xy[0], setup.pedestrian.path_xy[-1]
+            assert _left_of(eye, start) > 0 and _left_of(eye, end) < -approach.lane_width_m / 2, (arm, seed)
+            corners = [_footprint(approach, v) for v in setup.parked]
+            if name == "crossing":
+                # While the ego is still behind the queue's head (its front behind the head's rear; on the
+                # short one-lane approaches it can be beside it at the step-off) and within 50 m (as
+                # tests/scenarios/test_staging.py), the queue stands between the ego and the pedestrian.
+                head = setup.parked[0]
+                if front_m < head.front_pos_m - head.size.length_m and math.dist(eye[:2], start) <= 50.0:
+                    checked += 1
+                    assert any(_crosses(eye[:2], start, c) for c in corners), (arm, seed)
+            else:
+                ux, uy = start[0] - eye[0], start[1] - eye[1]
+                norm = math.hypot(ux, uy)
+                beyond = (start[0] + 3.0 * ux / norm, start[1] + 3.0 * uy / norm)
+                checked += 1
+                assert any(_crosses(start, beyond, c) for c in corners), (arm, seed)
+    assert checked >= 8 * len(arms) // 2
 
 
 # --- a plain SUMO network without geo-reference ------------------------------------------------------------
@@ -358,3 +477,59 @@ def test_every_hosted_combination_runs_with_signals_and_roadside_detection(built
     # Under V2I the roadside camera is the first to detect the pedestrian in some episode.
     v2i = episodes[episodes["condition"] == "v2i"]
     assert (v2i["detected_by"] == "roadside").any(), v2i["detected_by"].tolist()
+
+
+@pytest.mark.slow
+def test_every_hosted_combination_on_the_left_hand_junction_runs_on_the_kerb_side(perth, tmp_path):
+    """The batch over every combination the left-hand site hosts: it says once how the scenarios' names read
+    there, no error rows, the signals staged, and in SUMO's own positions at the first step the ego's lane
+    lies left of the road's centre line (the oncoming carriageway to its right) with the pedestrian on the
+    kerb side (left of the ego), and later the pedestrian on the ego's lane."""
+    site = resolve_site(str(perth.folder))
+    hosted = _hosted(perth)
+    out = tmp_path / "run"
+    proc = _run(
+        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "2",
+        "--workers", "1", "--keep-logs", "all", "--site", str(perth.folder), "--out", str(out), timeout=900,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("keeps left (left-hand traffic): every scenario is staged mirrored") == 1
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    assert hosted and hosted <= set(zip(episodes["scenario"], episodes["approach"], strict=True))
+    assert (episodes["error"] == "").all(), episodes["error"].tolist()
+    assert (episodes["ego_signal"] != "none").all(), episodes[["scenario", "approach", "ego_signal"]]
+    net = read_net(str(site.file("net.xml")))
+    # A step log per unit and chunk: SCENARIO@ARM-....parquet.
+    steps = pd.concat(
+        pd.read_parquet(f).assign(approach=f.name.split("@")[1].split("-")[0])
+        for f in sorted((out / "steplogs").glob("*@*.parquet"))
+    )
+    checked = 0
+    for (scenario, arm, _, seed), log in steps.groupby(["scenario", "approach", "condition", "seed"]):
+        log = log.sort_values("time_s")
+        approach = load_approach(site, arm)
+        first = log.iloc[0]
+        ego = (first["ego_x_m"], first["ego_y_m"], first["ego_yaw_rad"])
+        edge = net.getEdge(approach.edge_id)
+        oncoming = [
+            lane.getShape()
+            for e in edge.getToNode().getOutgoing()
+            if e.getToNode() == edge.getFromNode() and e.getFunction() == ""
+            for lane in e.getLanes()
+            if lane.allows("passenger")
+        ]
+        assert oncoming and all(_left_of(ego, s[len(s) // 2]) < 0 for s in oncoming), (scenario, seed)
+        walked = log[log["ped_x_m"].notna()]
+        assert _left_of(ego, (walked.iloc[0]["ped_x_m"], walked.iloc[0]["ped_y_m"])) > 0, (scenario, seed)
+        # The ego's lane: the approach lane its first position lies on. The pedestrian starts beside it on the
+        # kerb side and reaches its centre line, continued straight over the crosswalk at the stop line.
+        lane = min(
+            range(len(approach.lane_ids)),
+            key=lambda k: abs(_left_of(approach.pose(k, approach.lane_lengths_m[k] - 1.0), ego[:2])),
+        )
+        stop_line = approach.pose(lane, approach.lane_lengths_m[lane] - 1.0)
+        offsets = [_left_of(stop_line, p) for p in zip(walked["ped_x_m"], walked["ped_y_m"], strict=True)]
+        half_m = approach.lane_width_m / 2
+        assert offsets[0] > half_m and min(abs(o) for o in offsets) < half_m, (scenario, seed, offsets[0])
+        checked += 1
+    assert checked == len(episodes)

@@ -66,8 +66,9 @@ def formed_by_sumo(queue: list[VehicleSetup]) -> list[VehicleSetup]:
 
 
 def kerb_wait_offset_m(approach: Approach) -> float:
-    """Where a pedestrian waiting at the kerb stands, to the left of the kerb lane's centre [m]: on the
-    sidewalk, their body circle touching the kerb line (the lane's right edge) from the sidewalk side."""
+    """Where a pedestrian waiting at the kerb stands, towards the median from the kerb lane's centre
+    (Approach.across) [m]: on the sidewalk, their body circle touching the kerb line (the lane's kerb-side
+    edge) from the sidewalk side."""
     return -(approach.lane_width_m / 2 + PEDESTRIAN_RADIUS_M)
 
 

@@ -298,15 +298,17 @@ def ego_start(
 
 
 def road_offsets_m(approach: Approach) -> list[float]:
-    """Offsets to the left of the kerb lane's centre [m]: the sidewalk's middle, then each lane's centre."""
+    """Offsets towards the median from the kerb lane's centre (Approach.across) [m]: the sidewalk's
+    middle, then each lane's centre."""
     lane_w = approach.lane_width_m
     lanes = len(approach.lane_ids)
     return [-(lane_w / 2 + approach.sidewalk_width_m / 2)] + [k * lane_w for k in range(lanes)]
 
 
 def kerb_parking_offset_m(approach: Approach, size: VehicleSize) -> float:
-    """How far to the right of the centre of a one-lane approach's lane a car parked at the kerb stands
-    (its centre) [m]: on the sidewalk, its road-side flank on the kerb line (the lane's right edge).
+    """How far towards the kerb from the centre of a one-lane approach's lane a car parked at the kerb
+    stands (its centre) [m]: on the sidewalk, its road-side flank on the kerb line (the lane's kerb-side
+    edge).
     Standing in the lane, or across the kerb, it would overlap the ego driving the lane's centre: a 1.8 m
     car in a 3.2 m lane leaves 0.7 m to the kerb line, and every class is wider than that (docs/sites.md)."""
     return approach.lane_width_m / 2 + size.width_m / 2

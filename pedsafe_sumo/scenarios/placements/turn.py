@@ -19,7 +19,14 @@ from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.sampling.draws import Draws
 from pedsafe_sumo.scenarios.episode_setup import VehicleSetup
 from pedsafe_sumo.scenarios.errors import ScenarioError
-from pedsafe_sumo.scenarios.geometry import Approach, Turn, lane_pos_to_offset_m, load_turn, path_pos_m
+from pedsafe_sumo.scenarios.geometry import (
+    Approach,
+    Turn,
+    lane_pos_to_offset_m,
+    load_turn,
+    path_pos_m,
+    turn_name,
+)
 from pedsafe_sumo.scenarios.oncoming import (
     OncomingPath,
     lane_position,
@@ -211,13 +218,15 @@ class TurnPlacement(Placement):
         conflict = first_crossing(turn.path_xy, (start, end))
         if conflict is None:
             return (
-                f"approach staging: crosswalk {turn.crosswalk_id} does not cross the ego's {spec.turn} turn"
+                f"approach staging: crosswalk {turn.crosswalk_id} does not cross the ego's "
+                f"{turn_name(spec.turn, approach.keep_side)}"
             )
         room_m = path_pos_m(turn.lanes, conflict) - VEHICLE_CLASSES["car"].length_m
         if room_m < spec.ego_start_min_m:
             return (
                 f"approach staging: lane {approach.lane_ids[turn.lane_index]} holds the ego at most "
-                f"{room_m:.1f} m before the conflict point of its {spec.turn} turn, less than "
+                f"{room_m:.1f} m before the conflict point of its "
+                f"{turn_name(spec.turn, approach.keep_side)}, less than "
                 f"ego_start_min_m {spec.ego_start_min_m:g} m"
             )
         return None
