@@ -25,8 +25,10 @@ from functools import lru_cache
 
 import sumolib
 
+from pedsafe_sumo.network.approach_chain import ApproachChain
 from pedsafe_sumo.network.approaches import legs_at
 from pedsafe_sumo.network.sites import Site
+from pedsafe_sumo.scenarios.chained import chain_approach, chain_lanes_before
 from pedsafe_sumo.scenarios.upstream import UpstreamRoad, connection_lanes, free_through, upstream_road
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
@@ -123,6 +125,11 @@ class Approach:
     #: (upstream.UPSTREAM_MAX_M): approach staging starts the ego there when the lane is shorter than its
     #: drawn start distance (placements/straight.py).
     upstream_roads: tuple[UpstreamRoad, ...] = ()
+    #: Where the junction's incoming edge is a stub, the chain of edges the approach is (scenarios/
+    #: chained.py): lane_shapes, lane_lengths_m, through_paths, through_route and upstream_roads run
+    #: along it, and the staged vehicles are put on its lanes (chained.land_scene). None: the approach is
+    #: its incoming edge alone.
+    chain: ApproachChain | None = None
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -282,7 +289,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
     if math.dist(b, kerb) < math.dist(a, kerb):
         a, b = b, a
 
-    return Approach(
+    approach = Approach(
         edge_id=edge.getID(),
         lane_ids=tuple(lane.getID() for lane in vehicle_lanes),
         lane_shapes=tuple(tuple(map(tuple, lane.getShape())) for lane in vehicle_lanes),
@@ -308,6 +315,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         ),
         upstream_roads=tuple(upstream_road(net, lane, follow=free_through) for lane in vehicle_lanes),
     )
+    return chain_approach(net, approach)
 
 
 @lru_cache(maxsize=16)
@@ -352,7 +360,7 @@ def straight_staging_problem(approach: Approach, ego_lane: int | None = None) ->
     if ego_lane not in approach.through_lanes:
         return (
             f"lane {approach.lane_ids[ego_lane]}, where the ego drives, has no straight movement onto "
-            f"{approach.through_route[1]}"
+            f"{approach.through_route[-1]}"
         )
     return None
 
@@ -365,7 +373,7 @@ class Turn:
     #: Index (kerb to median, as in Approach.lane_ids) of the approach lane the turn starts from.
     lane_index: int
     #: The approach, then the road the ego turns into.
-    route: tuple[str, str]
+    route: tuple[str, ...]
     #: The ego's path: the approach lane's centreline, the junction's internal lane(s) of the
     #: connection, then the first lane of the road turned into (network frame, metres).
     path_xy: tuple[tuple[float, float], ...]
@@ -411,7 +419,7 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
         return abs(change - wanted)
 
     connection = min(connections, key=turn_error)
-    driven = connection_lanes(net, connection)
+    driven = chain_lanes_before(approach, lane_index, net) + connection_lanes(net, connection)
     path = [tuple(p) for ln in driven for p in ln.getShape()]
     exit_lane = driven[-1]
     # Drop repeated points where one lane's shape ends at the next one's start.
@@ -444,7 +452,7 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
     return Turn(
         direction=direction,
         lane_index=lane_index,
-        route=(approach.edge_id, target.getID()),
+        route=(*approach.through_route[:-1], target.getID()),
         path_xy=tuple(path_xy),
         approach_length_m=approach.lane_lengths_m[lane_index],
         crosswalk_id=crossing.getID(),

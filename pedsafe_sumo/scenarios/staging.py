@@ -11,6 +11,7 @@ import numpy as np
 
 from pedsafe_sumo.sampling.draws import Draws, as_draws
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, SignalStaging
+from pedsafe_sumo.scenarios.chained import land_scene
 from pedsafe_sumo.scenarios.geometry import Approach, Turn
 from pedsafe_sumo.scenarios.oncoming import OncomingPath
 from pedsafe_sumo.scenarios.placements import placement_of
@@ -79,6 +80,8 @@ def draw_episode(
             oncoming=oncoming,
         )
     )
+    # Where the approach is a chain of edges, on the lanes SUMO knows (scenarios/chained.py).
+    scene = land_scene(approach, scene)
     return EpisodeSetup(
         scenario=spec.name,
         seed=seed,
@@ -171,7 +174,7 @@ def stage_signals(
         occluder_link_index=(
             oncoming_links[0]
             if oncoming_links
-            else junction.turn_link(setup.parked[0].lane_id, "r")
+            else junction.turn_link(setup.parked[0].stop_line_lane_id, "r")
             if setup.parked
             else NO_LINK
         ),
@@ -224,7 +227,7 @@ def _leaders(setup: EpisodeSetup) -> list:
     """The vehicles that come down the ego's lane ahead of it to turn on its green (approach staging's
     right_turn leader)."""
     lane_id = setup.ego.stop_line_lane_id
-    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.lane_id == lane_id]
+    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.stop_line_lane_id == lane_id]
 
 
 def step_off_time_s(ped: PedestrianSetup) -> float:
