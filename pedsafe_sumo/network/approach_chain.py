@@ -1,4 +1,4 @@
-"""The road an approach is: the chain of edges that leads without a choice into the edge entering the junction.
+"""The road an approach is: the chain of edges that leads unambiguously into the edge entering the junction.
 
 netconvert splits a road where a node lies on it: where a slip lane leaves, where the OSM way was split,
 where it joined the nodes of a divided road's junction. Such a split can sit right before the stop line:
@@ -85,7 +85,9 @@ class ChainLane:
 
 
 def _chain_lane(lane) -> ChainLane:
-    return ChainLane(lane.getID(), tuple((float(x), float(y)) for x, y in lane.getShape()), float(lane.getLength()))
+    return ChainLane(
+        lane.getID(), tuple((float(x), float(y)) for x, y in lane.getShape()), float(lane.getLength())
+    )
 
 
 def _via_lanes(net, from_lane, to_lane) -> list:

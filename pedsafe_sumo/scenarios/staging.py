@@ -10,8 +10,8 @@ import math
 import numpy as np
 
 from pedsafe_sumo.sampling.draws import Draws, as_draws
-from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, SignalStaging
 from pedsafe_sumo.scenarios.chained import land_scene
+from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, SignalStaging
 from pedsafe_sumo.scenarios.geometry import Approach, Turn
 from pedsafe_sumo.scenarios.oncoming import OncomingPath
 from pedsafe_sumo.scenarios.placements import placement_of
