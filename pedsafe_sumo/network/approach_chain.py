@@ -143,3 +143,19 @@ def approach_chain(net, edge, max_m: float = CHAIN_MAX_M) -> ApproachChain:
         edges=tuple(edges),
         lanes=tuple(tuple(_chain_lane(lane) for lane in lanes) for lanes in per_lane),
     )
+
+
+def kerb_lane_along_chain(net, edge) -> tuple[tuple[tuple[float, float], ...], float]:
+    """(drawn shape, SUMO length [m]) of the kerb-side vehicle lane of `edge` along its chain (the roadside
+    poles are placed by distances before its stop line, network/poles.py): the lane's own where `edge` is
+    no stub."""
+    chain = approach_chain(net, edge)
+    if len(chain.edges) == 1:
+        lane = vehicle_lanes(edge)[0]
+        return tuple(tuple(p) for p in lane.getShape()), lane.getLength()
+    points: list[tuple[float, float]] = []
+    for lane in chain.lanes[0]:
+        for p in lane.shape:
+            if not points or p != points[-1]:
+                points.append(p)
+    return tuple(points), chain.length_m(0)
