@@ -94,7 +94,8 @@ class Approach:
     lane_width_m: float
     sidewalk_lane_id: str
     sidewalk_width_m: float
-    #: Edges of a straight-through route: the approach, then the outgoing road beyond the junction.
+    #: Edges of a straight-through route: the approach (the chain of edges before a stub: `chain`), then
+    #: the outgoing road beyond the junction.
     through_route: tuple[str, ...]
     #: The crosswalk over the approach at the stop line, oriented from the kerb side to the far side.
     crosswalk_id: str
@@ -102,9 +103,9 @@ class Approach:
     crosswalk_width_m: float
     junction_id: str
     #: Per vehicle lane (as lane_ids): the lanes of the straight-through movement from it onto
-    #: through_route[1] (the lane alone where it has no such movement).
+    #: through_route[-1] (the lane alone where it has no such movement).
     through_paths: tuple[LanePath, ...] = ()
-    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[1].
+    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[-1].
     through_lanes: tuple[int, ...] = ()
     #: The approach's speed limit (its fastest vehicle lane's) [m/s].
     speed_limit_mps: float = math.nan
