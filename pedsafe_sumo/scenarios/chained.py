@@ -8,8 +8,9 @@ staging's upstream start) begins where the chain does. The placements measure al
 any approach lane: a vehicle is staged on the stop line's lane (Approach.lane_ids) at a position along
 its chain. `land_scene` then puts each on the lane of the chain its front stands on, at its position
 there, with a route from that lane's edge (SUMO inserts a vehicle on its route's first edge); a front on a
-node's internal lane is inserted at the end of the lane before it and moved there before the first step
-(VehicleSetup.internal_lane_id), as the ego starting on the road before its approach.
+node's internal lane is inserted on a lane before it where its body has room and moved there before the
+first step (VehicleSetup.internal_lane_id), as the ego starting on the road before its approach. What
+cannot be staged so is refused in one line (land_scene, check_conflict_off_nodes).
 
 An approach whose incoming edge is no stub is that edge alone: its Approach and staged vehicles are
 unchanged.
@@ -59,8 +60,8 @@ def chain_approach(net, approach: Approach) -> Approach:
         for lane in [net.getEdge(edge_id).getLane(0)]
         if lane.allows("pedestrian") and not lane.allows("passenger")
     ]
-    # The person is added on the sidewalk edge at 1 m (sim/staging.py add_pedestrian): the stop line's
-    # own sidewalk when it is that long, else the longest of the chain.
+    # The person is added on the sidewalk edge 1 m from its start (sim/staging.py add_pedestrian): the stop
+    # line's own sidewalk when it holds that and half a metre more, else the longest of the chain.
     sidewalk = net.getLane(approach.sidewalk_lane_id)
     if sidewalk.getLength() < 1.5 and sidewalks:
         sidewalk = max(sidewalks, key=lambda lane: lane.getLength())
