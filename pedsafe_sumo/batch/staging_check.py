@@ -52,6 +52,22 @@ def staging_problem(runner: EpisodeRunner, spec, seed: int, lane_lengths_m: dict
         length_m = lane_lengths_m.get(vehicle.lane_id)
         if length_m is None:
             return f"seed {seed}: vehicle '{vehicle.vehicle_id}' is staged on {vehicle.lane_id}, not a lane"
+        chain = getattr(runner.approach, "chain", None)
+        if chain is not None and vehicle.lane_id in runner.approach.lane_ids and not vehicle.approach_lane_id:
+            # Left on the stop line's lane by scenarios/chained.py: its position is along the chain.
+            chain_m = chain.length_m(runner.approach.lane_ids.index(vehicle.lane_id))
+            where = (
+                f"{-vehicle.front_pos_m:.1f} m before the start"
+                if vehicle.front_pos_m < 0.0
+                else f"{vehicle.front_pos_m - chain_m:.1f} m beyond the end"
+            )
+            if not 0.0 <= vehicle.front_pos_m <= chain_m:
+                return (
+                    f"seed {seed}: vehicle '{vehicle.vehicle_id}' would stand {where} of its lane "
+                    f"{vehicle.lane_id} and the chain of edges before it ({', '.join(chain.edges)}: "
+                    f"{chain_m:.1f} m): SUMO cannot put it there"
+                )
+            continue
         if not 0.0 <= vehicle.front_pos_m <= length_m:
             where = (
                 f"{-vehicle.front_pos_m:.1f} m before the start"

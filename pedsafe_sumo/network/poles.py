@@ -16,6 +16,7 @@ from pathlib import Path
 
 import sumolib
 
+from pedsafe_sumo.network.approach_chain import kerb_lane_along_chain
 from pedsafe_sumo.network.approaches import (
     arm_axis,
     bearing_deg,
@@ -142,11 +143,11 @@ def place_roadside_unit_across(
         raise BuildError(f"the main junction's {watch_arm} arm has no incoming carriageway")
     approach = max(incoming, key=lambda e: len(vehicle_lanes(e)))
     kerb_lane = vehicle_lanes(approach)[0]
+    # Along the chain of edges before a stub approach (network/approach_chain.py).
+    kerb_shape, kerb_length_m = kerb_lane_along_chain(net, approach)
 
     def before_stop_line(distance_m: float) -> tuple[float, float]:
-        return sumolib.geomhelper.positionAtShapeOffset(
-            kerb_lane.getShape(), max(kerb_lane.getLength() - distance_m, 0.0)
-        )
+        return sumolib.geomhelper.positionAtShapeOffset(kerb_shape, max(kerb_length_m - distance_m, 0.0))
 
     abreast = before_stop_line(abreast_m)
     sidewalks = []
@@ -159,9 +160,7 @@ def place_roadside_unit_across(
         # as far from its kerb lane as the far sidewalk would be.
         far_lane = vehicle_lanes(approach)[-1]
         x, y = abreast
-        heading = sumolib.geomhelper.rotationAtShapeOffset(
-            kerb_lane.getShape(), max(kerb_lane.getLength() - abreast_m, 0.0)
-        )
+        heading = sumolib.geomhelper.rotationAtShapeOffset(kerb_shape, max(kerb_length_m - abreast_m, 0.0))
         median_m = side * ((len(vehicle_lanes(approach)) - 0.5) * far_lane.getWidth() + setback_m + 1.0)
         pole = (x - median_m * math.sin(heading), y + median_m * math.cos(heading))
         return _pole_aimed_at(pole, before_stop_line(aim_m), "across", watch_arm)

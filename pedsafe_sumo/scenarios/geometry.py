@@ -33,9 +33,11 @@ from functools import lru_cache
 
 import sumolib
 
+from pedsafe_sumo.network.approach_chain import ApproachChain
 from pedsafe_sumo.network.approaches import legs_at
 from pedsafe_sumo.network.sites import Site
 from pedsafe_sumo.network.traffic_side import KEEP_RIGHT, far_turn_letter, near_turn_letter, network_keep_side
+from pedsafe_sumo.scenarios.chained import chain_approach, chain_lanes_before
 from pedsafe_sumo.scenarios.upstream import UpstreamRoad, connection_lanes, free_through, upstream_road
 from pedsafe_sumo.scenarios.walkways import Walkway, network_walkways
 from pedsafe_sumo.sumo_net import read_net
@@ -102,7 +104,8 @@ class Approach:
     lane_width_m: float
     sidewalk_lane_id: str
     sidewalk_width_m: float
-    #: Edges of a straight-through route: the approach, then the outgoing road beyond the junction.
+    #: Edges of a straight-through route: the approach (the chain of edges before a stub: `chain`), then
+    #: the outgoing road beyond the junction.
     through_route: tuple[str, ...]
     #: The crosswalk over the approach at the stop line, oriented from the kerb side to the far side.
     crosswalk_id: str
@@ -110,9 +113,9 @@ class Approach:
     crosswalk_width_m: float
     junction_id: str
     #: Per vehicle lane (as lane_ids): the lanes of the straight-through movement from it onto
-    #: through_route[1] (the lane alone where it has no such movement).
+    #: through_route[-1] (the lane alone where it has no such movement).
     through_paths: tuple[LanePath, ...] = ()
-    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[1].
+    #: Vehicle lanes (indices as in lane_ids) with a straight movement onto through_route[-1].
     through_lanes: tuple[int, ...] = ()
     #: The approach's speed limit (its fastest vehicle lane's) [m/s].
     speed_limit_mps: float = math.nan
@@ -136,6 +139,11 @@ class Approach:
     #: The side traffic keeps to (network.traffic_side): +1 right-hand (the median lies to the left of
     #: travel), -1 left-hand (to the right).
     keep_side: float = KEEP_RIGHT
+    #: Where the junction's incoming edge is a stub, the chain of edges the approach is (scenarios/
+    #: chained.py): lane_shapes, lane_lengths_m, through_paths, through_route and upstream_roads run
+    #: along it, and the staged vehicles are put on its lanes (chained.land_scene). None: the approach is
+    #: its incoming edge alone.
+    chain: ApproachChain | None = None
 
     def pose(self, lane_index: int, pos_m: float) -> tuple[float, float, float]:
         """(x, y, heading) of the centre of vehicle lane `lane_index` at SUMO lane position `pos_m`, where
@@ -299,7 +307,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
     if math.dist(b, kerb) < math.dist(a, kerb):
         a, b = b, a
 
-    return Approach(
+    approach = Approach(
         edge_id=edge.getID(),
         lane_ids=tuple(lane.getID() for lane in vehicle_lanes),
         lane_shapes=tuple(tuple(map(tuple, lane.getShape())) for lane in vehicle_lanes),
@@ -326,6 +334,7 @@ def load_approach(site: Site, arm: str | None = None) -> Approach:
         upstream_roads=tuple(upstream_road(net, lane, follow=free_through) for lane in vehicle_lanes),
         keep_side=network_keep_side(site.file("net.xml")),
     )
+    return chain_approach(net, approach)
 
 
 @lru_cache(maxsize=16)
@@ -370,7 +379,7 @@ def straight_staging_problem(approach: Approach, ego_lane: int | None = None) ->
     if ego_lane not in approach.through_lanes:
         return (
             f"lane {approach.lane_ids[ego_lane]}, where the ego drives, has no straight movement onto "
-            f"{approach.through_route[1]}"
+            f"{approach.through_route[-1]}"
         )
     return None
 
@@ -385,7 +394,7 @@ class Turn:
     #: Index (kerb to median, as in Approach.lane_ids) of the approach lane the turn starts from.
     lane_index: int
     #: The approach, then the road the ego turns into.
-    route: tuple[str, str]
+    route: tuple[str, ...]
     #: The ego's path: the approach lane's centreline, the junction's internal lane(s) of the
     #: connection, then the first lane of the road turned into (network frame, metres).
     path_xy: tuple[tuple[float, float], ...]
@@ -446,7 +455,7 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
         return abs(change - wanted)
 
     connection = min(connections, key=turn_error)
-    driven = connection_lanes(net, connection)
+    driven = chain_lanes_before(approach, lane_index, net) + connection_lanes(net, connection)
     path = [tuple(p) for ln in driven for p in ln.getShape()]
     exit_lane = driven[-1]
     # Drop repeated points where one lane's shape ends at the next one's start.
@@ -479,7 +488,7 @@ def load_turn(site: Site, direction: str, arm: str | None = None) -> Turn:
     return Turn(
         direction=direction,
         lane_index=lane_index,
-        route=(approach.edge_id, target.getID()),
+        route=(*approach.through_route[:-1], target.getID()),
         path_xy=tuple(path_xy),
         approach_length_m=approach.lane_lengths_m[lane_index],
         crosswalk_id=crossing.getID(),

@@ -11,6 +11,7 @@ import numpy as np
 
 from pedsafe_sumo.network.traffic_side import KEEP_RIGHT, near_turn_letter
 from pedsafe_sumo.sampling.draws import Draws, as_draws
+from pedsafe_sumo.scenarios.chained import land_scene
 from pedsafe_sumo.scenarios.episode_setup import EpisodeSetup, PedestrianSetup, SignalStaging
 from pedsafe_sumo.scenarios.geometry import Approach, Turn
 from pedsafe_sumo.scenarios.oncoming import OncomingPath
@@ -80,6 +81,8 @@ def draw_episode(
             oncoming=oncoming,
         )
     )
+    # Where the approach is a chain of edges, on the lanes SUMO knows (scenarios/chained.py).
+    scene = land_scene(approach, scene)
     return EpisodeSetup(
         scenario=spec.name,
         seed=seed,
@@ -174,7 +177,7 @@ def stage_signals(
         occluder_link_index=(
             oncoming_links[0]
             if oncoming_links
-            else junction.turn_link(setup.parked[0].lane_id, near_turn_letter(side))
+            else junction.turn_link(setup.parked[0].stop_line_lane_id, near_turn_letter(side))
             if setup.parked
             else NO_LINK
         ),
@@ -227,7 +230,7 @@ def _leaders(setup: EpisodeSetup) -> list:
     """The vehicles that come down the ego's lane ahead of it to turn on its green (approach staging's
     right_turn leader)."""
     lane_id = setup.ego.stop_line_lane_id
-    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.lane_id == lane_id]
+    return [v for v in setup.parked if v.vehicle_id.startswith("leader_") and v.stop_line_lane_id == lane_id]
 
 
 def step_off_time_s(ped: PedestrianSetup) -> float:

@@ -98,7 +98,9 @@ def load_site_data(site: Site, params: dict[str, Any], arm: str = "") -> SiteDat
         site.file("rsu.add.xml"), rsu["default_height_m"], rsu["default_pitch_down_deg"]
     )
     demand_site = load_demand_site(site.name, net_file=site.file("net.xml"))
-    background_lanes = [lane for lane in demand_site.entering_lanes if lane.edge_id != approach.edge_id]
+    # No background vehicle enters on the approach (its chain of edges before a stub: scenarios/chained.py).
+    approach_edges = set(approach.through_route[:-1])
+    background_lanes = [lane for lane in demand_site.entering_lanes if lane.edge_id not in approach_edges]
     return SiteData(
         approach=approach,
         static=static,

@@ -7,7 +7,7 @@ its place (or the data, or --lefthand), built for left-hand traffic and staged m
 | clip | what it exercises |
 |---|---|
 | seattle_westlake | diagonal legs (Lenora Street, 8th Avenue at ~45 degrees to Westlake Avenue) |
-| aguascalientes_convencion | one light over a divided road's signal nodes; stub approaches: refused |
+| aguascalientes_convencion | one light over a divided road's signal nodes; approaches ending in stub edges |
 | copenhagen_allegade | a T-junction (one vehicle lane per approach) |
 | seattle_9th_50th | one-lane approaches (9th Avenue NE); one light joined over two junctions |
 | perth_albany | left-hand traffic (Australia): built left-hand, the scenarios staged mirrored |
@@ -188,8 +188,7 @@ def test_the_junction_builds_signalised_and_one_light_controls_its_links(built, 
     ]
     assert vehicle and crosswalks
     assert {c.get("tl") for c in vehicle + crosswalks} == {light}
-    if name != "aguascalientes_convencion":  # its approaches cannot be staged (test below)
-        assert _hosted(site)
+    assert _hosted(site)
 
 
 def test_a_junction_with_diagonal_legs_names_them_by_their_bearing(built):
@@ -279,23 +278,98 @@ def test_one_lane_approaches_host_the_straight_scenarios(built):
     assert {("crossing", "N"), ("jaywalking", "N"), ("background_blending", "N")} <= hosted
 
 
-def test_a_junction_whose_approaches_are_stub_edges_is_refused_in_one_line(built, tmp_path):
+def test_a_junction_whose_approaches_end_in_stub_edges_is_staged_along_their_chains(built):
     """netconvert keeps a node just before each stop line of aguascalientes_convencion: every road enters the
-    junction on an edge 0.2 m long, where no ego can be inserted. The build lists each combination as not
-    hosted, and the batch refuses the site in one line, writing nothing."""
+    junction on an edge 0.2 m long. The approaches are the chains of edges before those stubs
+    (network/approach_chain.py): the south one (Avenida Convencion de 1914 Oriente) hosts crossing, and
+    what it cannot host it refuses for a reason of its own, not the stub's length."""
     site = built["aguascalientes_convencion"]
     main = site.info["main_junction"]
     lengths = [float(_vehicle_lanes(e)[0].get("length")) for e in _incoming_edges(site.net, main)]
     assert lengths and max(lengths) < 1.0, lengths
-    assert not _hosted(site)
-    assert "(0.2 m long): SUMO cannot put it there" in site.build_stdout
+    hosted = _hosted(site)
+    assert ("crossing", "S") in hosted, site.build_stdout
+    # The south stub 837164836#4 comes straight from 837164836#2 (42.5 m, read from the net.xml): the ego's
+    # lane and the queue's are measured along both, so no vehicle is refused for the stub's 0.2 m.
+    edges = {e.get("id"): e for e in site.net.iter("edge")}
+    assert float(_vehicle_lanes(edges["837164836#2"])[0].get("length")) > 40.0
+    south = [
+        line
+        for line in site.build_stdout.split("under approach staging")[0].splitlines()
+        if line.startswith("  ") and line.strip().split(":")[0] in SCENARIOS
+    ]
+    assert south and not any("(0.2 m long)" in line for line in south), south
+    # The east stub widens its road: 103039302#2's two vehicle lanes feed its four (read from the net.xml),
+    # so no lane of it comes from a lane of its own and its approach is the stub alone, still refused.
+    assert len(_vehicle_lanes(edges["103039302#2"])) == 2 and len(_vehicle_lanes(edges["837164834"])) == 4
+    assert "crossing on approach E: NOT hosted" in site.build_stdout
+
+
+# The combinations of aguascalientes_convencion that stand or fall with its chains (approach, scenario):
+# crossing on S stages its occluder on the internal lane of the node before the stub.
+AGUASCALIENTES_SEEDS = 2
+
+
+@pytest.mark.slow
+def test_every_hosted_combination_on_the_stub_junction_runs_with_its_signals(built, tmp_path):
+    site = built["aguascalientes_convencion"]
+    hosted = _hosted(site)
     out = tmp_path / "run"
     proc = _run(
-        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all", "--episodes", "1",
-        "--workers", "1", "--site", str(site.folder), "--out", str(out),
+        "-m", "pedsafe_sumo.batch", "--scenario", "all", "--approach", "all",
+        "--episodes", str(AGUASCALIENTES_SEEDS), "--workers", "1", "--site", str(site.folder),
+        "--out", str(out), timeout=900,
     )  # fmt: skip
-    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
-    assert "can stage none of these scenarios" in proc.stderr and not out.exists()
+    assert proc.returncode == 0, proc.stderr
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    assert hosted <= set(zip(episodes["scenario"], episodes["approach"], strict=True))
+    for _, seeds in episodes.groupby(["scenario", "approach"])["seed"]:
+        assert seeds.nunique() == AGUASCALIENTES_SEEDS
+    assert (episodes["status"] == "ok").all() and (episodes["error"] == "").all(), episodes["error"].tolist()
+    assert (episodes["ego_signal"] != "none").all(), episodes[["scenario", "approach", "ego_signal"]]
+    at_signals = episodes[episodes["scenario"] != "jaywalking"]
+    assert (at_signals["ped_signal"] != "none").all(), at_signals[["scenario", "approach", "ped_signal"]]
+
+
+@pytest.mark.slow
+def test_sumo_puts_the_staged_vehicles_on_the_chains_lanes(built):
+    """In SUMO, at the episode's first step, every staged vehicle of crossing on the south approach stands
+    on the lane and at the position the staging gives (a vehicle on a node's internal lane moved there
+    from where it was inserted), and the ego's route passes the stub."""
+    from pedsafe_sumo.control.baseline import BaselineStack
+    from pedsafe_sumo.network.sites import resolve_site
+    from pedsafe_sumo.params import load_params
+    from pedsafe_sumo.scenarios.specs import get_scenario
+    from pedsafe_sumo.sim.episode import EpisodeRunner
+
+    site = resolve_site(str(built["aguascalientes_convencion"].folder))
+    runner = EpisodeRunner(site, load_params(None), BaselineStack)
+    spec = get_scenario("crossing").with_overrides({"approach": "S"})
+    try:
+        for seed in (0, 1):
+            setup = runner.draw_setup(spec, seed)
+            seen: dict[str, tuple[str, float]] = {}
+            route: list[str] = []
+
+            def first_step(api, row, seen=seen, route=route) -> None:
+                if not seen:
+                    for vid in api.vehicle.getIDList():
+                        seen[vid] = (api.vehicle.getLaneID(vid), api.vehicle.getLanePosition(vid))
+                    route.extend(api.vehicle.getRoute("ego"))
+
+            runner.run(spec, "sv", seed, setup=setup, on_step=first_step)
+            assert "837164836#4" in route and route.index("837164836#4") > 0, route
+            assert any(v.internal_lane_id for v in setup.parked) or seed != 0
+            for vehicle in (setup.ego, *setup.parked):
+                lane, pos = seen[vehicle.vehicle_id]
+                want_lane = vehicle.internal_lane_id or vehicle.lane_id
+                want_pos = vehicle.internal_pos_m if vehicle.internal_lane_id else vehicle.front_pos_m
+                # The ego has driven one step at its speed when the first step is logged.
+                slack_m = vehicle.speed_mps * 0.05 + 1e-3
+                assert lane == want_lane, (vehicle.vehicle_id, lane, want_lane)
+                assert abs(pos - want_pos) <= slack_m, (vehicle.vehicle_id, pos, want_pos)
+    finally:
+        runner.close()
 
 
 # --- left-hand traffic (default suite) ---------------------------------------------------------------------

@@ -255,7 +255,7 @@ class TurnPlacement(Placement):
         self, site: Site, spec: ScenarioSpec, approach: Approach, turn: Turn | None, arm: str
     ) -> str | None:
         if getattr(spec, "oncoming_vehicle", 0) and turn is not None:
-            return oncoming_signal_problem(site, arm, approach.lane_ids[turn.lane_index], turn.route[1])
+            return oncoming_signal_problem(site, arm, approach.lane_ids[turn.lane_index], turn.route[-1])
         return None
 
 
@@ -326,7 +326,7 @@ def approach_leader(
             speed_mps,
             colour,
             size,
-            route=(turn.route[1],),
+            route=(turn.route[-1],),
         )
     raise ScenarioError(
         f"scenario '{spec.name}': the vehicle turning ahead of the ego would start on the junction "
@@ -395,7 +395,7 @@ def turn_leader(
     size = VEHICLE_CLASSES[spec.occluder_class]
     rear_before_m = conflict_pos_m - (turn.exit_start_m + front_m - size.length_m)
     leader = VehicleSetup(
-        "leader_0", turn.exit_lane_id, front_m, speed_mps, colour, size, route=(turn.route[1],)
+        "leader_0", turn.exit_lane_id, front_m, speed_mps, colour, size, route=(turn.route[-1],)
     )
     return leader, max(0.0, rear_before_m + 0.3) / speed_mps
 
