@@ -88,6 +88,12 @@ class ObservationFeeds:
             return None
         return cls(api, ego_id, extra, condition, net_file, sensors, perception_params)
 
+    @property
+    def sees_scene(self) -> bool:
+        """Whether any wanted part is made from the world snapshot (raw sensor data, perceived vehicles);
+        route, road map and signal come from SUMO and the network alone."""
+        return bool(self.wanted & (set(RAW_SENSORS) | {"vehicles"}))
+
     # ----------------------------------------------------------------------------- per step
     def step(self, snapshot, ego_pose, ego_index: int, time_s: float) -> dict[str, Any]:
         """Keyword arguments for this step's Observation."""

@@ -19,7 +19,7 @@ from pedsafe_sumo.params import load_params, with_overrides
 from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
 from pedsafe_sumo.protocol import VALUES_BEFORE
 from pedsafe_sumo.scenarios.specs import get_scenario
-from pedsafe_sumo.sim import episode as episode_module
+from pedsafe_sumo.sim import loop as loop_module
 from pedsafe_sumo.sim.episode import EpisodeRunner
 from pedsafe_sumo.sim.staging import PED_ID
 from tests.sim.ad_agents import Recorder
@@ -88,13 +88,13 @@ def test_before_appearing_the_pedestrian_is_nowhere(runner, crossing, monkeypatc
     row at 4.00 s on they stand at the start of their path, in SUMO, and the sensors run."""
     setup = _with_pedestrian(crossing[0], appear_time_s=4.0, risk="unaware")
     calls = []
-    real_perceive = episode_module.perceive
+    real_perceive = loop_module.perceive
 
     def counting_perceive(snapshot, ego_pose, sensors, rng, time_s, link):
         calls.append((time_s, len(snapshot.pedestrians)))
         return real_perceive(snapshot, ego_pose, sensors, rng, time_s, link)
 
-    monkeypatch.setattr(episode_module, "perceive", counting_perceive)
+    monkeypatch.setattr(loop_module, "perceive", counting_perceive)
     seen = []
     result = runner.run(SPEC, "sv", SEED, setup=setup, on_step=_in_sumo_hook(seen))
     log = result.log
