@@ -258,6 +258,8 @@ class EpisodeRunner:
         feeds = ObservationFeeds.for_agent(
             api, EGO_ID, wanted, condition, self.site.file("net.xml"), sensors, self.params["perception"]
         )
+        if feeds is not None:
+            feeds.subscribe_ego()
         pose = appearing_pose(walker)
         moved_at_s = math.nan
         if in_scene_from_start(ped):  # else the loop adds them to SUMO when they appear

@@ -11,6 +11,8 @@ import math
 import time
 from collections.abc import Callable
 from functools import partial
+from itertools import chain
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
@@ -87,6 +89,7 @@ def drive(
     clock = time.perf_counter
     tc = api.constants
     var_position, var_angle, var_speed = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED
+    position_of, angle_of, speed_of = itemgetter(var_position), itemgetter(var_angle), itemgetter(var_speed)
     ped = setup.pedestrian
     ped_radius_m, time_limit_s = ped.radius_m, setup.time_limit_s
     ped_ids = (PED_ID,)
@@ -96,7 +99,7 @@ def drive(
     # Body sizes and colours of the vehicles in the last snapshot: they change only when a vehicle
     # enters or leaves, so they are rebuilt then, not every step.
     body_ids: tuple[str, ...] = ()
-    lengths = widths = heights = half_diagonals = np.zeros(0)
+    lengths = widths = heights = half_diagonals = half_lengths = np.zeros(0)
     colours = np.zeros((0, 3))
     ego_index = -1
     rows: list[tuple] = []
@@ -147,9 +150,16 @@ def drive(
                 if ids != body_ids:
                     body_ids = ids
                     lengths, widths, heights, half_diagonals, colours, ego_index = vehicle_bodies(ids, dims)
-            front_xy = np.array([results[vid][var_position] for vid in ids])
-            yaw = sumo_angle_to_yaw_rad([results[vid][var_angle] for vid in ids])
-            centre_x, centre_y = sumo_front_to_centre(front_xy[:, 0], front_xy[:, 1], yaw, lengths)
+                    half_lengths = 0.5 * lengths
+            values = list(map(results.__getitem__, ids))
+            n_vehicles = len(ids)
+            front_xy = np.fromiter(chain.from_iterable(map(position_of, values)), float, 2 * n_vehicles)
+            front_xy = front_xy.reshape(n_vehicles, 2)
+            # units.sumo_angle_to_yaw_rad and units.sumo_front_to_centre: the same operations in the same
+            # order (the same bits), without converting their arguments again.
+            yaw = np.deg2rad(90.0 - np.fromiter(map(angle_of, values), float, n_vehicles))
+            centre_x = front_xy[:, 0] - half_lengths * np.cos(yaw)
+            centre_y = front_xy[:, 1] - half_lengths * np.sin(yaw)
             ego_x, ego_y = float(centre_x[ego_index]), float(centre_y[ego_index])
             ego_yaw = float(yaw[ego_index])
             ego_speed = float(results[EGO_ID][var_speed])
@@ -175,7 +185,9 @@ def drive(
             detections = (
                 perceive(snapshot, ego_pose, sensors, perception_rng, time_s, link) if in_scene else None
             )
-            extra = feeds.step(snapshot, ego_pose, ego_index, time_s) if feeds is not None else {}
+            extra = (
+                {} if feeds is None else feeds.step(snapshot, ego_pose, ego_index, time_s, results[EGO_ID])
+            )
         else:
             ego_result = api.vehicle.getSubscriptionResults(EGO_ID)
             if not ego_result:
@@ -193,7 +205,9 @@ def drive(
             timings["snapshot_s"] += t1 - t0
             detections = None
             extra = (
-                {} if feeds is None else feeds.step(None, EgoPose(ego_x, ego_y, ego_yaw, EGO_ID), 0, time_s)
+                {}
+                if feeds is None
+                else feeds.step(None, EgoPose(ego_x, ego_y, ego_yaw, EGO_ID), 0, time_s, ego_result)
             )
         t2 = clock()
         timings["perception_s"] += t2 - t1
@@ -282,7 +296,7 @@ def drive(
         if steer is not None:
             steer()
         if in_scene:
-            speeds = np.array([results[vid][var_speed] for vid in ids]) if body_speeds else None
+            speeds = np.fromiter(map(speed_of, values), float, n_vehicles) if body_speeds else None
             bodies = VehicleBodies(
                 centre_x, centre_y, yaw, lengths, widths, half_diagonals, speeds, ego_index
             )
