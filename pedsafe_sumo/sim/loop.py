@@ -39,7 +39,6 @@ from pedsafe_sumo.sim.outcome import LOG_COLUMNS, EpisodeTrace, sumo_collision_r
 from pedsafe_sumo.sim.road_map import load_net_map
 from pedsafe_sumo.sim.scene import episode_end, in_scene_from_start, perceived_pedestrians, vehicle_bodies
 from pedsafe_sumo.sim.staging import EGO_ID, PED_ID, VehicleDims, move_pedestrian
-from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
 #: A per-step observer for replay: `on_step(api, row)` gets SUMO's API handle, in the state of the step
 #: just logged, and that step's log row (a dict of the log columns).
@@ -127,7 +126,7 @@ def drive(
     # the snapshot's feeds only), no SUMO collision check (no person in SUMO to collide with).
     scene_feeds = feeds is not None and feeds.sees_scene
     ego_dims = dims[EGO_ID]
-    ego_lengths = np.array([ego_dims[0]], dtype=float)
+    ego_half_length = 0.5 * np.array([ego_dims[0]], dtype=float)
     while True:
         # The world at time_s, from SUMO's subscriptions.
         t0 = clock()
@@ -193,11 +192,12 @@ def drive(
             if not ego_result:
                 end_reason = "ego_left_network"
                 break
-            # The ego's arrays of one element: the same bits as its element of the arrays of all the
-            # vehicles (numpy's elementwise functions).
-            yaw = sumo_angle_to_yaw_rad([ego_result[var_angle]])
-            front_xy = np.array([ego_result[var_position]])
-            centre_x, centre_y = sumo_front_to_centre(front_xy[:, 0], front_xy[:, 1], yaw, ego_lengths)
+            # The ego's arrays of one element, the same operations as above: the same bits as its element
+            # of the arrays of all the vehicles (numpy's elementwise functions).
+            yaw = np.deg2rad(90.0 - np.array([ego_result[var_angle]], dtype=float))
+            front_x, front_y = ego_result[var_position]
+            centre_x = np.array([front_x], dtype=float) - ego_half_length * np.cos(yaw)
+            centre_y = np.array([front_y], dtype=float) - ego_half_length * np.sin(yaw)
             ego_x, ego_y, ego_yaw = float(centre_x[0]), float(centre_y[0]), float(yaw[0])
             ego_speed = float(ego_result[var_speed])
             ego_length, ego_width = float(ego_dims[0]), float(ego_dims[1])
