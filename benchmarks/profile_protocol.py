@@ -3,6 +3,7 @@ and per step.
 
     .venv/bin/python benchmarks/profile_protocol.py --protocol protocols/paper-v7.toml --episodes 10
     .venv/bin/python benchmarks/profile_protocol.py ... --cprofile prof.out   # and a cProfile dump
+    .venv/bin/python benchmarks/profile_protocol.py --protocol protocols/approach-v2.toml --phases
 
 Runs the worker side of a batch (`batch.runner.run_chunk`, the protocol's scenarios, conditions and
 parameters) in this process, after one untimed pair per scenario (numba's kernels loaded). The phases
@@ -12,12 +13,23 @@ staging (adding vehicles and the pedestrian, the first step), SUMO's own `simula
 own timers (snapshot, perception, agent, logging), the indexes at the end, building the log's DataFrame;
 the rest of an episode is the loop's glue. Writing (the driver's part files) is timed separately on the
 chunk's rows. Times are wall clock and CPU time of this process.
+
+`--phases` (instead of the phase timers above) splits the CPU time of the loop's steps by whether the
+pedestrian is in the scene (before they appear, in the scene, after they left; staging and judging
+apart) and by part: SUMO's `simulation.step`, every other libsumo call, perception (`perceive`), the
+stack's feeds (route, map, signals, raw data: `ObservationFeeds.step`), the pedestrian model
+(`PedestrianWalker.step`, sight rays included), the AD stack (`run_step`); each part's own time (a part
+inside another counts once, in the inner one), "loop" is the rest of the step (the snapshot, the row, the
+loop's own lines, the clock reads of the wrappers). A step runs from the end of one `simulation.step` to
+the end of the next and belongs to the phase at its start. The last line is the overhead ratio of each
+phase: (step CPU - simulation.step) / simulation.step.
 """
 
 from __future__ import annotations
 
 import argparse
 import cProfile
+import math
 import sys
 import tempfile
 import time
@@ -30,11 +42,19 @@ from pedsafe_sumo.batch import runner as batch_runner  # noqa: E402
 from pedsafe_sumo.batch.__main__ import parse_args  # noqa: E402
 from pedsafe_sumo.batch.chunks import plan_chunks  # noqa: E402
 from pedsafe_sumo.batch.plan import prepare  # noqa: E402
+from pedsafe_sumo.behaviour import pedestrian as pedestrian_module  # noqa: E402
 from pedsafe_sumo.io.episodes import to_table  # noqa: E402
 from pedsafe_sumo.sim import episode as episode_module  # noqa: E402
+from pedsafe_sumo.sim import observation as observation_module  # noqa: E402
 from pedsafe_sumo.sim import outcome as outcome_module  # noqa: E402
 from pedsafe_sumo.sim import staging as staging_module  # noqa: E402
 from pedsafe_sumo.sim.connection import SumoSession  # noqa: E402
+
+try:  # the loop's module; in commits before it, the loop is sim/episode.py's _drive (before/after runs)
+    from pedsafe_sumo.sim import loop as loop_module  # noqa: E402
+except ImportError:
+    loop_module = episode_module
+DRIVE = "drive" if hasattr(episode_module, "drive") else "_drive"
 
 TOTALS: dict[str, float] = defaultdict(float)
 CPU_TOTALS: dict[str, float] = defaultdict(float)
@@ -123,6 +143,148 @@ def report_sumo_calls(episodes: int, steps: int) -> None:
         print(f"  {label:40s} {per_step:5.2f} per step {own / steps * 1e6:8.1f} us per step")
 
 
+class PhaseProfile:
+    """CPU time of the loop's steps by phase (pedestrian absent, in the scene, gone) and by part, each
+    part's own time (a wrapped call inside another is taken off the outer one)."""
+
+    SETUP, ABSENT, PRESENT, LEFT, JUDGING = (
+        "staging",
+        "before appearing",
+        "in scene",
+        "after leaving",
+        "judging",
+    )
+
+    def __init__(self) -> None:
+        self.phase = self.step_phase = self.SETUP
+        self.mark = time.process_time()
+        self.inner: list[float] = []  # time of wrapped calls inside the open ones
+        self.own: dict[tuple[str, str], float] = defaultdict(float)
+        self.calls: dict[tuple[str, str], int] = defaultdict(int)
+        self.total: dict[str, float] = defaultdict(float)
+        self.steps: dict[str, int] = defaultdict(int)
+
+    def wrap(self, owner, name: str, label: str, after=None) -> None:
+        """Time owner.name as `label`; `after(result, args)` runs after each call (phase changes)."""
+        real, cpu, inner = getattr(owner, name), time.process_time, self.inner
+
+        def wrapper(*args, **kwargs):
+            c = cpu()
+            inner.append(0.0)
+            try:
+                result = real(*args, **kwargs)
+            finally:
+                spent = cpu() - c
+                key = (self.step_phase, label)
+                self.own[key] += spent - inner.pop()
+                self.calls[key] += 1
+                if inner:
+                    inner[-1] += spent
+            if after is not None:
+                after(result, args, kwargs)
+            return result
+
+        setattr(owner, name, wrapper)
+
+    def end_step(self, *_) -> None:
+        """A step ends with simulation.step: its CPU time since the last one goes to its phase."""
+        now = time.process_time()
+        self.total[self.step_phase] += now - self.mark
+        self.steps[self.step_phase] += 1
+        self.mark, self.step_phase = now, self.phase
+
+    def enter(self, phase: str) -> None:
+        """Close the current stretch (staging, or the episode's last row) and start `phase` now."""
+        now = time.process_time()
+        self.total[self.step_phase] += now - self.mark
+        self.mark, self.phase, self.step_phase = now, phase, phase
+
+    def install(self, libsumo) -> None:
+        runner_cls = episode_module.EpisodeRunner
+        real_drive, real_guard = getattr(episode_module, DRIVE), episode_module.guard_step
+
+        def drive(pose, *args, **kwargs):
+            from_start = loop_module.in_scene_from_start(kwargs["setup"].pedestrian)
+            self.enter(self.PRESENT if from_start else self.ABSENT)
+            try:
+                return real_drive(pose, *args, **kwargs)
+            finally:
+                self.enter(self.JUDGING)
+
+        def guard(step, timeout_s):
+            holder = type("StackStep", (), {"run_step": staticmethod(step)})
+            self.wrap(holder, "run_step", "AD stack (run_step)")
+            return real_guard(holder.run_step, timeout_s)
+
+        setattr(episode_module, DRIVE, drive)
+        episode_module.guard_step = guard
+        self.wrap(runner_cls, "run", "staging, judging", after=lambda *_: self.enter(self.SETUP))
+        self.wrap(libsumo.simulation, "step", "simulation.step", after=self.end_step)
+        for domain in ("vehicle", "person", "simulation", "trafficlight", "route", "vehicletype", "lane"):
+            owner = getattr(libsumo, domain)
+            for name in dir(owner):
+                label = f"{domain}.{name}"
+                if name.startswith("_") or not callable(getattr(owner, name)) or label in NOT_WRAPPED:
+                    continue
+                self.wrap(owner, name, "libsumo " + label)
+        self.wrap(episode_module.SumoStaging, "add_pedestrian_now", "libsumo person.add (glue)")
+        real_add = episode_module.SumoStaging.add_pedestrian_now
+
+        def add_now(*args, **kwargs):
+            result = real_add(*args, **kwargs)
+            self.phase = self.PRESENT  # from the step that SUMO now makes on
+            return result
+
+        episode_module.SumoStaging.add_pedestrian_now = add_now
+        real_remove = libsumo.person.remove
+
+        def remove(*args, **kwargs):
+            result = real_remove(*args, **kwargs)
+            if self.step_phase == self.PRESENT:
+                self.phase = self.LEFT
+            return result
+
+        libsumo.person.remove = remove
+        self.wrap(loop_module, "perceive", "perception (perceive)")
+        self.wrap(observation_module.ObservationFeeds, "step", "stack's feeds (ObservationFeeds.step)")
+        self.wrap(pedestrian_module.PedestrianWalker, "step", "pedestrian model (walker.step)")
+
+    def report(self) -> None:
+        cost = wrapper_cost_s()
+        for phase in (self.ABSENT, self.PRESENT, self.LEFT):
+            steps = self.steps[phase]
+            if not steps:
+                continue
+            parts = {label: s for (p, label), s in self.own.items() if p == phase}
+            calls = sum(n for (p, _), n in self.calls.items() if p == phase)
+            step_s = parts.get("simulation.step", 0.0)
+            print(f"{phase}: {steps} steps, {self.total[phase] / steps * 1e6:.0f} us CPU per step")
+            libsumo = {k: v for k, v in parts.items() if k.startswith("libsumo ")}
+            rows = {k: v for k, v in parts.items() if k not in libsumo and k != "staging, judging"}
+            rows["other libsumo calls"] = sum(libsumo.values())
+            # The loop's own lines (snapshot, row, glue), less the wrappers' clock reads.
+            rows["loop (snapshot, row, glue)"] = self.total[phase] - sum(parts.values()) - calls * cost
+            for label, seconds in sorted(rows.items(), key=lambda kv: -kv[1]):
+                ratio = seconds / step_s if step_s else math.nan
+                print(f"  {label:44s} {seconds / steps * 1e6:8.1f} us/step {ratio:6.2f} x step")
+            for label, seconds in sorted(libsumo.items(), key=lambda kv: -kv[1])[:8]:
+                n = self.calls[(phase, label)]
+                print(f"    {label[8:]:42s} {seconds / steps * 1e6:8.1f} us/step {n / steps:5.2f} calls/step")
+        ratios, engine = [], []
+        for phase in (self.ABSENT, self.PRESENT, self.LEFT):
+            step_s = self.own.get((phase, "simulation.step"), 0.0)
+            if step_s:
+                calls = sum(n for (p, _), n in self.calls.items() if p == phase)
+                ours = self.total[phase] - step_s - calls * cost
+                stack = self.own.get((phase, "AD stack (run_step)"), 0.0)
+                ratios.append(f"{phase} {ours / step_s:.2f}")
+                engine.append(f"{phase} {(ours - stack) / step_s:.2f}")
+        print(
+            "overhead ratio (CPU: a step besides simulation.step, per simulation.step): " + ", ".join(ratios)
+        )
+        print("  of it without the AD stack's run_step (the engine's own):", ", ".join(engine))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--protocol", default="protocols/paper-v7.toml")
@@ -133,6 +295,11 @@ def main() -> None:
         action="store_true",
         help="also time every other libsumo call (vehicle, person, simulation, trafficlight, route, "
         "vehicletype), the wrapper's own cost subtracted: what SUMO costs outside its step and load",
+    )
+    parser.add_argument(
+        "--phases",
+        action="store_true",
+        help="split the loop's CPU time by phase (pedestrian absent, in the scene, gone) and part instead",
     )
     args = parser.parse_args()
     # prepare() writes nothing: --out is only a name the parser requires.
@@ -149,6 +316,16 @@ def main() -> None:
 
     import libsumo
 
+    if args.phases:
+        phases = PhaseProfile()
+        phases.install(libsumo)
+        cpu = time.process_time()
+        for chunk in chunks:
+            batch_runner.run_chunk(plan.config, chunk.key, chunk.tasks)
+        print(f"{len(chunks) * 2 * args.episodes} episodes, CPU {time.process_time() - cpu:.1f} s")
+        phases.report()
+        return
+
     runner_cls = episode_module.EpisodeRunner
     timed(runner_cls, "draw_setup", "draw world (draw_setup)")
     timed(episode_module, "draw_background", "  of it: background traffic")
@@ -156,7 +333,7 @@ def main() -> None:
     timed(staging_module, "populate", "staging: add vehicles, person")
     timed(staging_module, "start_signals", "staging: signals")
     timed(outcome_module, "episode_indexes", "indexes at the end")
-    timed(episode_module.pd, "DataFrame", "log DataFrame")
+    timed(loop_module.pd, "DataFrame", "log DataFrame")
     timed(libsumo.simulation, "step", "simulation.step (all)")
     timed(runner_cls, "run", "episode (run)")
     real_run = runner_cls.run
@@ -169,9 +346,9 @@ def main() -> None:
         return result
 
     runner_cls.run = run_keeping_timings
-    timed(episode_module, "perceive", "perceive")
-    timed(episode_module, "ego_in_sight", "pedestrian sight rays")
-    timed(episode_module, "move_pedestrian", "person.moveToXY")
+    timed(loop_module, "perceive", "perceive")
+    timed(loop_module, "ego_in_sight", "pedestrian sight rays")
+    timed(loop_module, "move_pedestrian", "person.moveToXY")
 
     if args.sumo_calls:
         wrap_sumo_calls(libsumo)

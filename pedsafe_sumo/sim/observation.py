@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping
 from typing import Any
 
 from pedsafe_sumo.control.agent import (
@@ -88,9 +89,32 @@ class ObservationFeeds:
             return None
         return cls(api, ego_id, extra, condition, net_file, sensors, perception_params)
 
+    def subscribe_ego(self) -> None:
+        """With the route feed: add what it reads of the ego at each step (lane, route index, position on
+        the lane) to the ego's subscription (position, angle, speed), so that the loop's one read of the
+        subscription replaces three calls a step (step's `ego_values`)."""
+        if "route" in self.wanted:
+            tc = self.api.constants
+            variables = [tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED, *self._route_variables]
+            self.api.vehicle.subscribe(self.ego_id, variables)
+
+    @property
+    def _route_variables(self) -> tuple[int, int, int]:
+        tc = self.api.constants
+        return tc.VAR_LANE_ID, tc.VAR_ROUTE_INDEX, tc.VAR_LANEPOSITION
+
+    @property
+    def sees_scene(self) -> bool:
+        """Whether any wanted part is made from the world snapshot (raw sensor data, perceived vehicles);
+        route, road map and signal come from SUMO and the network alone."""
+        return bool(self.wanted & (set(RAW_SENSORS) | {"vehicles"}))
+
     # ----------------------------------------------------------------------------- per step
-    def step(self, snapshot, ego_pose, ego_index: int, time_s: float) -> dict[str, Any]:
-        """Keyword arguments for this step's Observation."""
+    def step(
+        self, snapshot, ego_pose, ego_index: int, time_s: float, ego_values: Mapping[int, Any] | None = None
+    ) -> dict[str, Any]:
+        """Keyword arguments for this step's Observation. `ego_values`: the ego's subscription results
+        of this step (subscribe_ego), or None (the route feed asks SUMO)."""
         out: dict[str, Any] = {}
         wanted = self.wanted
         data: dict[str, Any] = {}
@@ -145,7 +169,7 @@ class ObservationFeeds:
         if "vehicles" in wanted:
             out["vehicles"] = self._vehicles(snapshot, ego_pose, ego_index)
         if "route" in wanted:
-            out["route"] = self._route()
+            out["route"] = self._route(ego_values)
         if "road_map" in wanted:
             out["road_map"] = self._net().road_map
         if "traffic_light" in wanted:
@@ -190,10 +214,16 @@ class ObservationFeeds:
             raise RuntimeError("the net map was not loaded: neither route nor road_map was asked for")
         return self.net
 
-    def _route(self) -> RouteAhead:
+    def _route(self, ego_values: Mapping[int, Any] | None = None) -> RouteAhead:
         api, ego = self.api, self.ego_id
-        lane_id = api.vehicle.getLaneID(ego)
-        route_index = api.vehicle.getRouteIndex(ego)
+        lane_var, index_var, position_var = self._route_variables
+        if ego_values is not None and position_var in ego_values:
+            lane_id, route_index = ego_values[lane_var], ego_values[index_var]
+            lane_position_m = float(ego_values[position_var])
+        else:
+            lane_id = api.vehicle.getLaneID(ego)
+            route_index = api.vehicle.getRouteIndex(ego)
+            lane_position_m = float(api.vehicle.getLanePosition(ego))
         key = (lane_id, route_index)
         if key != self._route_key:
             route = tuple(api.vehicle.getRoute(ego))[max(route_index, 0) :]
@@ -208,9 +238,7 @@ class ObservationFeeds:
                         net.lanes[v] for v in net.vias.get((edge, route[k + 1]), ()) if v in net.lanes
                     )
             self._route_key, self._route_edges, self._route_lanes = key, route, tuple(lanes)
-        return RouteAhead(
-            self._route_edges, self._route_lanes, lane_id, float(api.vehicle.getLanePosition(ego))
-        )
+        return RouteAhead(self._route_edges, self._route_lanes, lane_id, lane_position_m)
 
     def _traffic_light(self, time_s: float) -> TrafficLightState | None:
         api = self.api

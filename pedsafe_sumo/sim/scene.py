@@ -75,12 +75,15 @@ def episode_end(
     the scene has cleared it; `clearance_m` is +inf while nobody is in the scene."""
     if clearance_m <= 0.0 and ego.speed_mps >= STATIONARY_SPEED_MPS:
         return "collision"
-    cleared = walker.cleared((ego.x_m, ego.y_m), ego.yaw_rad, ego.length_m, ego.width_m)
-    if cleared is None:  # the ego's heading does not cross the path: its rear past the pedestrian
-        lon = (pose.x_m - ego.x_m) * math.cos(ego.yaw_rad) + (pose.y_m - ego.y_m) * math.sin(ego.yaw_rad)
-        cleared = (lon < -(ego.length_m / 2 + ped.radius_m), walker.finished)
-    if all(cleared) and time_s > walker.crossing_from_s:
-        return "both_cleared"
+    # Not before they step off: the geometry is looked at only from then on (walker.cleared has no effect
+    # on the walker beyond its memo of the conflict point).
+    if time_s > walker.crossing_from_s:
+        cleared = walker.cleared((ego.x_m, ego.y_m), ego.yaw_rad, ego.length_m, ego.width_m)
+        if cleared is None:  # the ego's heading does not cross the path: its rear past the pedestrian
+            lon = (pose.x_m - ego.x_m) * math.cos(ego.yaw_rad) + (pose.y_m - ego.y_m) * math.sin(ego.yaw_rad)
+            cleared = (lon < -(ego.length_m / 2 + ped.radius_m), walker.finished)
+        if all(cleared):
+            return "both_cleared"
     if time_s >= time_limit_s:
         return "time_limit"
     return None

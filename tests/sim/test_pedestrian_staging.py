@@ -19,9 +19,9 @@ from pedsafe_sumo.params import load_params, with_overrides
 from pedsafe_sumo.perception.surfaces import KIND_PEDESTRIAN
 from pedsafe_sumo.protocol import VALUES_BEFORE
 from pedsafe_sumo.scenarios.specs import get_scenario
-from pedsafe_sumo.sim import episode as episode_module
+from pedsafe_sumo.sim import loop as loop_module
 from pedsafe_sumo.sim.episode import EpisodeRunner
-from pedsafe_sumo.sim.staging import PED_ID
+from pedsafe_sumo.sim.staging import EGO_ID, PED_ID
 from tests.sim.ad_agents import Recorder
 
 SITE = get_site("xueqing")
@@ -82,19 +82,52 @@ def _in_sumo_hook(seen):
 
 
 # ---------------------------------------------------------------------------------------------- (a)
+def test_before_appearing_a_step_reads_the_ego_alone(runner, crossing, monkeypatch):
+    """appear_time_s = 4 s, a stack that asks for no feed made from the snapshot: before 4 s no step reads
+    the other vehicles from SUMO (getAllSubscriptionResults, once a step from 4 s on), and the ego's row
+    is still its footprint centre: SUMO's front bumper moved half its length back along its heading (SUMO's
+    angle clockwise from north), by hand from SUMO's getters at every step."""
+    setup = _with_pedestrian(crossing[0], appear_time_s=4.0, risk="unaware")
+    api = runner.session.api
+    reads = []
+    real_read = api.vehicle.getAllSubscriptionResults
+
+    def counting_read():
+        reads.append(api.simulation.getTime())
+        return real_read()
+
+    monkeypatch.setattr(api.vehicle, "getAllSubscriptionResults", counting_read)
+    by_hand = []
+
+    def hook(api, row):
+        x, y = api.vehicle.getPosition(EGO_ID)
+        yaw = math.radians(90.0 - api.vehicle.getAngle(EGO_ID))
+        half_m = setup.ego.size.length_m / 2
+        by_hand.append(
+            ((x - half_m * math.cos(yaw), y - half_m * math.sin(yaw)), (row["ego_x_m"], row["ego_y_m"]))
+        )
+
+    log = runner.run(SPEC, "sv", SEED, setup=setup, on_step=hook).log
+    assert (log["time_s"] < 4.0 - 1e-9).sum() == 79
+    assert len(reads) == (log["time_s"] >= 4.0 - 1e-9).sum()
+    assert len(by_hand) == len(log)
+    for expected, logged in by_hand:
+        assert logged == pytest.approx(expected, abs=1e-9)
+
+
 def test_before_appearing_the_pedestrian_is_nowhere(runner, crossing, monkeypatch):
     """appear_time_s = 4 s: the rows before 4 s have the pedestrian absent (NaN position, infinite
     clearance, nothing perceived or detected), perceive is not called, and SUMO has no person; from the
     row at 4.00 s on they stand at the start of their path, in SUMO, and the sensors run."""
     setup = _with_pedestrian(crossing[0], appear_time_s=4.0, risk="unaware")
     calls = []
-    real_perceive = episode_module.perceive
+    real_perceive = loop_module.perceive
 
     def counting_perceive(snapshot, ego_pose, sensors, rng, time_s, link):
         calls.append((time_s, len(snapshot.pedestrians)))
         return real_perceive(snapshot, ego_pose, sensors, rng, time_s, link)
 
-    monkeypatch.setattr(episode_module, "perceive", counting_perceive)
+    monkeypatch.setattr(loop_module, "perceive", counting_perceive)
     seen = []
     result = runner.run(SPEC, "sv", SEED, setup=setup, on_step=_in_sumo_hook(seen))
     log = result.log
