@@ -210,3 +210,28 @@ def test_shipped_stacks_load_by_short_name():
     assert resolve_stack_name("reference+x.y:Z") == "pedsafe_sumo.control.baseline:BaselineStack+x.y:Z"
     assert is_shipped("reference") and is_shipped("paper-v7") and not is_shipped("mypkg.stack:S")
     assert set(BaselineStack().sensors()) >= {"route", "road_map", "traffic_light", "v2i"}
+
+
+def test_crosswalk_spans_are_worked_out_by_hand_and_kept_per_path_map_and_width():
+    from pedsafe_sumo.control import baseline_planner
+
+    # The ego at the origin heading +x: its straight path, which starts _STRAIGHT_REACH_M behind it; a 4 m
+    # wide crosswalk across it from x = 20 to x = 24. With a half width of 1.4 m the corridor meets it from
+    # x = 18.6 m to x = 25.4 m, the path sampled every _PATH_SAMPLE_M.
+    path = PathArrays.of(straight_path(ego()))
+    back = baseline_planner._STRAIGHT_REACH_M
+    crosswalk = Crosswalk("c", ((20.0, -8.0), (24.0, -8.0), (24.0, 8.0), (20.0, 8.0)), "")
+    road_map = RoadMap((crosswalk,), ())
+    step = baseline_planner._PATH_SAMPLE_M
+    (span,) = baseline_planner.crosswalk_spans(path, road_map, 1.4)
+    assert span.enter_m == pytest.approx(math.ceil((back + 20.0 - 1.4) / step - 1e-9) * step)
+    assert span.leave_m == pytest.approx(math.floor((back + 24.0 + 1.4) / step + 1e-9) * step)
+    # asked again: the same spans, from the cache, in a list of its own
+    again = baseline_planner.crosswalk_spans(path, road_map, 1.4)
+    assert again == [span] and again is not baseline_planner.crosswalk_spans(path, road_map, 1.4)
+    # another width, or another map, is worked out again
+    (wide,) = baseline_planner.crosswalk_spans(path, road_map, 3.0)
+    assert wide.enter_m == pytest.approx(math.ceil((back + 20.0 - 3.0) / step - 1e-9) * step)
+    moved = RoadMap((Crosswalk("c", ((40.0, -8.0), (44.0, -8.0), (44.0, 8.0), (40.0, 8.0)), ""),), ())
+    (far,) = baseline_planner.crosswalk_spans(path, moved, 1.4)
+    assert far.enter_m == pytest.approx(math.ceil((back + 40.0 - 1.4) / step - 1e-9) * step)
