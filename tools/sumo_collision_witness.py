@@ -17,8 +17,8 @@ with the network, and prints one line per vehicle-person contact of either side:
   box never does: SUMO draws a person as a box `length` long behind its position, 0.215 m for its
   default pedestrian); `leaves crossing` (SUMO's boxes overlap while the person is on the crossing at one
   FCD step at most, and at the next the person is on a walking area, where SUMO does not look for this
-  vehicle's victims: SUMO registers a person on a crossing a step after the boxes first overlap in the
-  FCD, so one step is not enough); or `unexplained`.
+  vehicle's victims; on the public scenario of docs/conflicts.md SUMO reports no such contact); or
+  `unexplained`.
 
 The table is also written to DIR/witness.csv. Bad input: one line, exit 2.
 """
