@@ -25,7 +25,6 @@ The table is also written to DIR/witness.csv. Bad input: one line, exit 2.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import subprocess
@@ -38,6 +37,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from pedsafe_sumo.cli import OneLineParser
 from pedsafe_sumo.conflicts.__main__ import main as conflicts_main
 from pedsafe_sumo.conflicts.fcd import read_fcd
 from pedsafe_sumo.sumo_binaries import sumo_binary
@@ -106,9 +106,9 @@ def run_sumo(
     ]  # fmt: skip
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
-        raise WitnessError(
-            f"sumo failed: {done.stderr.strip().splitlines()[-1] if done.stderr else done.returncode}"
-        )
+        lines = done.stderr.strip().splitlines()
+        errors = [line for line in lines if line.startswith("Error")]
+        raise WitnessError(f"sumo failed: {(errors or lines or [str(done.returncode)])[0]}")
     return fcd, collisions
 
 
@@ -316,7 +316,7 @@ def witness(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="tools/sumo_collision_witness.py", description=__doc__.splitlines()[0])
     parser.add_argument("--net", type=Path, required=True)
     parser.add_argument("--routes", required=True, help="route files, comma-separated")
     parser.add_argument("--out", type=Path, required=True, help="folder for SUMO's outputs and witness.csv")
