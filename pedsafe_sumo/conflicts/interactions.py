@@ -201,15 +201,18 @@ class InteractionTracker:
                     vehicles.speed_mps[vi],
                     persons.speed_mps[pj],
                 )
-            ).tolist()
-            for i, j, row in zip(vi.tolist(), pj.tolist(), rows):
-                key = (vehicles.ids[i], persons.ids[j])
+            )
+            # Each pair's row appended as its 8-byte doubles (no Python float per number).
+            raw, width = rows.tobytes(), 8 * _ROW_WIDTH
+            v_ids, p_ids, v_places, p_places = vehicles.ids, persons.ids, vehicles.places, persons.places
+            for k, (i, j) in enumerate(zip(vi.tolist(), pj.tolist())):
+                key = (v_ids[i], p_ids[j])
                 near.add(key)
                 record = self.open.get(key)
                 if record is None:
                     record = self.open[key] = _Open(vehicles.types[i], persons.types[j])
-                record.values.extend(row)
-                record.places.append((vehicles.places[i], persons.places[j]))
+                record.values.frombytes(raw[k * width : (k + 1) * width])
+                record.places.append((v_places[i], p_places[j]))
         for key in [k for k in self.open if k not in near]:
             self.closed.append((key, self.open.pop(key)))
         self._flush()
