@@ -13,6 +13,9 @@ from pedsafe_sumo.sumo_net import read_net
 
 #: Search radius around the point for lanes, m: wider than any lane, so a point on a lane finds it.
 SEARCH_RADIUS_M = 5.0
+#: Points whose lane is remembered (exact coordinates); the memory is emptied when full. Stated
+#: assumption: a few thousand waiting places cover a district, at some 200 bytes each.
+FOUND_POINTS = 4096
 
 
 class NetError(ValueError):
@@ -34,6 +37,7 @@ class PlaceFinder:
         if not self.net.getEdges():
             raise NetError(f"network {path} has no edges")
         self.meeting = MeetingRules(self.net)
+        self._found: dict[tuple[float, float], tuple[str, str]] = {}
         # Without the rtree package, sumolib's getNeighboringLanes falls back to a brute-force search
         # that first appends every lane of the net to a list it keeps (Net._allLanes) on every call:
         # about 1 kB per interaction on Xueqing (135 lanes), 47 MB over the 43,330 interactions of an
@@ -76,6 +80,17 @@ class PlaceFinder:
     def __call__(self, x_m: float, y_m: float) -> tuple[str, str]:
         if not (math.isfinite(x_m) and math.isfinite(y_m)):
             return "", ""
+        # A person waiting at a kerb meets vehicle after vehicle at the same point: looked up once.
+        known = self._found.get((x_m, y_m))
+        if known is not None:
+            return known
+        if len(self._found) >= FOUND_POINTS:
+            self._found.clear()
+        found = self._find(x_m, y_m)
+        self._found[(x_m, y_m)] = found
+        return found
+
+    def _find(self, x_m: float, y_m: float) -> tuple[str, str]:
         lanes = self._neighbouring_lanes(x_m, y_m)
         if not lanes:
             return "", ""

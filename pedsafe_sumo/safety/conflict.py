@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -107,6 +108,12 @@ def conflict_steps(log: pd.DataFrame, model: ConflictModel = AMINI_2022) -> pd.D
     cross), candidate, md_m, tmd_s, cs_mps, conflict_probability, conflict (candidate and p over the
     threshold and CS over the minimum speed).
     """
+    return pd.DataFrame(_conflict_columns(log, model))
+
+
+def _conflict_columns(log: Any, model: ConflictModel) -> dict[str, np.ndarray]:
+    """The columns of `conflict_steps` as arrays (no DataFrame: `episode_conflict` runs once per
+    interaction, and building a DataFrame cost more than the measures themselves)."""
     a = steplog.as_arrays(log)
     evx, evy = steplog.ego_velocity_mps(a)
     dpx, dpy = a[steplog.PED_X] - a[steplog.EGO_X], a[steplog.PED_Y] - a[steplog.EGO_Y]
@@ -126,19 +133,17 @@ def conflict_steps(log: pd.DataFrame, model: ConflictModel = AMINI_2022) -> pd.D
         candidate = (s >= 0.0) & (u >= 0.0) & (np.abs(s - u) <= model.max_ttc_difference_s)
     p = model.probability(md, tmd, cs)
     conflict = candidate & (p >= model.probability_threshold) & (cs > model.min_conflicting_speed_mps)
-    return pd.DataFrame(
-        {
-            "time_s": a[steplog.TIME],
-            "ttc_vehicle_s": s,
-            "ttc_pedestrian_s": u,
-            "candidate": candidate,
-            "md_m": md,
-            "tmd_s": tmd,
-            "cs_mps": cs,
-            "conflict_probability": p,
-            "conflict": conflict,
-        }
-    )
+    return {
+        "time_s": a[steplog.TIME],
+        "ttc_vehicle_s": s,
+        "ttc_pedestrian_s": u,
+        "candidate": candidate,
+        "md_m": md,
+        "tmd_s": tmd,
+        "cs_mps": cs,
+        "conflict_probability": p,
+        "conflict": conflict,
+    }
 
 
 @dataclass(frozen=True)
@@ -162,22 +167,21 @@ def episode_conflict(
     highest p (the first on a tie) is reported, so `conflict == (conflict_probability >= threshold)`.
     Steps after `last_step` (e.g. after the first contact) are ignored. All NaN without an eligible step.
     """
-    steps = conflict_steps(log, model)
-    if last_step is not None:
-        steps = steps.iloc[: last_step + 1]
-    eligible = steps["candidate"].to_numpy() & (steps["cs_mps"].to_numpy() > model.min_conflicting_speed_mps)
+    columns = _conflict_columns(log, model)
+    stop = None if last_step is None else last_step + 1
+    candidate, cs = columns["candidate"][:stop], columns["cs_mps"][:stop]
+    eligible = candidate & (cs > model.min_conflicting_speed_mps)
     if not eligible.any():
         return ConflictResult(False, None, math.nan, math.nan, math.nan, math.nan)
-    p = np.where(eligible, steps["conflict_probability"].to_numpy(), -np.inf)
-    k = int(np.argmax(p))
-    row = steps.iloc[k]
+    probability = columns["conflict_probability"][:stop]
+    k = int(np.argmax(np.where(eligible, probability, -np.inf)))
     return ConflictResult(
-        conflict=bool(steps["conflict"].to_numpy().any()),
+        conflict=bool(columns["conflict"][:stop].any()),
         step=k,
-        md_m=float(row["md_m"]),
-        tmd_s=float(row["tmd_s"]),
-        cs_mps=float(row["cs_mps"]),
-        conflict_probability=float(row["conflict_probability"]),
+        md_m=float(columns["md_m"][k]),
+        tmd_s=float(columns["tmd_s"][k]),
+        cs_mps=float(cs[k]),
+        conflict_probability=float(probability[k]),
     )
 
 

@@ -50,15 +50,24 @@ class InteractionMeasures:
     conflict_probability: float
     #: the reported conflict step (riskiest eligible step); None if no step is eligible
     conflict_step: int | None
+    #: step of the largest DRAC up to the first contact (the first on a tie); None without a DRAC
+    drac_step: int | None = None
 
 
-def interaction_measures(log: Any, conflict_model: ConflictModel = AMINI_2022) -> InteractionMeasures:
-    """All measures of one interaction's per-step log (see the module docstring for the rules)."""
+def interaction_measures(
+    log: Any, conflict_model: ConflictModel = AMINI_2022, ttc_s: np.ndarray | None = None
+) -> InteractionMeasures:
+    """All measures of one interaction's per-step log (see the module docstring for the rules).
+
+    `ttc_s`: the log's per-step TTC when the caller has computed it already (`ttc_of_rows` over the rows
+    of many logs at once); None computes it here."""
     arrays = kinematic_arrays(log)
     hit = detect_collision(arrays)
+    ttc = ttc_steps_s(arrays) if ttc_s is None else ttc_s
     # the closest approach of the pair over the whole interaction window, whatever the pedestrian does
-    proximity = episode_proximity(arrays, replace(default_proximity_model(), scope=SCOPE_EPISODE), hit.step)
-    ttc = ttc_steps_s(arrays)
+    proximity = episode_proximity(
+        arrays, replace(default_proximity_model(), scope=SCOPE_EPISODE), hit.step, ttc_s=ttc
+    )
     if hit.step is not None:
         ttc = ttc[: hit.step + 1]
     k_ttc = int(np.nanargmin(ttc)) if np.isfinite(ttc).any() else None
@@ -78,4 +87,5 @@ def interaction_measures(log: Any, conflict_model: ConflictModel = AMINI_2022) -
         cs_mps=conflict.cs_mps,
         conflict_probability=conflict.conflict_probability,
         conflict_step=conflict.step,
+        drac_step=proximity.drac_step,
     )

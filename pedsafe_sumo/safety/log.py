@@ -80,6 +80,11 @@ class _ValidatedLog(dict[str, np.ndarray]):
     every column once more (the arrays are shared either way: asarray of a float64 array is itself)."""
 
 
+def is_validated(log: Any) -> bool:
+    """Whether `log` is what `as_arrays` returned: checked, with every required column."""
+    return type(log) is _ValidatedLog
+
+
 def as_arrays(log: Any) -> dict[str, np.ndarray]:
     """Validate a log and return its columns as numpy arrays (float64 or bool), extra sensors included.
 

@@ -123,6 +123,8 @@ def _default_section() -> dict[str, Any]:
 
 def kinematic_arrays(log: Any) -> dict[str, np.ndarray]:
     """A log's columns as validated arrays (`steplog.as_arrays`); missing detection flags read as False."""
+    if steplog.is_validated(log):
+        return steplog.as_arrays(log)  # checked already, flags included: a copy of the mapping
     names = list(log.columns) if hasattr(log, "columns") else list(log.keys()) if hasattr(log, "keys") else []
     if not names:
         return steplog.as_arrays(log)  # raises the contract's own message
@@ -257,22 +259,30 @@ class ProximityResult:
     close_pass: bool
     #: number of steps in scope up to the window's end
     steps_in_scope: int
+    #: index of the step of the largest DRAC (the first on a tie); None when no DRAC is defined
+    drac_step: int | None = None
 
 
-def episode_proximity(log: Any, model: ProximityModel, last_step: int | None = None) -> ProximityResult:
+def episode_proximity(
+    log: Any, model: ProximityModel, last_step: int | None = None, ttc_s: np.ndarray | None = None
+) -> ProximityResult:
     """The proximity measures of one episode over the steps up to and including `last_step` (the first
     contact, as for the conflict measures; all steps when None). Clearance and close pass take only the
-    steps in the model's scope (`interaction_steps`)."""
+    steps in the model's scope (`interaction_steps`). `ttc_s`: the log's `ttc_steps_s`, when the caller
+    has it already (the DRAC rests on it)."""
     a = kinematic_arrays(log)
     stop = len(a[steplog.TIME]) if last_step is None else last_step + 1
     clearance = _clearance(a)
     in_scope = _steps_in_scope(a, clearance, model)[:stop]
     clearance = clearance[:stop]
     speed = a[steplog.EGO_SPEED][:stop]
-    drac = _drac(a)[:stop]
-    drac_max = float(np.nanmax(drac)) if np.isfinite(drac).any() else math.nan
+    ttc = ttc_steps_s(a) if ttc_s is None else ttc_s
+    drac = drac_from_ttc_mps2(a[steplog.EGO_SPEED], ttc)[:stop]
+    drac_defined = np.isfinite(drac).any()
+    drac_max = float(np.nanmax(drac)) if drac_defined else math.nan
+    drac_step = int(np.nanargmax(drac)) if drac_defined else None
     if not in_scope.any():
-        return ProximityResult(math.nan, math.nan, -1, drac_max, False, 0)
+        return ProximityResult(math.nan, math.nan, -1, drac_max, False, 0, drac_step)
     k = int(np.argmin(np.where(in_scope, clearance, np.inf)))
     return ProximityResult(
         min_clearance_m=float(clearance[k]),
@@ -281,6 +291,7 @@ def episode_proximity(log: Any, model: ProximityModel, last_step: int | None = N
         drac_mps2=drac_max,
         close_pass=bool((close_pass_steps(clearance, speed, model) & in_scope).any()),
         steps_in_scope=int(in_scope.sum()),
+        drac_step=drac_step,
     )
 
 

@@ -14,7 +14,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -32,7 +32,13 @@ from pedsafe_sumo.safety.geometry import (
 
 def ttc_steps_s(log: pd.DataFrame) -> np.ndarray:
     """Per-step TTC, s (NaN where the two would never touch under constant velocity)."""
-    a = steplog.as_arrays(log)
+    return ttc_of_rows(steplog.as_arrays(log))
+
+
+def ttc_of_rows(a: Mapping[str, np.ndarray]) -> np.ndarray:
+    """TTC of each row of columns in the log contract's names and units, checked by the caller, s (NaN
+    where never touching). Each row stands alone (no time order): the rows of many logs can be stacked
+    into one call, each row's TTC the same as in its own log's `ttc_steps_s`."""
     evx, evy = steplog.ego_velocity_mps(a)
     yaw = a[steplog.EGO_YAW]
     lx, ly = to_rectangle_frame(a[steplog.PED_X], a[steplog.PED_Y], a[steplog.EGO_X], a[steplog.EGO_Y], yaw)
