@@ -572,6 +572,9 @@ def test_every_hosted_combination_on_the_left_hand_junction_runs_on_the_kerb_sid
     assert hosted and hosted <= set(zip(episodes["scenario"], episodes["approach"], strict=True))
     assert (episodes["error"] == "").all(), episodes["error"].tolist()
     assert (episodes["ego_signal"] != "none").all(), episodes[["scenario", "approach", "ego_signal"]]
+    # Under V2I the roadside camera is the first to detect the pedestrian in some episode.
+    v2i = episodes[episodes["condition"] == "v2i"]
+    assert (v2i["detected_by"] == "roadside").any(), v2i["detected_by"].tolist()
     net = read_net(str(site.file("net.xml")))
     # A step log per unit and chunk: SCENARIO@ARM-....parquet.
     steps = pd.concat(
