@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import subprocess
-import sys
 
 import pandas as pd
 import pytest
 import tomllib
+from test_sweep import sweep
 
 from pedsafe_sumo import REPO_ROOT
 from pedsafe_sumo.protocol import load_protocol
@@ -17,16 +16,6 @@ from pedsafe_sumo.settings import UsageError
 from pedsafe_sumo.sweep_protocol import derived_protocol_text, write_derived_protocol
 
 PROTOCOL = REPO_ROOT / "protocols" / "approach-v2.toml"
-
-
-def sweep(*args, timeout=600):
-    return subprocess.run(
-        [sys.executable, "-m", "pedsafe_sumo.sweep", *args],
-        capture_output=True,
-        text=True,
-        cwd=REPO_ROOT,
-        timeout=timeout,
-    )
 
 
 def test_a_derived_protocol_differs_from_its_source_only_in_the_swept_values_and_its_name():
