@@ -27,8 +27,8 @@ from pedsafe_sumo.conflicts.fcd import FcdStep
 from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import first_polyline_crossing
-from pedsafe_sumo.safety.interaction import interaction_measures
-from pedsafe_sumo.safety.surrogates import ttc_of_rows
+from pedsafe_sumo.safety.interaction import InteractionMeasures, measures_of_steps, step_measures_of_rows
+from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
 #: Columns of the per-step buffer of an open interaction, in the log contract's names.
@@ -224,22 +224,30 @@ class InteractionTracker:
 
     def _flush(self) -> None:
         """Measure and emit the interactions that ended at this timestep, in the order they ended: the
-        per-step TTC of all of them in one call (`ttc_of_rows`: each row stands alone), whose fixed cost
-        (some 80 numpy operations) they share; the rest interaction by interaction. Nothing is held
+        per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them in one call
+        (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
+        operations) they share; the reductions and the row interaction by interaction. Nothing is held
         from one timestep to the next but the open interactions."""
         if not self.closed:
             return
         tables = [
             np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH) for _, record in self.closed
         ]
-        stacked = np.concatenate(tables)
-        ttc = ttc_of_rows({name: stacked[:, k] for k, name in enumerate(_STEP_COLUMNS)})
-        start = 0
-        for (key, record), table in zip(self.closed, tables):
-            stop = start + len(table)
+        stops = np.cumsum([len(table) for table in tables]).tolist()
+        starts = [0, *stops[:-1]]
+        # one contiguous array per column: the element-wise measures run faster on it than on strides
+        stacked = np.ascontiguousarray(np.concatenate(tables).T)
+        columns = {name: stacked[k] for k, name in enumerate(_STEP_COLUMNS)}
+        if not steplog.logs_pass(columns, starts):
+            for table in tables:  # raises the contract's message for the first log that breaks it
+                kinematic_arrays({name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)})
+        steps = step_measures_of_rows(columns)
+        for (key, record), start, stop in zip(self.closed, starts, stops):
             self.interactions += 1
-            self.emit(interaction_row(key[0], key[1], record, self.place, self.meeting, ttc[start:stop]))
-            start = stop
+            log = {name: values[start:stop] for name, values in columns.items()}
+            speeds = stacked[len(_STEP_COLUMNS) :, start:stop]
+            m = measures_of_steps(log, steps.part(start, stop))
+            self.emit(interaction_row(key[0], key[1], record, log, speeds, m, self.place, self.meeting))
         self.closed = []
 
 
@@ -282,27 +290,26 @@ def interaction_row(
     vehicle_id: str,
     person_id: str,
     record: _Open,
+    log: dict[str, np.ndarray],
+    speeds: np.ndarray,
+    m: InteractionMeasures,
     place: PlaceLookup | None,
     meeting: MeetingLookup | None = None,
-    ttc_s: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """The output row of one finished interaction (ROW_COLUMNS); `ttc_s` its per-step TTC if known."""
-    table = np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH)
-    log = {name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)}
-    m = interaction_measures(log, ttc_s=ttc_s)
+    """The output row of one finished interaction (ROW_COLUMNS): its log (_STEP_COLUMNS), its vehicle's
+    and person's FCD speeds (two rows) and its measures (`measures_of_steps`)."""
     t = log[steplog.TIME]
     k = m.min_clearance_step
     x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
     lane_id, crossing_id = place(x_m, y_m) if place is not None else ("", "")
-    vehicle_speed = table[:, len(_STEP_COLUMNS)]
+    vehicle_speed, person_speed = speeds[0], speeds[1]
     ex, ey, px, py = log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
     drac_step = m.drac_step
-    # Where the centre paths cross: needed for the PET's point without a contact and for the encounter
-    # type of a TTC or DRAC; most interactions within the radius have neither, and the search is costly.
-    needs_crossing = (
-        (not m.collision and math.isfinite(m.pet_s)) or m.ttc_step is not None or drac_step is not None
-    )
-    path_crossing = first_polyline_crossing(ex, ey, px, py) if needs_crossing else None
+    # Where the centre paths cross: the PET's point without a contact and the encounter type of a TTC or
+    # DRAC. The measures found it without a contact; with one it is sought only for a TTC or DRAC.
+    path_crossing = m.path_crossing
+    if m.collision and (m.ttc_step is not None or drac_step is not None):
+        path_crossing = first_polyline_crossing(ex, ey, px, py)
     # The encroachment point: where the two met for a contact, else where the centre paths cross.
     point: tuple[float, float] | None
     if m.collision:
@@ -350,8 +357,8 @@ def interaction_row(
         "person_edge": record.places[k][1],
         "lane_id": lane_id,
         "crossing_id": crossing_id,
-        "vehicle_speed_mps": float(table[k, len(_STEP_COLUMNS)]),
-        "person_speed_mps": float(table[k, len(_STEP_COLUMNS) + 1]),
+        "vehicle_speed_mps": float(vehicle_speed[k]),
+        "person_speed_mps": float(person_speed[k]),
         "min_clearance_m": m.min_clearance_m,
         "meeting": meeting_kind,
         "collision": m.collision and may_meet is not False,
