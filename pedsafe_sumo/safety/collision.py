@@ -9,6 +9,7 @@ counting a 0 km/h touch as an impact would give it an injury probability of 0.07
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +36,7 @@ class CollisionResult:
     contact_stationary: bool = False
 
 
-def clearance_m(arrays: dict[str, np.ndarray]) -> np.ndarray:
+def clearance_m(arrays: Mapping[str, np.ndarray]) -> np.ndarray:
     """Per-step signed clearance between the ego footprint and the pedestrian circle, m (<= 0: contact)."""
     return rectangle_circle_distance_m(
         arrays[steplog.EGO_X],

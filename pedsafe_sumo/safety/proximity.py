@@ -140,7 +140,7 @@ def clearance_steps_m(log: Any) -> np.ndarray:
     return _clearance(kinematic_arrays(log))
 
 
-def _clearance(a: dict[str, np.ndarray]) -> np.ndarray:
+def _clearance(a: Mapping[str, np.ndarray]) -> np.ndarray:
     return rectangle_circle_distance_m(
         a[steplog.EGO_X],
         a[steplog.EGO_Y],
@@ -165,7 +165,7 @@ def _window_s(position: np.ndarray, rate: np.ndarray, low: np.ndarray, high: np.
     return start, end
 
 
-def _interaction(a: dict[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
+def _interaction(a: Mapping[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
     cos_yaw, sin_yaw = np.cos(a[steplog.EGO_YAW]), np.sin(a[steplog.EGO_YAW])
     dx, dy = a[steplog.PED_X] - a[steplog.EGO_X], a[steplog.PED_Y] - a[steplog.EGO_Y]
     vx, vy = a[steplog.PED_VX], a[steplog.PED_VY]
@@ -187,7 +187,7 @@ def _interaction(a: dict[str, np.ndarray], clearance: np.ndarray, model: Proximi
     return np.isfinite(clearance) & ((start <= end) | (clearance <= 0.0))
 
 
-def _steps_in_scope(a: dict[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
+def _steps_in_scope(a: Mapping[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
     if model.scope == SCOPE_EPISODE:
         return np.isfinite(clearance)
     return _interaction(a, clearance, model)
