@@ -246,12 +246,16 @@ class InteractionTracker:
             for table in tables:  # raises the contract's message for the first log that breaks it
                 kinematic_arrays({name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)})
         steps = step_measures_of_rows(columns)
+        turns = _step_turns_rad(columns[steplog.EGO_YAW])
         for (key, record), start, stop in zip(self.closed, starts, stops):
             self.interactions += 1
             log = {name: values[start:stop] for name, values in columns.items()}
             speeds = stacked[len(_STEP_COLUMNS) :, start:stop]
             m = measures_of_steps(log, steps.part(start, stop))
-            self.emit(interaction_row(key[0], key[1], record, log, speeds, m, self.place, self.meeting))
+            row = interaction_row(
+                key[0], key[1], record, log, speeds, m, turns[start : stop - 1], self.place, self.meeting
+            )
+            self.emit(row)
         self.closed = []
 
 
@@ -271,14 +275,20 @@ def _nearest_step(x_m: np.ndarray, y_m: np.ndarray, point: tuple[float, float]) 
     return int(np.argmin(np.hypot(x_m - point[0], y_m - point[1])))
 
 
-def _turn_deg(yaw_rad: np.ndarray) -> float:
+def _step_turns_rad(yaw_rad: np.ndarray) -> np.ndarray:
+    """The heading's change from each step to the next, taken the short way round (crossing +-180 deg is
+    no turn), rad. Element by element: over the steps of many interactions stacked, each interaction's
+    turns are its own slice (one fewer than its steps)."""
+    return (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _turn_deg(step_turns_rad: np.ndarray) -> float:
     """How far the heading ranges over the steps, deg: the spread of the summed step-to-step turns
-    (each taken the short way round, so crossing +-180 deg is no turn)."""
-    if len(yaw_rad) < 2:
+    (`_step_turns_rad`), the heading at the first step counting as 0."""
+    if len(step_turns_rad) == 0:
         return 0.0
-    step = (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
-    heading = np.concatenate(([0.0], np.cumsum(step)))
-    return math.degrees(float(heading.max() - heading.min()))
+    heading = np.cumsum(step_turns_rad)
+    return math.degrees(float(max(0.0, float(heading.max())) - min(0.0, float(heading.min()))))
 
 
 def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -> int:
@@ -297,11 +307,13 @@ def interaction_row(
     log: dict[str, np.ndarray],
     speeds: np.ndarray,
     m: InteractionMeasures,
+    step_turns_rad: np.ndarray,
     place: PlaceLookup | None,
     meeting: MeetingLookup | None = None,
 ) -> dict[str, Any]:
     """The output row of one finished interaction (ROW_COLUMNS): its log (_STEP_COLUMNS), its vehicle's
-    and person's FCD speeds (two rows) and its measures (`measures_of_steps`)."""
+    and person's FCD speeds (two rows), its measures (`measures_of_steps`) and its vehicle's turns from
+    step to step (`_step_turns_rad`)."""
     t = log[steplog.TIME]
     k = m.min_clearance_step
     x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
@@ -331,7 +343,7 @@ def interaction_row(
     meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
     # On coarse FCD a turning vehicle extrapolated straight makes conflicts that are not there: flagged.
     period_s = float(t[-1] - t[0]) / (len(t) - 1) if len(t) > 1 else math.nan
-    turn_deg = _turn_deg(log[steplog.EGO_YAW])
+    turn_deg = _turn_deg(step_turns_rad)
     extrapolated = m.conflict or math.isfinite(m.ttc_s)
     uncertain = bool(not m.collision and extrapolated and period_s > COARSE_PERIOD_S and turn_deg > TURN_DEG)
     encounter_type = math.nan
