@@ -27,8 +27,8 @@ from pedsafe_sumo.conflicts.fcd import FcdStep
 from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import first_polyline_crossing
-from pedsafe_sumo.safety.interaction import interaction_measures
-from pedsafe_sumo.safety.surrogates import ttc_of_rows
+from pedsafe_sumo.safety.interaction import InteractionMeasures, measures_of_steps, step_measures_of_rows
+from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
 #: Columns of the per-step buffer of an open interaction, in the log contract's names.
@@ -202,17 +202,21 @@ class InteractionTracker:
                     persons.speed_mps[pj],
                 )
             )
-            # Each pair's row appended as its 8-byte doubles (no Python float per number).
-            raw, width = rows.tobytes(), 8 * _ROW_WIDTH
-            v_ids, p_ids, v_places, p_places = vehicles.ids, persons.ids, vehicles.places, persons.places
-            for k, (i, j) in enumerate(zip(vi.tolist(), pj.tolist())):
-                key = (v_ids[i], p_ids[j])
-                near.add(key)
-                record = self.open.get(key)
+            # Each pair's row appended as its 8-byte doubles (no Python float per number); the pairs'
+            # keys and places gathered by whole lists first (fewer Python steps per pair).
+            raw, width = memoryview(rows.tobytes()), 8 * _ROW_WIDTH
+            v_list, p_list = vi.tolist(), pj.tolist()
+            keys = list(zip(map(vehicles.ids.__getitem__, v_list), map(persons.ids.__getitem__, p_list)))
+            places = zip(map(vehicles.places.__getitem__, v_list), map(persons.places.__getitem__, p_list))
+            near = set(keys)
+            open_records, start = self.open, 0
+            for key, place, i, j in zip(keys, places, v_list, p_list):
+                record = open_records.get(key)
                 if record is None:
-                    record = self.open[key] = _Open(vehicles.types[i], persons.types[j])
-                record.values.frombytes(raw[k * width : (k + 1) * width])
-                record.places.append((v_places[i], p_places[j]))
+                    record = open_records[key] = _Open(vehicles.types[i], persons.types[j])
+                record.values.frombytes(raw[start : start + width])
+                record.places.append(place)
+                start += width
         for key in [k for k in self.open if k not in near]:
             self.closed.append((key, self.open.pop(key)))
         self._flush()
@@ -224,22 +228,34 @@ class InteractionTracker:
 
     def _flush(self) -> None:
         """Measure and emit the interactions that ended at this timestep, in the order they ended: the
-        per-step TTC of all of them in one call (`ttc_of_rows`: each row stands alone), whose fixed cost
-        (some 80 numpy operations) they share; the rest interaction by interaction. Nothing is held
+        per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them in one call
+        (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
+        operations) they share; the reductions and the row interaction by interaction. Nothing is held
         from one timestep to the next but the open interactions."""
         if not self.closed:
             return
         tables = [
             np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH) for _, record in self.closed
         ]
-        stacked = np.concatenate(tables)
-        ttc = ttc_of_rows({name: stacked[:, k] for k, name in enumerate(_STEP_COLUMNS)})
-        start = 0
-        for (key, record), table in zip(self.closed, tables):
-            stop = start + len(table)
+        stops = np.cumsum([len(table) for table in tables]).tolist()
+        starts = [0, *stops[:-1]]
+        # one contiguous array per column: the element-wise measures run faster on it than on strides
+        stacked = np.ascontiguousarray(np.concatenate(tables).T)
+        columns = {name: stacked[k] for k, name in enumerate(_STEP_COLUMNS)}
+        if not steplog.logs_pass(columns, starts):
+            for table in tables:  # raises the contract's message for the first log that breaks it
+                kinematic_arrays({name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)})
+        steps = step_measures_of_rows(columns)
+        turns = _step_turns_rad(columns[steplog.EGO_YAW])
+        for (key, record), start, stop in zip(self.closed, starts, stops):
             self.interactions += 1
-            self.emit(interaction_row(key[0], key[1], record, self.place, self.meeting, ttc[start:stop]))
-            start = stop
+            log = {name: values[start:stop] for name, values in columns.items()}
+            speeds = stacked[len(_STEP_COLUMNS) :, start:stop]
+            m = measures_of_steps(log, steps.part(start, stop))
+            row = interaction_row(
+                key[0], key[1], record, log, speeds, m, turns[start : stop - 1], self.place, self.meeting
+            )
+            self.emit(row)
         self.closed = []
 
 
@@ -259,14 +275,20 @@ def _nearest_step(x_m: np.ndarray, y_m: np.ndarray, point: tuple[float, float]) 
     return int(np.argmin(np.hypot(x_m - point[0], y_m - point[1])))
 
 
-def _turn_deg(yaw_rad: np.ndarray) -> float:
+def _step_turns_rad(yaw_rad: np.ndarray) -> np.ndarray:
+    """The heading's change from each step to the next, taken the short way round (crossing +-180 deg is
+    no turn), rad. Element by element: over the steps of many interactions stacked, each interaction's
+    turns are its own slice (one fewer than its steps)."""
+    return (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _turn_deg(step_turns_rad: np.ndarray) -> float:
     """How far the heading ranges over the steps, deg: the spread of the summed step-to-step turns
-    (each taken the short way round, so crossing +-180 deg is no turn)."""
-    if len(yaw_rad) < 2:
+    (`_step_turns_rad`), the heading at the first step counting as 0."""
+    if len(step_turns_rad) == 0:
         return 0.0
-    step = (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
-    heading = np.concatenate(([0.0], np.cumsum(step)))
-    return math.degrees(float(heading.max() - heading.min()))
+    heading = np.cumsum(step_turns_rad)
+    return math.degrees(float(max(0.0, float(heading.max())) - min(0.0, float(heading.min()))))
 
 
 def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -> int:
@@ -282,27 +304,28 @@ def interaction_row(
     vehicle_id: str,
     person_id: str,
     record: _Open,
+    log: dict[str, np.ndarray],
+    speeds: np.ndarray,
+    m: InteractionMeasures,
+    step_turns_rad: np.ndarray,
     place: PlaceLookup | None,
     meeting: MeetingLookup | None = None,
-    ttc_s: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """The output row of one finished interaction (ROW_COLUMNS); `ttc_s` its per-step TTC if known."""
-    table = np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH)
-    log = {name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)}
-    m = interaction_measures(log, ttc_s=ttc_s)
+    """The output row of one finished interaction (ROW_COLUMNS): its log (_STEP_COLUMNS), its vehicle's
+    and person's FCD speeds (two rows), its measures (`measures_of_steps`) and its vehicle's turns from
+    step to step (`_step_turns_rad`)."""
     t = log[steplog.TIME]
     k = m.min_clearance_step
     x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
     lane_id, crossing_id = place(x_m, y_m) if place is not None else ("", "")
-    vehicle_speed = table[:, len(_STEP_COLUMNS)]
+    vehicle_speed, person_speed = speeds[0], speeds[1]
     ex, ey, px, py = log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
     drac_step = m.drac_step
-    # Where the centre paths cross: needed for the PET's point without a contact and for the encounter
-    # type of a TTC or DRAC; most interactions within the radius have neither, and the search is costly.
-    needs_crossing = (
-        (not m.collision and math.isfinite(m.pet_s)) or m.ttc_step is not None or drac_step is not None
-    )
-    path_crossing = first_polyline_crossing(ex, ey, px, py) if needs_crossing else None
+    # Where the centre paths cross: the PET's point without a contact and the encounter type of a TTC or
+    # DRAC. The measures found it without a contact; with one it is sought only for a TTC or DRAC.
+    path_crossing = m.path_crossing
+    if m.collision and (m.ttc_step is not None or drac_step is not None):
+        path_crossing = first_polyline_crossing(ex, ey, px, py)
     # The encroachment point: where the two met for a contact, else where the centre paths cross.
     point: tuple[float, float] | None
     if m.collision:
@@ -320,7 +343,7 @@ def interaction_row(
     meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
     # On coarse FCD a turning vehicle extrapolated straight makes conflicts that are not there: flagged.
     period_s = float(t[-1] - t[0]) / (len(t) - 1) if len(t) > 1 else math.nan
-    turn_deg = _turn_deg(log[steplog.EGO_YAW])
+    turn_deg = _turn_deg(step_turns_rad)
     extrapolated = m.conflict or math.isfinite(m.ttc_s)
     uncertain = bool(not m.collision and extrapolated and period_s > COARSE_PERIOD_S and turn_deg > TURN_DEG)
     encounter_type = math.nan
@@ -350,8 +373,8 @@ def interaction_row(
         "person_edge": record.places[k][1],
         "lane_id": lane_id,
         "crossing_id": crossing_id,
-        "vehicle_speed_mps": float(table[k, len(_STEP_COLUMNS)]),
-        "person_speed_mps": float(table[k, len(_STEP_COLUMNS) + 1]),
+        "vehicle_speed_mps": float(vehicle_speed[k]),
+        "person_speed_mps": float(person_speed[k]),
         "min_clearance_m": m.min_clearance_m,
         "meeting": meeting_kind,
         "collision": m.collision and may_meet is not False,

@@ -75,17 +75,17 @@ class TableWriter(_Staged):
         self._csv_handle = None
         if self.kind == ".csv":
             self._csv_handle = open(self.tmp, "w", newline="", encoding="utf-8")
-            self._csv = csv.DictWriter(self._csv_handle, fieldnames=ROW_COLUMNS)
-            self._csv.writeheader()
+            self._csv = csv.writer(self._csv_handle)
+            self._csv.writerow(ROW_COLUMNS)
         else:
             self._parquet = pq.ParquetWriter(self.tmp, _schema())
 
     def write(self, row: dict[str, Any]) -> None:
         self.rows += 1
         if self._csv_handle is not None:
-            self._csv.writerow(
-                {k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
-            )
+            # the values in ROW_COLUMNS' order (a row holds exactly those keys), NaN as an empty field
+            values = [row[k] for k in ROW_COLUMNS]
+            self._csv.writerow(["" if isinstance(v, float) and math.isnan(v) else v for v in values])
             return
         self._buffer.append(row)
         if len(self._buffer) >= ROW_GROUP_ROWS:

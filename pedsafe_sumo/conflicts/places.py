@@ -61,6 +61,22 @@ class PlaceFinder:
                     for shape in shapes
                 ]
             )
+            # Every lane's segments, lane after lane: the distances of one lookup in a few numpy calls
+            # (a net with a lane of one point, which sumolib measures as INVALID_DISTANCE: lane by lane).
+            self._seg_lane: np.ndarray | None = None
+            if all(len(shape) >= 2 for shape in shapes):
+                self._segments(shapes)
+
+    def _segments(self, shapes: list) -> None:
+        starts, ends, owner = [], [], []
+        for k, shape in enumerate(shapes):
+            points = [(float(p[0]), float(p[1])) for p in shape]
+            starts += points[:-1]
+            ends += points[1:]
+            owner += [k] * (len(points) - 1)
+        self._seg_start = np.array(starts, dtype=float).reshape(-1, 2)
+        self._seg_end = np.array(ends, dtype=float).reshape(-1, 2)
+        self._seg_lane = np.array(owner, dtype=int)
 
     def _neighbouring_lanes(self, x_m: float, y_m: float) -> list:
         """(lane, distance) of the lanes closer than SEARCH_RADIUS_M, as sumolib's getNeighboringLanes
@@ -68,13 +84,25 @@ class PlaceFinder:
         if self._lanes is None:
             return self.net.getNeighboringLanes(x_m, y_m, SEARCH_RADIUS_M, includeJunctions=True)
         b = self._boxes
-        near = np.flatnonzero((b[:, 0] <= x_m) & (x_m <= b[:, 2]) & (b[:, 1] <= y_m) & (y_m <= b[:, 3]))
+        in_box = (b[:, 0] <= x_m) & (x_m <= b[:, 2]) & (b[:, 1] <= y_m) & (y_m <= b[:, 3])
         found = []
-        for k in near.tolist():
-            lane, shape = self._lanes[k]
-            d = sumolib.geomhelper.distancePointToPolygon((x_m, y_m), shape)
+        if self._seg_lane is None:
+            for k in np.flatnonzero(in_box).tolist():
+                lane, shape = self._lanes[k]
+                d = sumolib.geomhelper.distancePointToPolygon((x_m, y_m), shape)
+                if d < SEARCH_RADIUS_M:
+                    found.append((lane, d))
+            return found
+        segments = np.flatnonzero(in_box[self._seg_lane])
+        if segments.size == 0:
+            return found
+        distance = _point_to_segments_m(x_m, y_m, self._seg_start[segments], self._seg_end[segments])
+        lane_of = self._seg_lane[segments]
+        first = np.flatnonzero(np.r_[True, lane_of[1:] != lane_of[:-1]])
+        # a lane's distance: the least over its segments (sumolib's distancePointToPolygon)
+        for k, d in zip(lane_of[first].tolist(), np.minimum.reduceat(distance, first).tolist()):
             if d < SEARCH_RADIUS_M:
-                found.append((lane, d))
+                found.append((self._lanes[k][0], d))
         return found
 
     def __call__(self, x_m: float, y_m: float) -> tuple[str, str]:
@@ -97,3 +125,18 @@ class PlaceFinder:
         lane, _ = min(lanes, key=lambda pair: (pair[1], pair[0].getID()))
         edge = lane.getEdge()
         return lane.getID(), edge.getID() if edge.getFunction() == "crossing" else ""
+
+
+def _point_to_segments_m(x_m: float, y_m: float, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Distance from the point to each segment start[i] -> end[i], m: sumolib's
+    `geomhelper.distancePointToLine` (not perpendicular) operation for operation, so the same floats."""
+    sx, sy, ex, ey = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
+    length = np.sqrt((sx - ex) * (sx - ex) + (sy - ey) * (sy - ey))
+    u = (x_m - sx) * (ex - sx) + (y_m - sy) * (ey - sy)
+    outside = (length == 0.0) | (u < 0.0) | (u > length * length)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offset = np.where(outside, np.where(u < 0.0, 0.0, length), u / length)
+        fraction = offset / length
+    ix, iy = sx + fraction * (ex - sx), sy + fraction * (ey - sy)
+    to_start = np.sqrt((x_m - sx) * (x_m - sx) + (y_m - sy) * (y_m - sy))
+    return np.where(offset == 0.0, to_start, np.sqrt((x_m - ix) * (x_m - ix) + (y_m - iy) * (y_m - iy)))

@@ -9,6 +9,7 @@ counting a 0 km/h touch as an impact would give it an injury probability of 0.07
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +36,7 @@ class CollisionResult:
     contact_stationary: bool = False
 
 
-def clearance_m(arrays: dict[str, np.ndarray]) -> np.ndarray:
+def clearance_m(arrays: Mapping[str, np.ndarray]) -> np.ndarray:
     """Per-step signed clearance between the ego footprint and the pedestrian circle, m (<= 0: contact)."""
     return rectangle_circle_distance_m(
         arrays[steplog.EGO_X],
@@ -57,16 +58,17 @@ def detect_collision(log: Any) -> CollisionResult:
     before it make `contact_stationary` true (and without a later moving contact there is no collision).
     """
     arrays = steplog.as_arrays(log)
-    contact = clearance_m(arrays) <= 0.0
-    moving = arrays[steplog.EGO_SPEED] >= STATIONARY_SPEED_MPS
+    return collision_of_steps(clearance_m(arrays), arrays[steplog.EGO_SPEED], arrays[steplog.TIME])
+
+
+def collision_of_steps(
+    clearance: np.ndarray, ego_speed_mps: np.ndarray, time_s: np.ndarray
+) -> CollisionResult:
+    """`detect_collision` from a log's per-step clearance (`clearance_m`), ego speed and time."""
+    contact = clearance <= 0.0
+    moving = ego_speed_mps >= STATIONARY_SPEED_MPS
     strikes = np.flatnonzero(contact & moving)
     if strikes.size == 0:
         return CollisionResult(False, None, math.nan, math.nan, bool(contact.any()))
     k = int(strikes[0])
-    return CollisionResult(
-        True,
-        k,
-        float(arrays[steplog.TIME][k]),
-        float(arrays[steplog.EGO_SPEED][k]),
-        bool(contact[:k].any()),
-    )
+    return CollisionResult(True, k, float(time_s[k]), float(ego_speed_mps[k]), bool(contact[:k].any()))

@@ -18,6 +18,7 @@ An episode has a conflict when any step does. Table I counts a conflict only wit
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -114,7 +115,12 @@ def conflict_steps(log: pd.DataFrame, model: ConflictModel = AMINI_2022) -> pd.D
 def _conflict_columns(log: Any, model: ConflictModel) -> dict[str, np.ndarray]:
     """The columns of `conflict_steps` as arrays (no DataFrame: `episode_conflict` runs once per
     interaction, and building a DataFrame cost more than the measures themselves)."""
-    a = steplog.as_arrays(log)
+    return conflict_columns_of_rows(steplog.as_arrays(log), model)
+
+
+def conflict_columns_of_rows(a: Mapping[str, np.ndarray], model: ConflictModel) -> dict[str, np.ndarray]:
+    """The columns of `conflict_steps` of rows of columns in the log contract's names, checked by the
+    caller. Each row stands alone (no time order): the rows of many logs can be stacked into one call."""
     evx, evy = steplog.ego_velocity_mps(a)
     dpx, dpy = a[steplog.PED_X] - a[steplog.EGO_X], a[steplog.PED_Y] - a[steplog.EGO_Y]
     md, tmd = minimum_distance(dpx, dpy, a[steplog.PED_VX] - evx, a[steplog.PED_VY] - evy)
@@ -167,7 +173,13 @@ def episode_conflict(
     highest p (the first on a tie) is reported, so `conflict == (conflict_probability >= threshold)`.
     Steps after `last_step` (e.g. after the first contact) are ignored. All NaN without an eligible step.
     """
-    columns = _conflict_columns(log, model)
+    return conflict_of_columns(_conflict_columns(log, model), model, last_step)
+
+
+def conflict_of_columns(
+    columns: Mapping[str, np.ndarray], model: ConflictModel = AMINI_2022, last_step: int | None = None
+) -> ConflictResult:
+    """`episode_conflict` from a log's `conflict_columns_of_rows`."""
     stop = None if last_step is None else last_step + 1
     candidate, cs = columns["candidate"][:stop], columns["cs_mps"][:stop]
     eligible = candidate & (cs > model.min_conflicting_speed_mps)

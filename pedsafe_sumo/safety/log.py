@@ -34,7 +34,7 @@ Every numeric value must be finite: the engine logs a step only when both road u
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -127,6 +127,26 @@ def as_arrays(log: Any) -> dict[str, np.ndarray]:
     if np.any(np.diff(out[TIME]) <= 0):
         raise LogError(f"log column {TIME} must strictly increase")
     return out
+
+
+def logs_pass(columns: Mapping[str, np.ndarray], starts: Sequence[int]) -> bool:
+    """Whether `as_arrays` accepts every one of many logs stacked one after another in `columns` (the
+    numeric columns only; log k's rows begin at `starts[k]`, the first at 0), each with its flags all
+    False: one pass over all their rows instead of one call per log."""
+    n = len(columns[TIME])
+    if any(len(columns[name]) != n for name in NUMERIC_COLUMNS) or len(starts) == 0 or starts[0] != 0:
+        return False
+    if n == 0 or len(set(starts)) != len(starts) or max(starts) >= n:
+        return False  # an empty log among them
+    if not all(np.all(np.isfinite(np.asarray(columns[name], dtype=float))) for name in NUMERIC_COLUMNS):
+        return False
+    if np.any(columns[EGO_SPEED] < 0) or np.any(columns[PED_RADIUS] < 0):
+        return False
+    if np.any(columns[EGO_LENGTH] <= 0) or np.any(columns[EGO_WIDTH] <= 0):
+        return False
+    rising = np.diff(columns[TIME]) > 0
+    rising[np.asarray(starts[1:], dtype=int) - 1] = True  # from one log to the next: no order
+    return bool(rising.all())
 
 
 def sensor_columns(arrays: Mapping[str, np.ndarray]) -> list[str]:

@@ -140,7 +140,7 @@ def clearance_steps_m(log: Any) -> np.ndarray:
     return _clearance(kinematic_arrays(log))
 
 
-def _clearance(a: dict[str, np.ndarray]) -> np.ndarray:
+def _clearance(a: Mapping[str, np.ndarray]) -> np.ndarray:
     return rectangle_circle_distance_m(
         a[steplog.EGO_X],
         a[steplog.EGO_Y],
@@ -165,7 +165,7 @@ def _window_s(position: np.ndarray, rate: np.ndarray, low: np.ndarray, high: np.
     return start, end
 
 
-def _interaction(a: dict[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
+def _interaction(a: Mapping[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
     cos_yaw, sin_yaw = np.cos(a[steplog.EGO_YAW]), np.sin(a[steplog.EGO_YAW])
     dx, dy = a[steplog.PED_X] - a[steplog.EGO_X], a[steplog.PED_Y] - a[steplog.EGO_Y]
     vx, vy = a[steplog.PED_VX], a[steplog.PED_VY]
@@ -187,7 +187,7 @@ def _interaction(a: dict[str, np.ndarray], clearance: np.ndarray, model: Proximi
     return np.isfinite(clearance) & ((start <= end) | (clearance <= 0.0))
 
 
-def _steps_in_scope(a: dict[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
+def _steps_in_scope(a: Mapping[str, np.ndarray], clearance: np.ndarray, model: ProximityModel) -> np.ndarray:
     if model.scope == SCOPE_EPISODE:
         return np.isfinite(clearance)
     return _interaction(a, clearance, model)
@@ -271,13 +271,26 @@ def episode_proximity(
     steps in the model's scope (`interaction_steps`). `ttc_s`: the log's `ttc_steps_s`, when the caller
     has it already (the DRAC rests on it)."""
     a = kinematic_arrays(log)
-    stop = len(a[steplog.TIME]) if last_step is None else last_step + 1
     clearance = _clearance(a)
-    in_scope = _steps_in_scope(a, clearance, model)[:stop]
-    clearance = clearance[:stop]
-    speed = a[steplog.EGO_SPEED][:stop]
     ttc = ttc_steps_s(a) if ttc_s is None else ttc_s
-    drac = drac_from_ttc_mps2(a[steplog.EGO_SPEED], ttc)[:stop]
+    drac = drac_from_ttc_mps2(a[steplog.EGO_SPEED], ttc)
+    return proximity_of_steps(a, clearance, drac, model, last_step)
+
+
+def proximity_of_steps(
+    a: Mapping[str, np.ndarray],
+    clearance_m: np.ndarray,
+    drac_mps2: np.ndarray,
+    model: ProximityModel,
+    last_step: int | None = None,
+) -> ProximityResult:
+    """`episode_proximity` from a log's checked columns and its per-step clearance (`clearance_steps_m`)
+    and DRAC (`drac_from_ttc_mps2`), computed by the caller (e.g. over the rows of many logs at once)."""
+    stop = len(a[steplog.TIME]) if last_step is None else last_step + 1
+    in_scope = _steps_in_scope(a, clearance_m, model)[:stop]
+    clearance = clearance_m[:stop]
+    speed = a[steplog.EGO_SPEED][:stop]
+    drac = drac_mps2[:stop]
     drac_defined = np.isfinite(drac).any()
     drac_max = float(np.nanmax(drac)) if drac_defined else math.nan
     drac_step = int(np.nanargmax(drac)) if drac_defined else None

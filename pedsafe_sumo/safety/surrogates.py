@@ -99,6 +99,12 @@ def pet_s(log: pd.DataFrame) -> float:
     """Post-encroachment time at the first crossing of the logged centre paths, s (NaN if none)."""
     a = steplog.as_arrays(log)
     point = first_polyline_crossing(a[steplog.EGO_X], a[steplog.EGO_Y], a[steplog.PED_X], a[steplog.PED_Y])
+    return pet_at_crossing_s(a, point)
+
+
+def pet_at_crossing_s(a: Mapping[str, np.ndarray], point: tuple[float, float] | None) -> float:
+    """`pet_s` of a log's checked columns, given the first crossing of its centre paths
+    (`first_polyline_crossing`, None if they never cross) found by the caller."""
     if point is None:
         return math.nan
     px, py = point

@@ -8,6 +8,7 @@ import tracemalloc
 import warnings
 
 import numpy as np
+import sumolib
 
 from pedsafe_sumo.conflicts.places import SEARCH_RADIUS_M, PlaceFinder
 from pedsafe_sumo.network.sites import get_site
@@ -56,3 +57,25 @@ def test_lookups_keep_no_memory():
         tracemalloc.stop()
     # sumolib's fallback keeps 135 lane references (1 kB) per call: 2 MB over 2,000 calls.
     assert grown < 100_000, grown
+
+
+def test_lane_distances_are_sumolibs_own_floats():
+    """The lookup measures all segments of the near lanes at once; each lane's distance must be the very
+    float sumolib's distancePointToPolygon gives (the nearest lane is chosen on it, ties by id)."""
+    finder = PlaceFinder(NET)
+    rng = np.random.default_rng(11)
+    lanes = [lane for edge in finder.net.getEdges(withInternal=True) for lane in edge.getLanes()]
+    compared = 0
+    for _ in range(200):
+        lane = lanes[rng.integers(len(lanes))]
+        x, y = lane.getShape(True)[0][:2]
+        x, y = x + rng.uniform(-6, 6), y + rng.uniform(-6, 6)
+        expected = {}
+        for other in lanes:
+            d = sumolib.geomhelper.distancePointToPolygon((x, y), other.getShape(True))
+            if d < SEARCH_RADIUS_M:
+                expected[other.getID()] = d
+        found = {lane.getID(): d for lane, d in finder._neighbouring_lanes(x, y)}
+        assert found == expected
+        compared += len(found)
+    assert compared > 200
