@@ -12,7 +12,7 @@ import argparse
 import math
 from typing import NoReturn
 
-from pedsafe_sumo.settings import UsageError
+from pedsafe_sumo.usage import UsageError
 
 #: Default bound on the episodes one command starts (each condition of a pair counts): a million episodes
 #: take about a day on 2 cores at 10-12 episodes/s (BENCHMARKS.md, "A whole protocol"), twelve times the

@@ -13,10 +13,7 @@ from typing import Any
 from pedsafe_sumo.params import load_params, with_overrides
 from pedsafe_sumo.perception.world import load_roadside_units
 from pedsafe_sumo.scenarios.specs import ScenarioSpec, get_scenario
-
-
-class UsageError(ValueError):
-    """Bad command-line input; the CLIs print it as one line and exit with 2."""
+from pedsafe_sumo.usage import UsageError
 
 
 def parse_set(pairs: list[str]) -> tuple[dict[str, str], dict[str, Any]]:

@@ -30,7 +30,7 @@ from pedsafe_sumo.conflicts.sizes import SizeBook, TypesError
 from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.network.sites import SiteError, resolve_site
 from pedsafe_sumo.params import ParameterError, load_params
-from pedsafe_sumo.settings import UsageError
+from pedsafe_sumo.usage import UsageError
 
 #: Every vehicle-pedestrian pair within the radius is followed step by step: a kilometre is beyond any
 #: sight line at a junction, and a larger radius only makes every pair of the file an interaction.

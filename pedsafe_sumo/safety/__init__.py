@@ -7,6 +7,8 @@ contract (columns, frames, units) is in `pedsafe_sumo.safety.log`; formulas and 
 docs/safety_indexes.md.
 """
 
+from typing import Any
+
 from pedsafe_sumo.safety.collision import CollisionResult, detect_collision
 from pedsafe_sumo.safety.conflict import (
     AMINI_2022,
@@ -36,15 +38,27 @@ from pedsafe_sumo.safety.proximity import (
     episode_proximity,
     min_clearance_m,
 )
-from pedsafe_sumo.safety.stats import (
-    mcnemar_exact,
-    paired_counts,
-    paired_mcnemar,
-    table_one,
-    wilson_interval,
-    zero_inflated_mean_interval,
-)
 from pedsafe_sumo.safety.surrogates import min_ttc_s, pet_s, ttc_steps_s
+
+#: The statistics of many episodes (`stats`), loaded when first asked for: they need scipy.stats, which
+#: the per-episode indexes and the conflicts tool do not (a third of that tool's start-up).
+_STATS_NAMES = (
+    "mcnemar_exact",
+    "paired_counts",
+    "paired_mcnemar",
+    "table_one",
+    "wilson_interval",
+    "zero_inflated_mean_interval",
+)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _STATS_NAMES:
+        from pedsafe_sumo.safety import stats  # on first use: see _STATS_NAMES
+
+        return getattr(stats, name)
+    raise AttributeError(f"module 'pedsafe_sumo.safety' has no attribute '{name}'")
+
 
 __all__ = [
     "AMINI_2022",
