@@ -9,8 +9,10 @@ the ego's half width plus a margin on each side. Docs: docs/baseline_stack.md.
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections import OrderedDict, deque
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -91,8 +93,20 @@ class PathArrays:
         side[side == 0] = 1.0
         return s, side * off[rows, best]
 
+    @cached_property
+    def _starts_m(self) -> list[float]:
+        # Python floats: a lookup per predicted position, where numpy's per-call overhead dominates.
+        return self.start_m.tolist()
+
+    @cached_property
+    def _normals(self) -> list[tuple[float, float]]:
+        return [(-uy, ux) for ux, uy in zip(self.ux.tolist(), self.uy.tolist())]
+
     def segment_at(self, s_m: float) -> int:
-        return int(np.clip(np.searchsorted(self.start_m, s_m, side="right") - 1, 0, len(self.start_m) - 1))
+        """The segment that `s_m` falls on: the last one starting at or before it (the first before the
+        path's start)."""
+        starts = self._starts_m
+        return min(max(bisect_right(starts, s_m) - 1, 0), len(starts) - 1)
 
     def point_at(self, s_m: float) -> tuple[float, float]:
         k = self.segment_at(s_m)
@@ -101,8 +115,7 @@ class PathArrays:
 
     def normal_at(self, s_m: float) -> tuple[float, float]:
         """Unit vector square to the path (to its left) at distance `s_m`."""
-        k = self.segment_at(s_m)
-        return -float(self.uy[k]), float(self.ux[k])
+        return self._normals[self.segment_at(s_m)]
 
     def ego_position_m(self, ego: EgoState) -> tuple[float, int]:
         """The ego centre's distance along the path (projected onto its current lane) and the segment
@@ -149,18 +162,21 @@ def path_threat(
     else:
         times = times[:1]
         px, py = np.array([track.x_m]), np.array([track.y_m])
-    s, lat = path.project(px, py, first)
+    s_arr, lat_arr = path.project(px, py, first)
+    # Python floats from here: the same values, without numpy's per-element overhead.
+    s, lat = s_arr.tolist(), lat_arr.tolist()
+    moving = track.moving
     front_offset = ego.length_m / 2
-    for i, t in enumerate(times):
+    for i, t in enumerate(times.tolist()):
         ped_lon = s[i] - ego_s_m
         if ped_lon - ego.speed_mps * t < -front_offset:  # the ego has passed that point by then
             continue
         gap = ped_lon - front_offset
         if gap < -ego.length_m:
             continue
-        widen = sigma_factor * track.position_sigma_m(path.normal_at(s[i]), float(t)) if track.moving else 0.0
+        widen = sigma_factor * track.position_sigma_m(path.normal_at(s[i]), t) if moving else 0.0
         if abs(lat[i]) <= half_width_m + widen:
-            return Threat(track.ped_id, max(gap, 0.0), float(t), "path")
+            return Threat(track.ped_id, max(gap, 0.0), t, "path")
     return None
 
 

@@ -27,12 +27,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from functools import lru_cache
 
 import numpy as np
 
 from pedsafe_sumo.control.agent import PerceivedPedestrian
 from pedsafe_sumo.control.kalman_tracker import (
     ACCEL_PSD_M2PS3,
+    EYE4,
     INITIAL_SPEED_SIGMA_MPS,
     ONBOARD_POSITION_SIGMA_M,
     TRACK_MEMORY_S,
@@ -40,6 +42,7 @@ from pedsafe_sumo.control.kalman_tracker import (
     V2I_POSITION_SIGMA_M,
     V2I_SOURCE,
     Track,
+    frozen,
     transition,
 )
 
@@ -59,10 +62,12 @@ STANDING_POSITION_PSD_M2PS = 1e-4
 _WALK, _STAND = 0, 1
 
 
+@lru_cache(maxsize=64)
 def _standing_transition(dt_s: float, psd_m2ps: float) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of the standing model over `dt_s` (read-only: kept per step length)."""
     f = np.diag([1.0, 1.0, 0.0, 0.0])
     q = np.diag([psd_m2ps * dt_s, psd_m2ps * dt_s, 0.0, 0.0])
-    return f, q
+    return frozen(f), frozen(q)
 
 
 def _log_gaussian(innovation: np.ndarray, s: np.ndarray) -> float:
@@ -119,6 +124,11 @@ class ImmTracker:
         self.onboard_sigma_m = onboard_sigma_m
         self.v2i_latency_s = v2i_latency_s
         self._tracks: dict[str, _ImmTrack] = {}
+        # Kept between steps (read-only): Markov matrices by step length; measurement matrices by
+        # (V2I position, model) and noise covariances by whether the position is V2I's.
+        self._switching: dict[float, np.ndarray] = {}
+        self._h: dict[tuple[bool, int], np.ndarray] = {}
+        self._r: dict[bool, np.ndarray] = {}
 
     def switching(self, dt_s: float) -> np.ndarray:
         """Markov matrix [from, to] over `dt_s`: leave walking with dt / mean walk, standing with dt /
@@ -127,8 +137,26 @@ class ImmTracker:
         stand_to_walk = min(dt_s / self.mean_stand_s, 1.0)
         return np.array([[1.0 - walk_to_stand, walk_to_stand], [stand_to_walk, 1.0 - stand_to_walk]])
 
+    def _switching_kept(self, dt_s: float) -> np.ndarray:
+        switch = self._switching.get(dt_s)
+        if switch is None:
+            if len(self._switching) >= 64:
+                self._switching.clear()
+            switch = self._switching[dt_s] = frozen(self.switching(dt_s))
+        return switch
+
+    def _measurement(self, v2i: bool, model: int) -> np.ndarray:
+        h = self._h.get((v2i, model))
+        if h is None:
+            h = np.zeros((2, 4))
+            h[0, 0] = h[1, 1] = 1.0
+            if v2i and model == _WALK:
+                h[0, 2] = h[1, 3] = -self.v2i_latency_s
+            h = self._h[(v2i, model)] = frozen(h)
+        return h
+
     def _predict(self, track: _ImmTrack, dt_s: float) -> None:
-        switch = self.switching(dt_s)
+        switch = self._switching_kept(dt_s)
         predicted = switch.T @ track.probs  # c_j = sum_i p_ij mu_i
         models = (transition(dt_s), _standing_transition(dt_s, self.standing_psd))
         states, covs = [], []
@@ -146,19 +174,18 @@ class ImmTracker:
 
     def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> None:
         v2i = source == V2I_SOURCE
-        sigma = self.v2i_sigma_m if v2i else self.onboard_sigma_m
-        r = sigma * sigma * np.eye(2)
+        r = self._r.get(v2i)
+        if r is None:
+            sigma = self.v2i_sigma_m if v2i else self.onboard_sigma_m
+            r = self._r[v2i] = frozen(sigma * sigma * np.eye(2))
         log_likelihoods = np.zeros(2)
         for j in (_WALK, _STAND):
-            h = np.zeros((2, 4))
-            h[0, 0] = h[1, 1] = 1.0
-            if v2i and j == _WALK:
-                h[0, 2] = h[1, 3] = -self.v2i_latency_s
+            h = self._measurement(v2i, j)
             x, p = track.states[j], track.covs[j]
             s = h @ p @ h.T + r
             innovation = z - h @ x
             gain = p @ h.T @ np.linalg.inv(s)
-            i_kh = np.eye(4) - gain @ h
+            i_kh = EYE4 - gain @ h
             track.states[j] = x + gain @ innovation
             track.covs[j] = i_kh @ p @ i_kh.T + gain @ r @ gain.T
             log_likelihoods[j] = _log_gaussian(innovation, s)

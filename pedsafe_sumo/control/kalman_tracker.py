@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -87,10 +88,11 @@ class Track:
     #: 0 from the constant-velocity tracker, which has no such model.
     standing_probability: float = 0.0
 
-    @property
+    @cached_property
     def moving(self) -> bool:
         """Whether the velocity differs from zero at 99.9 % (Mahalanobis distance under its covariance),
-        the standing model, where there is one, being the less probable."""
+        the standing model, where there is one, being the less probable. Worked out once per track
+        and step: the planner asks it at every predicted position."""
         if self.standing_probability > STANDING_PROBABILITY_THRESHOLD:
             return False
         v = np.array([self.vx_mps, self.vy_mps])
@@ -107,7 +109,24 @@ class Track:
         return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
 
 
+def frozen(array: np.ndarray) -> np.ndarray:
+    """`array`, read-only: a matrix kept and shared between the steps and tracks."""
+    array.setflags(write=False)
+    return array
+
+
+#: The identity of the state space, shared (read-only).
+EYE4 = frozen(np.eye(4))
+
+
+@lru_cache(maxsize=64)
 def transition(dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q / q over `dt_s` (read-only: kept per step length, which repeats every step)."""
+    f, q = _transition(dt_s)
+    return frozen(f), frozen(q)
+
+
+def _transition(dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     f = np.eye(4)
     f[0, 2] = f[1, 3] = dt_s
     q = np.zeros((4, 4))
@@ -135,14 +154,17 @@ class KalmanTracker:
         self.v2i_latency_s = v2i_latency_s
         # ped id -> [state (4,), covariance (4, 4), time of the state, time of the last measurement]
         self._tracks: dict[str, list] = {}
+        self._h: dict[bool, np.ndarray] = {}  # measurement matrix by whether the position is V2I's
 
     def _measurement(self, source: str) -> tuple[np.ndarray, float]:
-        h = np.zeros((2, 4))
-        h[0, 0] = h[1, 1] = 1.0
-        if source == V2I_SOURCE:
-            h[0, 2] = h[1, 3] = -self.v2i_latency_s
-            return h, self.v2i_sigma_m
-        return h, self.onboard_sigma_m
+        v2i = source == V2I_SOURCE
+        if v2i not in self._h:
+            h = np.zeros((2, 4))
+            h[0, 0] = h[1, 1] = 1.0
+            if v2i:
+                h[0, 2] = h[1, 3] = -self.v2i_latency_s
+            self._h[v2i] = frozen(h)
+        return self._h[v2i], self.v2i_sigma_m if v2i else self.onboard_sigma_m
 
     def update(self, pedestrians: Iterable[PerceivedPedestrian], time_s: float) -> list[Track]:
         """Predict every track to `time_s`, fold in this step's positions, drop tracks unseen for longer
@@ -168,7 +190,7 @@ class KalmanTracker:
             s = h @ p @ h.T + r
             gain = p @ h.T @ np.linalg.inv(s)
             x = x + gain @ (z - h @ x)
-            i_kh = np.eye(4) - gain @ h
+            i_kh = EYE4 - gain @ h
             p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form: stays symmetric and positive
             track[0], track[1], track[3] = x, p, time_s
         for ped_id in [k for k, t in self._tracks.items() if time_s - t[3] > self.memory_s + 1e-9]:
