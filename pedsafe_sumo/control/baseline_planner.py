@@ -75,23 +75,39 @@ class PathArrays:
         segments from `first` on: the nearest one, the first extended backwards without end and the
         last forwards."""
         px, py = np.atleast_1d(px), np.atleast_1d(py)
-        k = slice(first, None)
-        rx = px[:, None] - self.x[None, k]
-        ry = py[:, None] - self.y[None, k]
-        along = rx * self.ux[None, k] + ry * self.uy[None, k]
-        low = np.zeros_like(self.length_m[k])
-        high = self.length_m[k].copy()
-        low[0] = -np.inf
-        high[-1] = np.inf
-        clipped = np.clip(along, low[None, :], high[None, :])
-        lat = -rx * self.uy[None, k] + ry * self.ux[None, k]
+        x, y, ux, uy, neg_uy, low, high, start = self._from_segment(first)
+        rx = px[:, None] - x
+        ry = py[:, None] - y
+        along = rx * ux + ry * uy
+        clipped = np.minimum(np.maximum(along, low), high)
+        lat = rx * neg_uy + ry * ux  # -rx * uy + ry * ux: the same products, negation being exact
         off = np.hypot(along - clipped, lat)
         best = np.argmin(off, axis=1)
         rows = np.arange(px.shape[0])
-        s = self.start_m[k][best] + clipped[rows, best]
+        s = start[best] + clipped[rows, best]
         side = np.sign(lat[rows, best])
         side[side == 0] = 1.0
         return s, side * off[rows, best]
+
+    @cached_property
+    def _segments_from(self) -> dict[int, tuple[np.ndarray, ...]]:
+        return {}
+
+    def _from_segment(self, first: int) -> tuple[np.ndarray, ...]:
+        """The segments from `first` on as rows to broadcast against points (x, y, ux, uy, -uy), the
+        bounds of the distance along each (the first open backwards, the last forwards), their starts:
+        kept per `first`, the projection running several times a step."""
+        kept = self._segments_from.get(first)
+        if kept is None:
+            k = slice(first, None)
+            low = np.zeros_like(self.length_m[k])
+            high = self.length_m[k].copy()
+            low[0] = -np.inf
+            high[-1] = np.inf
+            rows = (self.x[k], self.y[k], self.ux[k], self.uy[k], -self.uy[k], low, high)
+            kept = (*(row[None, :] for row in rows), self.start_m[k])
+            self._segments_from[first] = kept
+        return kept
 
     @cached_property
     def _starts_m(self) -> list[float]:
