@@ -12,7 +12,7 @@ import math
 from bisect import bisect_right
 from collections import OrderedDict, deque
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
@@ -110,6 +110,11 @@ class PathArrays:
         return kept
 
     @cached_property
+    def _segment_floats(self) -> tuple[list[float], ...]:
+        # Python floats for the per-step loops over segments: the same values, without numpy scalars.
+        return tuple(a.tolist() for a in (self.x, self.y, self.ux, self.uy, self.start_m, self.length_m))
+
+    @cached_property
     def _starts_m(self) -> list[float]:
         # Python floats: a lookup per predicted position, where numpy's per-call overhead dominates.
         return self.start_m.tolist()
@@ -137,14 +142,13 @@ class PathArrays:
         """The ego centre's distance along the path (projected onto its current lane) and the segment
         it is on."""
         best = None
+        x, y, ux, uy, start, length = self._segment_floats
         for k in range(self.current_count):
-            along = (ego.x_m - self.x[k]) * self.ux[k] + (ego.y_m - self.y[k]) * self.uy[k]
-            along = min(along, self.length_m[k]) if k == 0 else min(max(along, 0.0), self.length_m[k])
-            off = math.hypot(
-                ego.x_m - self.x[k] - along * self.ux[k], ego.y_m - self.y[k] - along * self.uy[k]
-            )
+            along = (ego.x_m - x[k]) * ux[k] + (ego.y_m - y[k]) * uy[k]
+            along = min(along, length[k]) if k == 0 else min(max(along, 0.0), length[k])
+            off = math.hypot(ego.x_m - x[k] - along * ux[k], ego.y_m - y[k] - along * uy[k])
             if best is None or off < best[0] - 1e-9:
-                best = (off, k, float(self.start_m[k] + along))
+                best = (off, k, float(start[k] + along))
         assert best is not None
         return best[2], best[1]
 
@@ -155,6 +159,14 @@ class Threat:
     gap_m: float  # from the ego's front to where it must stop short of (the pedestrian, a crosswalk) [m]
     time_s: float  # when the pedestrian is first inside the corridor [s from now]; 0 for a crosswalk
     reason: str  # "path" (predicted into the corridor) or "crosswalk" (yielding at a crosswalk)
+
+
+@lru_cache(maxsize=16)
+def _sample_times(horizon_s: float, sample_s: float) -> np.ndarray:
+    """The prediction's times [s from now] (read-only: the same every step)."""
+    times = np.arange(0.0, horizon_s + 1e-9, sample_s)
+    times.setflags(write=False)
+    return times
 
 
 def path_threat(
@@ -172,7 +184,7 @@ def path_threat(
     ego (at its current speed) has passed. The prediction moves the track at its velocity when that is
     told apart from standing (Track.moving), and widens the corridor by `sigma_factor` standard
     deviations of the predicted position square to the path; a standing track stays where it is."""
-    times = np.arange(0.0, horizon_s + 1e-9, sample_s)
+    times = _sample_times(horizon_s, sample_s)
     if track.moving:
         px, py = track.x_m + track.vx_mps * times, track.y_m + track.vy_mps * times
     else:

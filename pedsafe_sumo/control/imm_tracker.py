@@ -96,8 +96,8 @@ class _ImmTrack:
         x = self.probs[0] * self.states[0] + self.probs[1] * self.states[1]
         p = np.zeros((4, 4))
         for j in (_WALK, _STAND):
-            d = self.states[j] - x
-            p += self.probs[j] * (self.covs[j] + np.outer(d, d))
+            d = self.states[j] - x  # d d^T below: the products np.outer forms, without its wrapper
+            p += self.probs[j] * (self.covs[j] + d[:, None] * d[None, :])
         return x, p
 
 
@@ -166,7 +166,7 @@ class ImmTracker:
             p0 = np.zeros((4, 4))
             for i in (_WALK, _STAND):
                 d = track.states[i] - x0
-                p0 += weights[i] * (track.covs[i] + np.outer(d, d))
+                p0 += weights[i] * (track.covs[i] + d[:, None] * d[None, :])
             scale = self.accel_psd if j == _WALK else 1.0
             states.append(f @ x0)
             covs.append(f @ p0 @ f.T + scale * q)

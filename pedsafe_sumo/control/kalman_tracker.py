@@ -155,6 +155,7 @@ class KalmanTracker:
         # ped id -> [state (4,), covariance (4, 4), time of the state, time of the last measurement]
         self._tracks: dict[str, list] = {}
         self._h: dict[bool, np.ndarray] = {}  # measurement matrix by whether the position is V2I's
+        self._r: dict[float, np.ndarray] = {}  # measurement noise covariance by standard deviation
 
     def _measurement(self, source: str) -> tuple[np.ndarray, float]:
         v2i = source == V2I_SOURCE
@@ -179,7 +180,9 @@ class KalmanTracker:
         for ped in pedestrians:
             z = np.array([ped.x_m, ped.y_m])
             h, sigma = self._measurement(ped.source)
-            r = sigma * sigma * np.eye(2)
+            r = self._r.get(sigma)
+            if r is None:
+                r = self._r[sigma] = frozen(sigma * sigma * np.eye(2))
             track = self._tracks.get(ped.ped_id)
             if track is None:
                 state = np.array([ped.x_m, ped.y_m, 0.0, 0.0])
