@@ -195,14 +195,22 @@ def path_threat(
     s, lat = s_arr.tolist(), lat_arr.tolist()
     moving = track.moving
     front_offset = ego.length_m / 2
-    for i, t in enumerate(times.tolist()):
+    times_list = times.tolist()
+    sigmas: list[float] | None = None
+    sigmas_from = 0
+    for i, t in enumerate(times_list):
         ped_lon = s[i] - ego_s_m
         if ped_lon - ego.speed_mps * t < -front_offset:  # the ego has passed that point by then
             continue
         gap = ped_lon - front_offset
         if gap < -ego.length_m:
             continue
-        widen = sigma_factor * track.position_sigma_m(path.normal_at(s[i]), t) if moving else 0.0
+        widen = 0.0
+        if moving:
+            if sigmas is None:  # the standard deviations from this sample on, worked out together
+                sigmas_from = i
+                sigmas = track.position_sigmas_m([path.normal_at(v) for v in s[i:]], times_list[i:])
+            widen = sigma_factor * sigmas[i - sigmas_from]
         if abs(lat[i]) <= half_width_m + widen:
             return Threat(track.ped_id, max(gap, 0.0), t, "path")
     return None
