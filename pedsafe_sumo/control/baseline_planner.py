@@ -138,6 +138,11 @@ class PathArrays:
         """Unit vector square to the path (to its left) at distance `s_m`."""
         return self._normals[self.segment_at(s_m)]
 
+    def normals_at(self, s_m: np.ndarray) -> np.ndarray:
+        """normal_at for several distances: rows (nx, ny)."""
+        k = np.clip(np.searchsorted(self.start_m, s_m, side="right") - 1, 0, len(self.start_m) - 1)
+        return np.column_stack((-self.uy[k], self.ux[k]))
+
     def ego_position_m(self, ego: EgoState) -> tuple[float, int]:
         """The ego centre's distance along the path (projected onto its current lane) and the segment
         it is on."""
@@ -209,7 +214,7 @@ def path_threat(
         if moving:
             if sigmas is None:  # the standard deviations from this sample on, worked out together
                 sigmas_from = i
-                sigmas = track.position_sigmas_m([path.normal_at(v) for v in s[i:]], times_list[i:])
+                sigmas = track.position_sigmas_m(path.normals_at(s_arr[i:]), times_list[i:])
             widen = sigma_factor * sigmas[i - sigmas_from]
         if abs(lat[i]) <= half_width_m + widen:
             return Threat(track.ped_id, max(gap, 0.0), t, "path")

@@ -25,6 +25,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -108,10 +109,11 @@ class Track:
         h = np.array([ux, uy, ux * after_s, uy * after_s])
         return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
 
-    def position_sigmas_m(self, directions: list[tuple[float, float]], after_s: list[float]) -> list[float]:
+    def position_sigmas_m(self, directions: Any, after_s: list[float]) -> list[float]:
         """position_sigma_m for several (direction, time) pairs at once, bit for bit: h C h' as a stack
         of 1 x 4 rows, so that numpy makes for each row the calls (vector-matrix, then dot) it makes for
-        one (a 4 x 4 matrix product per row is rounded otherwise; tests/control pin the equality)."""
+        one (a 4 x 4 matrix product per row is rounded otherwise; tests/control pin the equality).
+        `directions`: unit vectors, as (x, y) pairs or the rows of an n x 2 array."""
         d = np.array(directions, dtype=float).reshape(-1, 2)
         t = np.array(after_s, dtype=float)
         h = np.empty((len(t), 1, 4))

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 
+from pedsafe_sumo.control.baseline_planner import PathArrays
 from pedsafe_sumo.control.kalman_tracker import Track
 
 
@@ -31,3 +32,20 @@ def test_equal_bit_for_bit_to_one_at_a_time():
         batch = track.position_sigmas_m(directions, times)
         one_by_one = [track.position_sigma_m(d, t) for d, t in zip(directions, times)]
         assert batch == one_by_one
+
+
+def test_path_normals_at_several_distances_equal_one_at_a_time():
+    # Three segments: east from 0 m, north from 10 m, west from 15 m (unit vectors by hand).
+    path = PathArrays(
+        np.array([0.0, 10.0, 10.0]),
+        np.array([0.0, 0.0, 5.0]),
+        np.array([1.0, 0.0, -1.0]),
+        np.array([0.0, 1.0, 0.0]),
+        np.array([0.0, 10.0, 15.0]),
+        np.array([10.0, 5.0, 20.0]),
+        1,
+    )
+    distances = np.array([-3.0, 0.0, 9.99, 10.0, 14.0, 15.0, 40.0])
+    expected = [(0.0, 1.0)] * 3 + [(-1.0, 0.0)] * 2 + [(0.0, -1.0)] * 2  # left of east, north, west
+    assert [tuple(row) for row in path.normals_at(distances).tolist()] == expected
+    assert [path.normal_at(float(s)) for s in distances] == expected
