@@ -38,6 +38,7 @@ from pedsafe_sumo.control.baseline_planner import (
     crosswalk_spans,
     distance_to_polygon_m,
     path_threat,
+    speed_under_signal,
     straight_path,
 )
 from pedsafe_sumo.control.imm_tracker import ImmTracker
@@ -229,18 +230,9 @@ class BaselineStack(Agent):
         if signal.reason:
             info["signal"] = signal.reason
         if target > signal.speed_cap_mps:
-            if speed > signal.speed_cap_mps:
-                # Above the stopping profile (a yellow decided late, or the last decimetre): the
-                # deceleration that stops in the room left, the hardest once it is nearly gone.
-                room_m = signal.room_m
-                decel = (
-                    min(self.max_decel_mps2, speed * speed / (2 * room_m))
-                    if room_m > 0.1
-                    else self.max_decel_mps2
-                )
-                target = min(target, max(0.0, speed - decel * dt))
-            else:
-                target = signal.speed_cap_mps
+            target = speed_under_signal(
+                target, speed, signal.speed_cap_mps, signal.room_m, self.max_decel_mps2, dt
+            )
             info.setdefault("brake_for", "signal")
         info["braking"] = bool(target < speed - 1e-9)
         return Command(float(target), info)

@@ -303,6 +303,21 @@ class SignalDemand:
     room_m: float = math.inf
 
 
+def speed_under_signal(
+    target_mps: float, speed_mps: float, cap_mps: float, room_m: float, max_decel_mps2: float, dt_s: float
+) -> float:
+    """The speed to command once a signal's speed cap is applied to `target_mps`: the cap itself when
+    the ego is at or below it; above it (a red seen late, a yellow decided late, the last decimetre),
+    the deceleration that stops in the `room_m` left, at most `max_decel_mps2`, the hardest once the
+    room is nearly gone."""
+    if target_mps <= cap_mps:
+        return target_mps
+    if speed_mps <= cap_mps:
+        return cap_mps
+    decel = min(max_decel_mps2, speed_mps * speed_mps / (2 * room_m)) if room_m > 0.1 else max_decel_mps2
+    return min(target_mps, max(0.0, speed_mps - decel * dt_s))
+
+
 class SignalPolicy:
     """Stop for red; at a yellow's onset, stop when the ego can do so before the stop line at the
     comfortable deceleration, else go on through (the decision holds until the signal shows green

@@ -65,6 +65,7 @@ from pedsafe_sumo.control.baseline_planner import (
     PathArrays,
     crosswalk_spans,
     distance_to_polygon_m,
+    speed_under_signal,
 )
 from pedsafe_sumo.control.reference import (
     CLEAR_HOLD_S,
@@ -408,18 +409,9 @@ class HumanDriverStack(Agent):
         if signal.reason:
             info["signal"] = signal.reason
         if target > signal.speed_cap_mps:
-            if speed > signal.speed_cap_mps:
-                # Above the comfortable stopping profile (a red seen late): the deceleration that stops
-                # in the room left, at most the driver's hardest.
-                room_m = signal.room_m
-                decel = (
-                    min(self.max_decel_mps2, speed * speed / (2 * room_m))
-                    if room_m > 0.1
-                    else self.max_decel_mps2
-                )
-                target = min(target, max(0.0, speed - decel * dt))
-            else:
-                target = signal.speed_cap_mps
+            target = speed_under_signal(
+                target, speed, signal.speed_cap_mps, signal.room_m, self.max_decel_mps2, dt
+            )
             info.setdefault("brake_for", "signal")
         info["braking"] = bool(reacted or target < speed - 1e-9)
         return Command(float(target), info)
