@@ -19,12 +19,17 @@ with the network, and prints one line per vehicle-person contact of either side:
   the box with its four corners cut off, overlaps the person only where the person is on a walking
   area or never: SUMO tests a person on a junction against that polygon); or `unexplained`.
 
+For a collision both report, `sumo_polygon_time_s` is the first FCD step of the tool's contact at which
+SUMO's car polygon overlaps the person off a walking area (SUMO reports that step when its FCD is
+written at every step).
+
 SUMO's test, in the order of one simulation step (src/microsim/MSNet.cpp, MSNet::simulationStep): the
 pedestrian model moves the persons (a begin-of-step event), the vehicles move, then each internal lane
 with junction checks tests every vehicle on it (also the back of one that left it) against the persons
 on the crossings among its link's foe lanes and on the link's one or two foe walking areas
 (MSLane::detectCollisions, MSLane::detectPedestrianJunctionCollision): first the vehicle's bounding box
-(MSVehicle::getBoundingBox: front bumper to the back along the lane, the vehicle's width), then its
+(MSVehicle::getBoundingBox: from the front bumper to its back position on the lane, the vehicle's
+width), then its
 polygon (MSVehicle::getBoundingPoly: for the passenger shapes, 0.6 of the width at both bumpers and the
 full width from 0.1 to 0.9 of the length), against the person's box (MSTransportable::getBoundingBox).
 The FCD of that step is written after all of this, with the positions SUMO tested.
