@@ -15,10 +15,24 @@ with the network, and prints one line per vehicle-person contact of either side:
   `walkingarea` (the person is on a walking area or a sidewalk, which the tool labels a geometry
   artefact); `person box` (the tool's circle of half the person's width touches the car, SUMO's person
   box never does: SUMO draws a person as a box `length` long behind its position, 0.215 m for its
-  default pedestrian); `leaves crossing` (SUMO's boxes overlap while the person is on the crossing at one
-  FCD step at most, and at the next the person is on a walking area, where SUMO does not look for this
-  vehicle's victims; on the public scenario of docs/conflicts.md SUMO reports no such contact); or
-  `unexplained`.
+  default pedestrian); `cut corner` (SUMO's bounding boxes overlap, but SUMO's passenger-car polygon,
+  the box with its four corners cut off, overlaps the person only where the person is on a walking
+  area or never: SUMO tests a person on a junction against that polygon); or `unexplained`.
+
+For a collision both report, `sumo_polygon_time_s` is the first FCD step of the tool's contact at which
+SUMO's car polygon overlaps the person off a walking area (SUMO reports that step when its FCD is
+written at every step).
+
+SUMO's test, in the order of one simulation step (src/microsim/MSNet.cpp, MSNet::simulationStep): the
+pedestrian model moves the persons (a begin-of-step event), the vehicles move, then each internal lane
+with junction checks tests every vehicle on it (also the back of one that left it) against the persons
+on the crossings among its link's foe lanes and on the link's one or two foe walking areas
+(MSLane::detectCollisions, MSLane::detectPedestrianJunctionCollision): first the vehicle's bounding box
+(MSVehicle::getBoundingBox: from the front bumper to its back position on the lane, the vehicle's
+width), then its
+polygon (MSVehicle::getBoundingPoly: for the passenger shapes, 0.6 of the width at both bumpers and the
+full width from 0.1 to 0.9 of the length), against the person's box (MSTransportable::getBoundingBox).
+The FCD of that step is written after all of this, with the positions SUMO tested.
 
 The table is also written to DIR/witness.csv. Bad input: one line, exit 2.
 """
@@ -53,6 +67,10 @@ SUMO_PERSON_LENGTH_M = 0.215
 SUMO_PERSON_WIDTH_M = 0.48
 SUMO_CAR_LENGTH_M = 5.0
 SUMO_CAR_WIDTH_M = 1.8
+#: SUMO's polygon of a passenger car (MSVehicle::getBoundingPoly, the passenger shapes of the default
+#: car): half-widths, as fractions of the width, at distances behind the front bumper, as fractions of the
+#: length; the other side mirrors it.
+SUMO_CAR_POLYGON = ((0.0, 0.3), (0.1, 0.5), (0.9, 0.5), (1.0, 0.3))
 #: Where the tool judges a contact not to be a meeting SUMO allows (docs/conflicts.md, "Where vehicles
 #: and persons meet").
 APART_MEETINGS = ("walkingarea", "sidewalk")
@@ -130,22 +148,49 @@ def sumo_person_collisions(path: Path, begin_s: float = -math.inf) -> list[SumoC
     return sorted(first.values(), key=lambda c: (c.time_s, c.vehicle_id, c.person_id))
 
 
+def _axes(yaw_rad: float) -> tuple[float, float, float, float]:
+    """The heading (cos, sin) and the normal to its left."""
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    return c, s, -s, c
+
+
 def _box(x_m: float, y_m: float, yaw_rad: float, back_m: float, length_m: float, width_m: float):
     """A rectangle from (x, y) back `length_m` along the heading, `width_m` wide (SUMO's bounding box)."""
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    c, s, nx, ny = _axes(yaw_rad)
     fx, fy = x_m - back_m * c, y_m - back_m * s
     bx, by = fx - length_m * c, fy - length_m * s
-    nx, ny = -s * 0.5 * width_m, c * 0.5 * width_m
+    nx, ny = nx * 0.5 * width_m, ny * 0.5 * width_m
     return shapely.Polygon([(fx + nx, fy + ny), (bx + nx, by + ny), (bx - nx, by - ny), (fx - nx, fy - ny)])
 
 
-def sumo_box_overlaps(
+def _car_polygon(x_m: float, y_m: float, yaw_rad: float, length_m: float, width_m: float):
+    """SUMO's polygon of a passenger car with its front bumper at (x, y): SUMO_CAR_POLYGON."""
+    c, s, nx, ny = _axes(yaw_rad)
+    side = [(x_m - d * length_m * c, y_m - d * length_m * s, h * width_m) for d, h in SUMO_CAR_POLYGON]
+    left = [(px + h * nx, py + h * ny) for px, py, h in side]
+    right = [(px - h * nx, py - h * ny) for px, py, h in reversed(side)]
+    return shapely.Polygon(left + right)
+
+
+@dataclass(frozen=True)
+class ShapeOverlap:
+    """One FCD step of a (vehicle, person) pair: the person's edge and whether SUMO's shapes overlap."""
+
+    time_s: float
+    person_edge: str
+    box: bool
+    polygon: bool
+
+
+def sumo_shape_overlaps(
     fcd: Path, pairs: dict[tuple[str, str], tuple[float, float]]
-) -> dict[tuple[str, str], list[str]]:
-    """For each (vehicle, person) pair, the person's FCD edge at every FCD step within [begin, end] at
-    which SUMO's two bounding boxes overlap: the car from its front bumper back along its heading, the
-    person from its position back along its angle (MSTransportable::getBoundingBox)."""
-    found: dict[tuple[str, str], list[str]] = {pair: [] for pair in pairs}
+) -> dict[tuple[str, str], list[ShapeOverlap]]:
+    """For each (vehicle, person) pair, every FCD step within [begin, end] at which both are in the FCD:
+    whether the person's box (from its position back along its angle, MSTransportable::getBoundingBox)
+    overlaps the car's bounding box (from its front bumper back along its heading) and the car's polygon
+    (SUMO_CAR_POLYGON). The FCD angle of a vehicle is the direction from its back to its front, so the
+    box is SUMO's own."""
+    found: dict[tuple[str, str], list[ShapeOverlap]] = {pair: [] for pair in pairs}
     if not pairs:
         return found
     begin_s = min(b for b, _ in pairs.values())
@@ -161,51 +206,57 @@ def sumo_box_overlaps(
             if not (b <= step.time_s <= e) or v not in vehicles or p not in persons:
                 continue
             i, j = vehicles[v], persons[p]
-            car = _box(
-                step.vehicles.x_m[i], step.vehicles.y_m[i],
-                float(sumo_angle_to_yaw_rad(step.vehicles.angle_deg[i])),
-                0.0, SUMO_CAR_LENGTH_M, SUMO_CAR_WIDTH_M,
-            )  # fmt: skip
+            x_m, y_m = step.vehicles.x_m[i], step.vehicles.y_m[i]
+            yaw_rad = float(sumo_angle_to_yaw_rad(step.vehicles.angle_deg[i]))
             person = _box(
                 step.persons.x_m[j], step.persons.y_m[j],
                 float(sumo_angle_to_yaw_rad(step.persons.angle_deg[j])),
                 0.0, SUMO_PERSON_LENGTH_M, SUMO_PERSON_WIDTH_M,
             )  # fmt: skip
-            if car.intersects(person):
-                found[(v, p)].append(step.persons.places[j])
+            box = _box(x_m, y_m, yaw_rad, 0.0, SUMO_CAR_LENGTH_M, SUMO_CAR_WIDTH_M).intersects(person)
+            polygon = box and _car_polygon(x_m, y_m, yaw_rad, SUMO_CAR_LENGTH_M, SUMO_CAR_WIDTH_M).intersects(
+                person
+            )
+            found[(v, p)].append(ShapeOverlap(step.time_s, step.persons.places[j], box, polygon))
     return found
 
 
-def crossing_edges(net: Path) -> set[str]:
-    """The ids of the network's pedestrian crossings."""
+def walkingarea_edges(net: Path) -> set[str]:
+    """The ids of the network's walking areas."""
     return {
         e.getID()
         for e in read_net(str(net), withInternal=True, withPedestrianConnections=True).getEdges(
             withInternal=True
         )
-        if e.getFunction() == "crossing"
+        if e.getFunction() == "walkingarea"
     }
 
 
-def tool_only_reason(meeting: str, overlap_edges: list[str], crossings: set[str]) -> str:
+def first_polygon_contact_s(overlaps: list[ShapeOverlap], walkingareas: set[str]) -> float:
+    """The first FCD time at which SUMO's car polygon overlaps the person off a walking area (NaN if none)."""
+    return next((o.time_s for o in overlaps if o.polygon and o.person_edge not in walkingareas), math.nan)
+
+
+def tool_only_reason(meeting: str, overlaps: list[ShapeOverlap], walkingareas: set[str]) -> str:
     """Why SUMO does not report a contact of the tool (module docstring)."""
     if meeting in APART_MEETINGS:
         return "walkingarea"
-    if not overlap_edges:
+    if not any(o.box for o in overlaps):
         return "person box"
-    on_crossing = [edge for edge in overlap_edges if edge in crossings]
-    if len(on_crossing) <= 1 and len(on_crossing) < len(overlap_edges):
-        return "leaves crossing"
+    if math.isnan(first_polygon_contact_s(overlaps, walkingareas)):
+        return "cut corner"
     return "unexplained"
 
 
 def compare(
-    table: pd.DataFrame, sumo: list[SumoCollision], fcd: Path, fcd_period_s: float, crossings: set[str]
+    table: pd.DataFrame, sumo: list[SumoCollision], fcd: Path, fcd_period_s: float, walkingareas: set[str]
 ) -> list[dict]:
-    """One line per contact of either side (module docstring)."""
+    """One line per contact of either side (module docstring). `sumo_polygon_time_s`: for a collision
+    both report, the first FCD step of the tool's contact at which SUMO's car polygon overlaps the
+    person off a walking area (SUMO's own test, rebuilt from the FCD)."""
     contacts = table[table["collision"] | table["geometry_artefact"]]
     lines: list[dict] = []
-    matched: set[int] = set()
+    matched: dict[int, dict] = {}
     for hit in sumo:
         rows = contacts[
             (contacts["vehicle_id"] == hit.vehicle_id)
@@ -226,30 +277,42 @@ def compare(
             )
             continue
         row = rows.iloc[0]
-        matched.add(int(rows.index[0]))
         label = "collision" if row["collision"] else "geometry artefact"
-        lines.append(
-            {
-                **line,
-                "side": "both",
-                "tool_time_s": float(row["contact_time_s"]),
-                "tool_label": label,
-                "tool_meeting": row["meeting"],
-                "tool_clearance_m": float(row["min_clearance_m"]),
-                "reason": "",
-            }
-        )
-    unmatched = contacts[~contacts.index.isin(matched)]
-    overlaps = sumo_box_overlaps(
-        fcd,
-        {
-            (r.vehicle_id, r.person_id): (float(r.contact_time_s), float(r.end_s))
-            for r in unmatched.itertuples()
-            if r.meeting not in APART_MEETINGS
-        },
-    )
+        both = {
+            **line,
+            "side": "both",
+            "tool_time_s": float(row["contact_time_s"]),
+            "tool_label": label,
+            "tool_meeting": row["meeting"],
+            "tool_clearance_m": float(row["min_clearance_m"]),
+            "reason": "",
+        }
+        matched[int(rows.index[0])] = both
+        lines.append(both)
+    unmatched = contacts[~contacts.index.isin(list(matched))]
+    windows: dict[tuple[str, str], tuple[float, float]] = {}
+    for index, r in contacts.iterrows():
+        if index in matched or r["meeting"] not in APART_MEETINGS:
+            pair = (r["vehicle_id"], r["person_id"])
+            begin_s = float(r["begin_s"] if index in matched else r["contact_time_s"])
+            old = windows.get(pair, (begin_s, float(r["end_s"])))
+            windows[pair] = (min(old[0], begin_s), max(old[1], float(r["end_s"])))
+    overlaps = sumo_shape_overlaps(fcd, windows)
+    for index, both in matched.items():
+        row = contacts.loc[index]
+        pair_overlaps = [
+            o
+            for o in overlaps.get((both["vehicle_id"], both["person_id"]), [])
+            if float(row["begin_s"]) <= o.time_s <= float(row["end_s"])
+        ]
+        both["sumo_polygon_time_s"] = first_polygon_contact_s(pair_overlaps, walkingareas)
     for r in unmatched.itertuples():
-        reason = tool_only_reason(r.meeting, overlaps.get((r.vehicle_id, r.person_id), []), crossings)
+        pair_overlaps = [
+            o
+            for o in overlaps.get((r.vehicle_id, r.person_id), [])
+            if float(r.contact_time_s) <= o.time_s <= float(r.end_s)
+        ]
+        reason = tool_only_reason(r.meeting, pair_overlaps, walkingareas)
         lines.append(
             {
                 "vehicle_id": r.vehicle_id,
@@ -277,6 +340,7 @@ COLUMNS = (
     "sumo_time_s",
     "sumo_type",
     "sumo_lane",
+    "sumo_polygon_time_s",
     "tool_time_s",
     "tool_label",
     "tool_meeting",
@@ -307,7 +371,7 @@ def witness(
     for column in ("contact_time_s", "min_clearance_m"):
         table[column] = pd.to_numeric(table[column].replace("", np.nan))
     sumo = sumo_person_collisions(collision_file, fcd_begin_s)
-    lines = compare(table, sumo, fcd, fcd_period_s, crossing_edges(net))
+    lines = compare(table, sumo, fcd, fcd_period_s, walkingarea_edges(net))
     with open(out / "witness.csv", "w", newline="", encoding="utf-8") as handle:
         writer = csv.DictWriter(handle, fieldnames=COLUMNS, extrasaction="ignore")
         writer.writeheader()
@@ -344,7 +408,8 @@ def main(argv: list[str] | None = None) -> int:
     for line in lines:
         print(
             f"{line['side']:9}  {line['vehicle_id']:>6} {line['person_id']:>6}  "
-            f"sumo {line['sumo_time_s']:7.2f} {line['sumo_type']:10}  tool {line['tool_time_s']:7.2f} "
+            f"sumo {line['sumo_time_s']:7.2f} {line['sumo_type']:10} "
+            f"polygon {line.get('sumo_polygon_time_s', math.nan):7.2f}  tool {line['tool_time_s']:7.2f} "
             f"{line['tool_label']:17} {line.get('tool_meeting', ''):11} {line.get('reason', '')}"
         )
     return 0

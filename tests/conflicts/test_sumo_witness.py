@@ -3,15 +3,17 @@
 
 SUMO runs at 0.1 s with junction collision checks; the tool reads SUMO's FCD. Every vehicle-person
 collision SUMO reports must be a contact of the same pair in the tool's table, and every contact of the
-tool that SUMO does not report must have one of the stated reasons (walkingarea, person box, leaves
-crossing), never `unexplained`. SUMO's collisions are the witness: the test asserts nothing the tool
-itself produced beyond matching them.
+tool that SUMO does not report must have one of the stated reasons (walkingarea, person box, cut
+corner), never `unexplained`. SUMO's collisions and its FCD are the witness: the test asserts nothing the
+tool itself produced beyond matching them.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import math
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -27,12 +29,12 @@ sys.modules[_spec.name] = witness  # its dataclasses look their module up by nam
 _spec.loader.exec_module(witness)
 
 ROUTES = [DATA / "vehicles.rou.xml", DATA / "pedestrians.rou.xml"]
-REASONS = ("walkingarea", "person box", "leaves crossing")
+REASONS = ("walkingarea", "person box", "cut corner")
 
 
-def run(tmp_path: Path, fcd_period_s: float, fcd_begin_s: float) -> list[dict]:
+def run(tmp_path: Path, fcd_period_s: float, fcd_begin_s: float, end_s: float = 400.0) -> list[dict]:
     return witness.witness(
-        DATA / "block.net.xml", ROUTES, tmp_path, end_s=400.0, step_s=0.1,
+        DATA / "block.net.xml", ROUTES, tmp_path, end_s=end_s, step_s=0.1,
         fcd_period_s=fcd_period_s, fcd_begin_s=fcd_begin_s,
     )  # fmt: skip
 
@@ -51,6 +53,11 @@ def test_every_sumo_collision_is_a_collision_of_the_tool_on_fcd_every_step(tmp_p
         # collision: the person is on the crossing.
         assert line["tool_label"] == "collision", line
         assert line["sumo_time_s"] - 0.25 <= line["tool_time_s"] <= line["sumo_time_s"] + 1e-9, line
+        # SUMO reports the very step at which its car polygon first overlaps the person's box, rebuilt
+        # from its FCD (312/72 at 364.7 s; 213/76 at 398.8 s, one step after the boxes first overlap).
+        assert line["sumo_polygon_time_s"] == pytest.approx(line["sumo_time_s"]), line
+    # Every other contact of the tool in the window is on a walking area, where SUMO does not look.
+    assert {line["reason"] for line in lines if line["side"] == "tool only"} <= {"walkingarea"}
     unexplained = [line for line in lines if line["side"] == "tool only" and line["reason"] not in REASONS]
     assert not unexplained, unexplained
 
@@ -89,19 +96,79 @@ def test_sumo_person_collisions_keep_vehicle_person_types_and_the_first_of_each_
     assert [c.person_id for c in witness.sumo_person_collisions(path, begin_s=6.5)] == ["q", "r"]
 
 
+def _fcd_row(fcd: Path, time_s: float, tag: str, ident: str) -> dict[str, str]:
+    for step in ET.parse(fcd).getroot().iter("timestep"):
+        if abs(float(step.get("time", "nan")) - time_s) < 1e-6:
+            return next(dict(e.attrib) for e in step.iter(tag) if e.get("id") == ident)
+    raise AssertionError(f"no {tag} {ident} at {time_s}")
+
+
+def _person_corners_in_car_frame(car: dict[str, str], person: dict[str, str]) -> list[tuple[float, float]]:
+    """The person box's corners as (metres behind the car's front bumper, metres to the car's left),
+    from SUMO's FCD: angles are degrees clockwise from north, a box reaches back from its position."""
+
+    def unit(angle_deg: str) -> tuple[float, float]:
+        a = math.radians(float(angle_deg))
+        return math.sin(a), math.cos(a)
+
+    (hx, hy), (px, py) = unit(car["angle"]), unit(person["angle"])
+    x, y = float(person["x"]), float(person["y"])
+    corners = []
+    for back_m in (0.0, 0.215):
+        for side_m in (0.24, -0.24):
+            cx = x - back_m * px - side_m * py
+            cy = y - back_m * py + side_m * px
+            dx, dy = cx - float(car["x"]), cy - float(car["y"])
+            corners.append((-(dx * hx + dy * hy), -dx * hy + dy * hx))
+    return corners
+
+
+@pytest.mark.slow
+def test_a_contact_inside_the_corner_sumo_cuts_off_its_car_is_not_reported(tmp_path):
+    lines = run(tmp_path, fcd_period_s=0.1, fcd_begin_s=90.0, end_s=100.0)
+    assert not witness.sumo_person_collisions(tmp_path / "collisions.xml", 90.0)
+    on_crossing = [line for line in lines if line.get("tool_meeting", "") not in witness.APART_MEETINGS]
+    assert [(x["side"], x["vehicle_id"], x["person_id"], x["reason"]) for x in on_crossing] == [
+        ("tool only", "17", "14", "cut corner")
+    ]
+    fcd = tmp_path / "fcd.xml"
+    # 96.8 s: the person still on the crossing, the only step there at which SUMO's boxes overlap. The
+    # corners of the person's box inside the car's 5 m x 1.8 m box all lie in its front corner that SUMO
+    # cuts off (from 0.54 m beside the axis at the bumper to 0.9 m at 0.5 m behind it).
+    car, person = _fcd_row(fcd, 96.8, "vehicle", "17"), _fcd_row(fcd, 96.8, "person", "14")
+    assert person["edge"] == ":A2_c0"
+    inside = [(b, s) for b, s in _person_corners_in_car_frame(car, person) if 0 <= b <= 5 and abs(s) <= 0.9]
+    assert inside
+    assert all(b < 0.5 and abs(s) > 0.54 + 0.36 * b / 0.5 for b, s in inside), inside
+    # 96.9 s: the person is on the walking area, which is no foe of the car's link.
+    assert _fcd_row(fcd, 96.9, "person", "14")["edge"] == ":A2_w1"
+
+
+def _steps(*steps: tuple[str, bool, bool]) -> list:
+    return [witness.ShapeOverlap(96.0 + 0.1 * k, e, box, poly) for k, (e, box, poly) in enumerate(steps)]
+
+
 @pytest.mark.parametrize(
-    ("meeting", "overlap_edges", "reason"),
+    ("meeting", "overlaps", "reason"),
     [
-        ("walkingarea", [":J_c0"], "walkingarea"),
+        ("walkingarea", _steps((":J_c0", True, True)), "walkingarea"),
         ("sidewalk", [], "walkingarea"),
         ("crossing", [], "person box"),
-        ("crossing", [":J_c0", ":J_w1", ":J_w1"], "leaves crossing"),
-        ("crossing", [":J_c0", ":J_c0", ":J_w1"], "unexplained"),
-        ("crossing", [":J_c0"], "unexplained"),
+        ("crossing", _steps((":J_c0", False, False)), "person box"),
+        ("crossing", _steps((":J_c0", True, False), (":J_w1", True, True)), "cut corner"),
+        ("crossing", _steps((":J_c0", True, False)), "cut corner"),
+        ("crossing", _steps((":J_c0", True, False), (":J_c0", True, True)), "unexplained"),
+        ("shared", _steps(("E_0", True, True)), "unexplained"),
     ],
 )
-def test_reasons_follow_their_definitions(meeting, overlap_edges, reason):
-    assert witness.tool_only_reason(meeting, overlap_edges, {":J_c0"}) == reason
+def test_reasons_follow_their_definitions(meeting, overlaps, reason):
+    assert witness.tool_only_reason(meeting, overlaps, {":J_w1"}) == reason
+
+
+def test_the_polygon_is_first_polygon_contact_off_a_walking_area():
+    steps = _steps((":J_c0", True, False), (":J_w1", True, True), (":J_c0", True, True))
+    assert witness.first_polygon_contact_s(steps, {":J_w1"}) == pytest.approx(96.2)
+    assert math.isnan(witness.first_polygon_contact_s(steps[:2], {":J_w1"}))
 
 
 def test_the_boxes_are_sumos(tmp_path):
@@ -113,3 +180,15 @@ def test_the_boxes_are_sumos(tmp_path):
     assert person.bounds == pytest.approx((10.06, -0.215, 10.54, 0.0))
     assert not car.intersects(person)
     assert car.intersects(witness._box(10.2, 0.0, 1.5707963267948966, 0.0, 0.215, 0.48))
+
+
+def test_the_car_polygon_is_sumos_passenger_shape():
+    # Facing east, front bumper at (10, 0), 5 m x 1.8 m: 0.3 * 1.8 = 0.54 m beside the axis at both
+    # bumpers, 0.9 m from 0.1 * 5 = 0.5 m behind the front to 0.5 m before the back.
+    polygon = witness._car_polygon(10.0, 0.0, 0.0, 5.0, 1.8)
+    vertices = {(round(x, 9), round(y, 9)) for x, y in polygon.exterior.coords}
+    assert vertices == {
+        (10.0, 0.54), (9.5, 0.9), (5.5, 0.9), (5.0, 0.54),
+        (10.0, -0.54), (9.5, -0.9), (5.5, -0.9), (5.0, -0.54),
+    }  # fmt: skip
+    assert polygon.area == pytest.approx(5 * 1.8 - 4 * 0.5 * 0.5 * 0.36)
