@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from pedsafe_sumo.conflicts.fcd import FcdStep
 from pedsafe_sumo.conflicts.sizes import SizeBook
@@ -30,6 +29,29 @@ from pedsafe_sumo.safety.geometry import first_polyline_crossing
 from pedsafe_sumo.safety.interaction import InteractionMeasures, measures_of_steps, step_measures_of_rows
 from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
+
+#: Up to this many vehicle-person distances in a timestep, all are computed at once (a few MB of numpy);
+#: above it a k-d tree finds the near pairs (scipy.spatial, 0.2 s to import: most files never need it).
+BRUTE_FORCE_PAIRS = 4_000_000
+
+
+def pairs_within(
+    vx_m: np.ndarray, vy_m: np.ndarray, px_m: np.ndarray, py_m: np.ndarray, radius_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(vehicle indices, person indices) of the pairs whose distance is at most `radius_m`, ordered by
+    vehicle and then by person."""
+    if len(vx_m) * len(px_m) > BRUTE_FORCE_PAIRS:
+        from scipy.spatial import cKDTree  # here, not at the top: see BRUTE_FORCE_PAIRS
+
+        tree = cKDTree(np.column_stack((px_m, py_m)))
+        hits = tree.query_ball_point(np.column_stack((vx_m, vy_m)), radius_m, return_sorted=True)
+        vi = np.repeat(np.arange(len(vx_m)), [len(h) for h in hits])
+        return vi, np.fromiter((j for h in hits for j in h), dtype=np.intp, count=len(vi))
+    dx = vx_m[:, None] - px_m[None, :]
+    dy = vy_m[:, None] - py_m[None, :]
+    vi, pj = np.nonzero(dx * dx + dy * dy <= radius_m * radius_m)
+    return vi, pj
+
 
 #: Columns of the per-step buffer of an open interaction, in the log contract's names.
 _STEP_COLUMNS = (
@@ -180,10 +202,7 @@ class InteractionTracker:
             radius = self.sizes.person_radii(persons.types, persons.length_m, persons.width_m)
             p_yaw = sumo_angle_to_yaw_rad(persons.angle_deg)
             pvx, pvy = persons.speed_mps * np.cos(p_yaw), persons.speed_mps * np.sin(p_yaw)
-            tree = cKDTree(np.column_stack((persons.x_m, persons.y_m)))
-            hits = tree.query_ball_point(np.column_stack((cx, cy)), self.radius_m)
-            vi = np.repeat(np.arange(len(vehicles)), [len(h) for h in hits])
-            pj = np.fromiter((j for h in hits for j in h), dtype=int, count=len(vi))
+            vi, pj = pairs_within(cx, cy, persons.x_m, persons.y_m, self.radius_m)
             rows = np.column_stack(
                 (
                     np.full(len(vi), step.time_s),

@@ -10,11 +10,8 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree
-
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from pedsafe_sumo.conflicts.interactions import (
     BOOL_COLUMNS,
@@ -23,12 +20,25 @@ from pedsafe_sumo.conflicts.interactions import (
     STRING_COLUMNS,
 )
 
+if TYPE_CHECKING:  # pyarrow in annotations only: see _pyarrow_parquet
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
 #: Rows per Parquet row group.
 ROW_GROUP_ROWS = 4096
 TABLE_SUFFIXES = (".csv", ".parquet")
 
 
+def _pyarrow_parquet() -> Any:
+    """pyarrow.parquet, imported when a .parquet table is written: a CSV run does not pay its 0.1 s."""
+    import pyarrow.parquet as pq  # here, not at the top: see the docstring
+
+    return pq
+
+
 def _schema() -> pa.Schema:
+    import pyarrow as pa  # here, not at the top: see _pyarrow_parquet
+
     def kind(name: str) -> pa.DataType:
         if name in STRING_COLUMNS:
             return pa.string()
@@ -78,7 +88,7 @@ class TableWriter(_Staged):
             self._csv = csv.writer(self._csv_handle)
             self._csv.writerow(ROW_COLUMNS)
         else:
-            self._parquet = pq.ParquetWriter(self.tmp, _schema())
+            self._parquet = _pyarrow_parquet().ParquetWriter(self.tmp, _schema())
 
     def write(self, row: dict[str, Any]) -> None:
         self.rows += 1
@@ -93,6 +103,8 @@ class TableWriter(_Staged):
 
     def _flush(self) -> None:
         if self._buffer and self._parquet is not None:
+            import pyarrow as pa  # here, not at the top: see _pyarrow_parquet
+
             self._parquet.write_table(pa.Table.from_pylist(self._buffer, schema=_schema()))
             self._buffer = []
 

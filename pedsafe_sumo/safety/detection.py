@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from pedsafe_sumo.safety import log as steplog
+
+if TYPE_CHECKING:  # pandas only in annotations: importing it costs the conflicts tool 0.3 s
+    import pandas as pd
 
 
 @dataclass(frozen=True)
