@@ -42,6 +42,10 @@ PRODUCT = ["--is-family", "product"]
         (["--sampler", "is", "--is-proposal", "/nonexistent/run"], "--is-proposal: cannot read"),
         (["--sampler", "is", "--is-proposal", "X", "--is-pilot-stages", "2"], "leave out the other --is-*"),
         (["--sampler", "is", "--condition", "v2i"], "adapts its proposal on the SV condition"),
+        (
+            ["--sampler", "is", "--set", "staging=approach"],
+            "--sampler is does not cover the approach staging of crossing",
+        ),
         (["--sampler", "is", "--is-family", "joint", "--is-score", "ttc"], "--is-score: not used by"),
         # joint is the default family: the product's own flags alone name the wrong family
         (["--sampler", "is", "--is-inputs", "all"], "--is-inputs: not used by --is-family joint (give"),
