@@ -171,6 +171,9 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "vehicle.max_accel_mps2": 4.0,
         # The reference stack's tracker: the constant-velocity Kalman filter alone.
         "algorithm.tracker_motion_model": "cv",
+        # No validation gate in the tracker; under V2I the SPaT message in place of the camera's reading.
+        "algorithm.tracker_gate": "none",
+        "perception.v2i.signal_source": "spat",
     },
 }
 
@@ -193,12 +196,22 @@ def with_values_before(given: dict[str, Any], before: dict[str, Any]) -> dict[st
     return given
 
 
+#: The parameters of VALUES_BEFORE that came together, named by one protocol or by none; every other
+#: parameter of VALUES_BEFORE is grouped with those of its own table.
+PARAMETER_GROUPS_BEFORE: tuple[tuple[str, ...], ...] = (
+    ("algorithm.tracker_motion_model",),
+    ("algorithm.tracker_gate", "perception.v2i.signal_source"),
+)
+
+
 def with_parameters_before(named: dict[str, Any]) -> dict[str, Any]:
-    """Dotted parameters completed, table by table, with the VALUES_BEFORE of each table they name none of."""
-    tables: dict[str, dict[str, Any]] = {}
+    """Dotted parameters completed, group by group (PARAMETER_GROUPS_BEFORE, else the table), with the
+    VALUES_BEFORE of each group they name none of."""
+    grouped = {dotted: group for group in PARAMETER_GROUPS_BEFORE for dotted in group}
+    groups: dict[Any, dict[str, Any]] = {}
     for dotted, value in VALUES_BEFORE["parameters"].items():
-        tables.setdefault(dotted.rsplit(".", 1)[0], {})[dotted] = value
-    for before in tables.values():
+        groups.setdefault(grouped.get(dotted, dotted.rsplit(".", 1)[0]), {})[dotted] = value
+    for before in groups.values():
         named = with_values_before(named, before)
     return named
 

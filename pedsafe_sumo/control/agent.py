@@ -140,7 +140,9 @@ class TrafficLightState:
     state: str  # SUMO's signal character: 'G'/'g' green, 'y' yellow, 'r' red, 'u' red-yellow, 'o' off
     distance_m: float  # from the ego's front to the stop line, at the time the state refers to [m]
     time_to_switch_s: float  # until the state changes; NaN when the source cannot know (onboard)
-    source: str  # "onboard_camera" (seen ahead) or "v2i" (SPaT over the link, latency applied)
+    #: "onboard_camera" (seen ahead), "v2i" (SPaT over the link, latency applied) or "onboard_camera+v2i"
+    #: (seen ahead, the time to the switch from SPaT: [perception.v2i] signal_source "fresher").
+    source: str
     measured_at_s: float  # simulation time the state refers to [s]
 
 

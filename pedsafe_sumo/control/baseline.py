@@ -6,7 +6,8 @@ brakes only for pedestrians in or predicted into its path, yielding at crosswalk
   constant-velocity Kalman filter alone. Measurement noise: the sensors' stated noise (V2I 0.2 m, its
   0.1 s latency in the measurement model; onboard positions nearly exact); process noise: a stated
   acceleration spectral density; a track is predicted on for `track_memory_s` (2 s) after its last
-  detection, then dropped.
+  detection, then dropped; `tracker_gate` "reinitialise": a position outside the track's 99.9 % validation
+  gate starts it afresh.
 - Pedestrians (control/baseline_planner.py): a track told moving (its velocity apart from standing at
   99.9 % under its covariance; under "imm" also the standing model the less probable) is moved ahead
   at that velocity for `horizon_s`, the corridor widened by one standard deviation of the predicted
@@ -42,7 +43,13 @@ from pedsafe_sumo.control.baseline_planner import (
     straight_path,
 )
 from pedsafe_sumo.control.imm_tracker import ImmTracker
-from pedsafe_sumo.control.kalman_tracker import TRACK_MEMORY_S, KalmanTracker, Track
+from pedsafe_sumo.control.kalman_tracker import (
+    GATE_CHI2,
+    TRACK_MEMORY_S,
+    TRACKER_GATES,
+    KalmanTracker,
+    Track,
+)
 from pedsafe_sumo.control.reference import (
     CLEAR_HOLD_S,
     HORIZON_S,
@@ -97,8 +104,15 @@ class BaselineStack(Agent):
         motion_model = str(config.get("tracker_motion_model", "cv"))
         if motion_model not in TRACKER_MOTION_MODELS:
             raise ValueError(f"tracker_motion_model must be one of {', '.join(TRACKER_MOTION_MODELS)}")
+        # A config without the key ran without a validation gate.
+        gate = str(config.get("tracker_gate", "none"))
+        if gate not in TRACKER_GATES:
+            raise ValueError(f"tracker_gate must be one of {', '.join(TRACKER_GATES)}")
+        gate_chi2 = GATE_CHI2 if gate == "reinitialise" else None
         self.tracker: KalmanTracker | ImmTracker = (
-            ImmTracker(memory_s=memory_s) if motion_model == "imm" else KalmanTracker(memory_s=memory_s)
+            ImmTracker(memory_s=memory_s, gate_chi2=gate_chi2)
+            if motion_model == "imm"
+            else KalmanTracker(memory_s=memory_s, gate_chi2=gate_chi2)
         )
         self._threat_since_s: float | None = None
         self._last_threat_s: float | None = None

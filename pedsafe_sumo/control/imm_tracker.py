@@ -20,7 +20,9 @@ switching coefficients", IEEE Trans. Automatic Control 33(8), 1988; Bar-Shalom, 
 The planner reads the combined estimate (Track) and the standing model's probability
 (Track.standing_probability): a track is moving when the walking model is the more probable and the
 combined velocity differs from zero at 99.9 % (Track.moving). Object permanence as the constant-velocity
-tracker: a track not measured is predicted on for `memory_s`, then dropped. Docs: docs/baseline_stack.md.
+tracker: a track not measured is predicted on for `memory_s`, then dropped. With a validation gate
+(`gate_chi2`, kalman_tracker.GATE_CHI2), a position outside both models' gates starts the track afresh.
+Docs: docs/baseline_stack.md.
 """
 
 from __future__ import annotations
@@ -114,8 +116,11 @@ class ImmTracker:
         v2i_sigma_m: float = V2I_POSITION_SIGMA_M,
         onboard_sigma_m: float = ONBOARD_POSITION_SIGMA_M,
         v2i_latency_s: float = V2I_LATENCY_S,
+        gate_chi2: float | None = None,
     ) -> None:
         self.memory_s = memory_s
+        #: The validation gate (kalman_tracker.GATE_CHI2), or None: every position is folded in.
+        self.gate_chi2 = gate_chi2
         self.accel_psd = accel_psd_m2ps3
         self.standing_psd = standing_psd_m2ps
         self.mean_walk_s = mean_walk_s
@@ -172,12 +177,29 @@ class ImmTracker:
             covs.append(f @ p0 @ f.T + scale * q)
         track.states, track.covs, track.probs = states, covs, predicted
 
-    def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> None:
-        v2i = source == V2I_SOURCE
+    def _noise(self, v2i: bool) -> np.ndarray:
         r = self._r.get(v2i)
         if r is None:
             sigma = self.v2i_sigma_m if v2i else self.onboard_sigma_m
             r = self._r[v2i] = frozen(sigma * sigma * np.eye(2))
+        return r
+
+    def _outside_gate(self, track: _ImmTrack, z: np.ndarray, source: str) -> bool:
+        """Whether `z` lies outside the validation gate of both models' predictions."""
+        assert self.gate_chi2 is not None
+        v2i = source == V2I_SOURCE
+        r = self._noise(v2i)
+        for j in (_WALK, _STAND):
+            h = self._measurement(v2i, j)
+            innovation = z - h @ track.states[j]
+            s = h @ track.covs[j] @ h.T + r
+            if float(innovation @ np.linalg.solve(s, innovation)) <= self.gate_chi2:
+                return False
+        return True
+
+    def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> None:
+        v2i = source == V2I_SOURCE
+        r = self._noise(v2i)
         log_likelihoods = np.zeros(2)
         for j in (_WALK, _STAND):
             h = self._measurement(v2i, j)
@@ -205,11 +227,14 @@ class ImmTracker:
         walk_prior = self.mean_walk_s / (self.mean_walk_s + self.mean_stand_s)
         for ped in pedestrians:
             track = self._tracks.get(ped.ped_id)
+            z = np.array([ped.x_m, ped.y_m])
+            if track is not None and self.gate_chi2 is not None and self._outside_gate(track, z, ped.source):
+                track = None  # the estimate has lost the person: taken up afresh from this position
             if track is None:
                 sigma = self.v2i_sigma_m if ped.source == V2I_SOURCE else self.onboard_sigma_m
                 self._tracks[ped.ped_id] = _ImmTrack(ped.x_m, ped.y_m, sigma, time_s, walk_prior)
                 continue
-            self._update(track, np.array([ped.x_m, ped.y_m]), ped.source)
+            self._update(track, z, ped.source)
             track.seen_s = time_s
         for ped_id in [k for k, t in self._tracks.items() if time_s - t.seen_s > self.memory_s + 1e-9]:
             del self._tracks[ped_id]

@@ -64,6 +64,18 @@ TRACK_MEMORY_S = 2.0
 #: track often enough to start the brakes (paper-v7's scenarios, 50 pairs: docs/baseline_stack.md). A
 #: walker's second exact onboard position passes it (1.4 m/s against a standard deviation of about 0.3).
 MOVING_CHI2 = 13.816
+#: Validation gate of a track [chi-square, 2 degrees of freedom]: a position whose normalised innovation
+#: squared (z - H x)^T S^-1 (z - H x) exceeds it under every motion model cannot have come from the track's
+#: estimate at the gate probability, 99.9 % (the quantile above): the estimate has lost the person, who is
+#: taken up afresh from this position as a new track (the validation region of Bar-Shalom, Li and
+#: Kirubarajan, "Estimation with Applications to Tracking and Navigation", Wiley 2001, and track
+#: initiation from an unassociated measurement). Without it, a track built on V2I positions (0.2 m noise,
+#: 0.1 s old) that lags a pedestrian who has just stepped off took the first onboard position (0.01 m),
+#: a metre or more ahead, as no motion, and held the walker as standing while they crossed
+#: (docs/decisions/2026-11-27-tracker-validation-gate.md).
+GATE_CHI2 = MOVING_CHI2
+#: `tracker_gate` of [algorithm]: "reinitialise" applies GATE_CHI2; "none" folds every position in.
+TRACKER_GATES = ("reinitialise", "none")
 
 #: A track whose standing model (control/imm_tracker.py) is the more probable is not moving: the
 #: maximum a posteriori model.
@@ -160,9 +172,12 @@ class KalmanTracker:
         v2i_sigma_m: float = V2I_POSITION_SIGMA_M,
         onboard_sigma_m: float = ONBOARD_POSITION_SIGMA_M,
         v2i_latency_s: float = V2I_LATENCY_S,
+        gate_chi2: float | None = None,
     ) -> None:
         self.memory_s = memory_s
         self.accel_psd = accel_psd_m2ps3
+        #: The validation gate (GATE_CHI2), or None: every position is folded into its track.
+        self.gate_chi2 = gate_chi2
         self.v2i_sigma_m = v2i_sigma_m
         self.onboard_sigma_m = onboard_sigma_m
         self.v2i_latency_s = v2i_latency_s
@@ -198,6 +213,11 @@ class KalmanTracker:
             if r is None:
                 r = self._r[sigma] = frozen(sigma * sigma * np.eye(2))
             track = self._tracks.get(ped.ped_id)
+            if track is not None and self.gate_chi2 is not None:
+                innovation = z - h @ track[0]
+                s = h @ track[1] @ h.T + r
+                if float(innovation @ np.linalg.solve(s, innovation)) > self.gate_chi2:
+                    track = None  # outside the validation gate: taken up afresh below
             if track is None:
                 state = np.array([ped.x_m, ped.y_m, 0.0, 0.0])
                 cov = np.diag([sigma**2, sigma**2, INITIAL_SPEED_SIGMA_MPS**2, INITIAL_SPEED_SIGMA_MPS**2])

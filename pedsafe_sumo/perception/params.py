@@ -162,6 +162,12 @@ def _mount(t: dict, where: str) -> None:
     check_upper_bounds(t, {"height_m": MOUNT_UPPER_BOUNDS["height_m"]}, where)
 
 
+#: [perception.v2i] signal_source: "fresher" the signal head as the onboard camera reads it now wherever it
+#: can (with SPaT's time to the switch while SPaT tells the same state), SPaT elsewhere; "spat" the SPaT
+#: message whenever one has arrived, in place of the camera's reading (sim/observation.py).
+V2I_SIGNAL_SOURCES = ("fresher", "spat")
+
+
 @register_validator("perception")
 def validate_perception(section: dict[str, Any], where: str = "perception") -> None:
     scene = section["scene"]
@@ -211,6 +217,11 @@ def validate_perception(section: dict[str, Any], where: str = "perception") -> N
     _non_negative(v2i, "latency_s", w)
     _probability(v2i, "packet_loss_probability", w)
     _non_negative(v2i, "position_noise_sigma_m", w)
+    if v2i.get("signal_source", "spat") not in V2I_SIGNAL_SOURCES:
+        raise ParameterError(
+            f"parameter '{w}.signal_source' must be one of {', '.join(V2I_SIGNAL_SOURCES)}, "
+            f"got {v2i['signal_source']!r}"
+        )
     check_upper_bounds(v2i, V2I_UPPER_BOUNDS, w)
 
     raw = section.get("raw")

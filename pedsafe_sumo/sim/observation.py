@@ -74,6 +74,8 @@ class ObservationFeeds:
         raw = perception_params["raw"]
         self.raw = raw
         self.latency_s = float(perception_params["v2i"]["latency_s"])
+        # A parameter set without the key (a run recorded before it existed) delivered SPaT.
+        self.fresher_signal = perception_params["v2i"].get("signal_source", "spat") == "fresher"
         self.net = load_net_map(str(net_file)) if self.wanted & {"route", "road_map"} else None
         self._roadside_buffer: deque = deque()
         self._signal_buffer: deque = deque()
@@ -248,16 +250,29 @@ class ObservationFeeds:
             tls_id, link_index, distance_m, state = upcoming[0]
             switch_in_s = float(api.trafficlight.getNextSwitch(tls_id)) - time_s
             measured = (tls_id, int(link_index), float(distance_m), str(state), switch_in_s)
+        reach_m = float(self.raw["signal_visibility_m"])
         if self.condition == "v2i":
             delivered = self._delayed(self._signal_buffer, time_s, measured)
             if delivered is not None and delivered[1] is not None:
                 at_s, (tls_id, link_index, _, state, switch_in_s) = delivered
+                switch_now_s = switch_in_s - (time_s - at_s)
+                if (
+                    self.fresher_signal
+                    and measured is not None
+                    and measured[2] <= reach_m
+                    and measured[0] == tls_id
+                ):
+                    # The camera reads the head now, SPaT `latency_s` ago: its state, with SPaT's timing
+                    # while SPaT tells the same state.
+                    _, link_now, distance_m, seen, _ = measured
+                    timing = switch_now_s if seen == state else math.nan
+                    return TrafficLightState(
+                        tls_id, link_now, seen, distance_m, timing, "onboard_camera+v2i", time_s
+                    )
                 # Distance now (the ego knows where it is); the state and its timing as sent at at_s.
                 now_m = measured[2] if measured is not None and measured[0] == tls_id else math.nan
-                return TrafficLightState(
-                    tls_id, link_index, state, now_m, switch_in_s - (time_s - at_s), "v2i", at_s
-                )
-        if measured is not None and measured[2] <= float(self.raw["signal_visibility_m"]):
+                return TrafficLightState(tls_id, link_index, state, now_m, switch_now_s, "v2i", at_s)
+        if measured is not None and measured[2] <= reach_m:
             tls_id, link_index, distance_m, state, _ = measured
             return TrafficLightState(
                 tls_id, link_index, state, distance_m, math.nan, "onboard_camera", time_s

@@ -4,6 +4,7 @@ link's latency), the map from the network, unknown sensors refused in one line."
 
 from __future__ import annotations
 
+import copy
 import math
 import subprocess
 import sys
@@ -219,7 +220,51 @@ def test_a_lateral_offset_is_held_by_sumo_and_one_off_the_road_is_refused(runner
 
 
 # ------------------------------------------------------------------ world feeds
-def test_the_traffic_light_is_sumos_onboard_and_arrives_with_the_latency_over_v2i(runner):
+def test_the_traffic_light_is_sumos_onboard_and_arrives_with_the_latency_over_v2i():
+    params = copy.deepcopy(PARAMS)
+    params["perception"]["v2i"]["signal_source"] = "spat"
+    runner = EpisodeRunner(SITE, params, Recorder)
+    try:
+        _check_signal_feed_spat(runner)
+    finally:
+        runner.close()
+
+
+def test_under_v2i_the_camera_reads_the_light_now_and_spat_gives_its_timing(runner):
+    # signal_source "fresher" (the default): within the camera's reach the state is SUMO's at this very
+    # step, the time to the switch SUMO's own (getNextSwitch) while the SPaT message, 0.1 s old, tells the
+    # same state, NaN on the step a change has been seen but not yet sent.
+    states: dict[float, str] = {}
+    switch_in: dict[float, float] = {}
+
+    def probe(api, row):
+        upcoming = api.vehicle.getNextTLS("ego")
+        if upcoming:
+            tls, index, _, _ = upcoming[0]
+            t = round(row["time_s"], 2)
+            states[t] = api.trafficlight.getRedYellowGreenState(tls)[index]
+            switch_in[t] = api.trafficlight.getNextSwitch(tls) - row["time_s"]
+
+    _, observations = _run(runner, ["traffic_light"], condition="v2i", hook=probe)
+    reach_m = PARAMS["perception"]["raw"]["signal_visibility_m"]
+    # Observation k is of the k-th step the probe saw (as in the test above).
+    now = sorted(states)[2 : len(states)]
+    delivered = [(t, o.traffic_light) for t, o in zip(now, observations[2 : len(states)], strict=True)]
+    assert sum(light.distance_m <= reach_m for _, light in delivered) > 20
+    for time_s, light in delivered:
+        if light.distance_m > reach_m:  # beyond the camera's reach: SPaT, 0.1 s old
+            assert light.source == "v2i" and round(light.measured_at_s, 2) == round(time_s - 0.1, 2)
+            continue
+        t = round(light.measured_at_s, 2)
+        assert light.source == "onboard_camera+v2i" and t == time_s
+        assert light.state == states[t]
+        if states.get(round(t - 0.1, 2)) == states[t]:
+            assert light.time_to_switch_s == pytest.approx(switch_in[t], abs=1e-6)
+        else:
+            assert math.isnan(light.time_to_switch_s)
+
+
+def _check_signal_feed_spat(runner):
     for condition in ("sv", "v2i"):
         states: dict[float, str] = {}
 
