@@ -55,9 +55,8 @@ def main() -> None:
     run_seed = json.loads((Path(run_dir) / "run.json").read_text())["run_seed"]
     rows = pd.concat(pd.read_parquet(f) for f in glob.glob(f"{run_dir}/parts/{scenario}-*.parquet"))
     rows = rows[rows.condition == condition]
-    episodes = (
-        [int(e) for e in sys.argv[5].split(",")] if len(sys.argv) > 5 else sorted(rows[rows.collision].episode)
-    )
+    collided = sorted(rows[rows.collision].episode)
+    episodes = [int(e) for e in sys.argv[5].split(",")] if len(sys.argv) > 5 else collided
     found = []
     for episode in episodes:
         RECORDED.clear()
@@ -84,9 +83,10 @@ def main() -> None:
         )
         print(found[-1], flush=True)
     table = pd.DataFrame(found)
+    held = int((table.held_standing_steps > 0).sum())
     print(
-        f"{scenario} {condition}: {int((table.held_standing_steps > 0).sum())} of {len(table)} episodes had steps "
-        f"with a walker measured onboard and held standing"
+        f"{scenario} {condition}: {held} of {len(table)} episodes had steps "
+        "with a walker measured onboard and held standing"
     )
 
 
