@@ -2,7 +2,7 @@
 
     python -m pedsafe_sumo.batch --protocol protocols/paper-v7.toml --out DIR [--episodes N] [--workers K]
     pedsafe-sumo batch --protocol paper-v7 --out DIR     # a bare name: a shipped protocol, from any folder
-    python -m pedsafe_sumo.protocol write paper-v10 --date 2026-12-01 --out protocols/paper-v10.toml
+    python -m pedsafe_sumo.protocol write paper-v11 --date 2026-12-01 --out protocols/paper-v11.toml
 
 A protocol file (TOML) holds:
 - [protocol]: name, date, description, scenarios (list), conditions, episodes, seed, site, algorithm;

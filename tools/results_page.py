@@ -1,8 +1,8 @@
 """Write a study's results page (Markdown, with figures) from its protocol runs and sensitivity sweeps.
 
-    python tools/results_page.py --run "Xueqing, reference=results/paper-v9-xueqing" \\
-        --run "Xueqing, human driver=results/paper-v9-xueqing-human" \\
-        --sweep results/paper-v9-xueqing-reaction --sweep results/paper-v9-xueqing-deceleration \\
+    python tools/results_page.py --run "Xueqing, reference=results/paper-v10-xueqing" \\
+        --run "Xueqing, human driver=results/paper-v10-xueqing-human" \\
+        --sweep results/paper-v10-xueqing-reaction --sweep results/paper-v10-xueqing-deceleration \\
         --out docs/results.md --figures docs/figures/results
 
 For each run (LABEL=DIR, a batch run directory, finished or not: a run still going is read from its

@@ -6,8 +6,8 @@ brakes only for pedestrians in or predicted into its path, yielding at crosswalk
   constant-velocity Kalman filter alone. Measurement noise: the sensors' stated noise (V2I 0.2 m, its
   0.1 s latency in the measurement model; onboard positions nearly exact); process noise: a stated
   acceleration spectral density; a track is predicted on for `track_memory_s` (2 s) after its last
-  detection, then dropped; `tracker_gate` "reinitialise": a position outside the track's 99.9 % validation
-  gate starts it afresh.
+  detection, then dropped; `tracker_gate` "precise": a position outside the track's 99.9 % validation gate
+  and more precise than its predicted position starts it afresh ("reinitialise": any position outside).
 - Pedestrians (control/baseline_planner.py): a track told moving (its velocity apart from standing at
   99.9 % under its covariance; under "imm" also the standing model the less probable) is moved ahead
   at that velocity for `horizon_s`, the corridor widened by one standard deviation of the predicted
@@ -108,11 +108,12 @@ class BaselineStack(Agent):
         gate = str(config.get("tracker_gate", "none"))
         if gate not in TRACKER_GATES:
             raise ValueError(f"tracker_gate must be one of {', '.join(TRACKER_GATES)}")
-        gate_chi2 = GATE_CHI2 if gate == "reinitialise" else None
+        gate_chi2 = None if gate == "none" else GATE_CHI2
+        precise = gate == "precise"
         self.tracker: KalmanTracker | ImmTracker = (
-            ImmTracker(memory_s=memory_s, gate_chi2=gate_chi2)
+            ImmTracker(memory_s=memory_s, gate_chi2=gate_chi2, gate_precise_only=precise)
             if motion_model == "imm"
-            else KalmanTracker(memory_s=memory_s, gate_chi2=gate_chi2)
+            else KalmanTracker(memory_s=memory_s, gate_chi2=gate_chi2, gate_precise_only=precise)
         )
         self._threat_since_s: float | None = None
         self._last_threat_s: float | None = None

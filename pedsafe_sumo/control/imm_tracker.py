@@ -21,7 +21,8 @@ The planner reads the combined estimate (Track) and the standing model's probabi
 (Track.standing_probability): a track is moving when the walking model is the more probable and the
 combined velocity differs from zero at 99.9 % (Track.moving). Object permanence as the constant-velocity
 tracker: a track not measured is predicted on for `memory_s`, then dropped. With a validation gate
-(`gate_chi2`, kalman_tracker.GATE_CHI2), a position outside both models' gates starts the track afresh.
+(`gate_chi2`, kalman_tracker.GATE_CHI2), a position outside both models' gates (under `gate_precise_only`:
+and more precise than the predicted position) starts the track afresh.
 Docs: docs/baseline_stack.md.
 """
 
@@ -117,10 +118,13 @@ class ImmTracker:
         onboard_sigma_m: float = ONBOARD_POSITION_SIGMA_M,
         v2i_latency_s: float = V2I_LATENCY_S,
         gate_chi2: float | None = None,
+        gate_precise_only: bool = False,
     ) -> None:
         self.memory_s = memory_s
         #: The validation gate (kalman_tracker.GATE_CHI2), or None: every position is folded in.
         self.gate_chi2 = gate_chi2
+        #: Restart only from a position more precise than the predicted one (`tracker_gate` "precise").
+        self.gate_precise_only = gate_precise_only
         self.accel_psd = accel_psd_m2ps3
         self.standing_psd = standing_psd_m2ps
         self.mean_walk_s = mean_walk_s
@@ -185,7 +189,8 @@ class ImmTracker:
         return r
 
     def _outside_gate(self, track: _ImmTrack, z: np.ndarray, source: str) -> bool:
-        """Whether `z` lies outside the validation gate of both models' predictions."""
+        """Whether `z` lies outside the validation gate of both models' predictions (and, with
+        `gate_precise_only`, is more precise than the combined predicted position)."""
         assert self.gate_chi2 is not None
         v2i = source == V2I_SOURCE
         r = self._noise(v2i)
@@ -195,6 +200,9 @@ class ImmTracker:
             s = h @ track.covs[j] @ h.T + r
             if float(innovation @ np.linalg.solve(s, innovation)) <= self.gate_chi2:
                 return False
+        if self.gate_precise_only:
+            _, p = track.combined()
+            return float(r[0, 0]) < (p[0, 0] + p[1, 1]) / 2
         return True
 
     def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> None:

@@ -17,7 +17,7 @@ ALGORITHM_UPPER_BOUNDS: Bounds = {
 #: Allowed values of the [algorithm] keys that are words, not numbers (control/baseline.py reads it).
 ALGORITHM_CHOICES: dict[str, tuple[str, ...]] = {
     "tracker_motion_model": ("cv", "imm"),
-    "tracker_gate": ("reinitialise", "none"),
+    "tracker_gate": ("precise", "reinitialise", "none"),
 }
 
 

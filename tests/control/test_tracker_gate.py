@@ -1,4 +1,5 @@
-"""The trackers' validation gate: a position that cannot have come from a track's estimate starts it afresh.
+"""The trackers' validation gate: a position that cannot have come from a track's estimate, and is more
+precise than it ("precise"; "reinitialise": any such position), starts the track afresh.
 
 The gate's arithmetic is worked by hand on the constant-velocity filter's second position; the hand-over
 from V2I positions to onboard ones, where an estimate lagging a pedestrian who has just stepped off meets
@@ -42,18 +43,21 @@ def test_the_gate_is_the_999_quantile_of_chi_square_with_two_degrees_of_freedom(
     assert GATE_CHI2 == pytest.approx(CHI2_999, abs=1e-3)
 
 
+@pytest.mark.parametrize("precise_only", [False, True])
 @pytest.mark.parametrize("tracker_class", [KalmanTracker, ImmTracker])
 def test_a_position_just_inside_the_gate_is_folded_in_and_one_just_outside_starts_the_track_afresh(
-    tracker_class,
+    tracker_class, precise_only
 ):
+    # The onboard position's variance (1e-4 m2) is far below the predicted one (about 0.0057 m2): under
+    # "precise" too, one outside the gate restarts the track.
     radius = second_position_gate_m()  # 0.284 m
     assert radius == pytest.approx(0.2837, abs=1e-3)
-    inside = tracker_class(gate_chi2=GATE_CHI2)
+    inside = tracker_class(gate_chi2=GATE_CHI2, gate_precise_only=precise_only)
     inside.update([onboard(0.0)], 0.0)
     track = inside.update([onboard(0.97 * radius)], STEP_S)[0]
     # Folded in: the velocity is taken up from the two positions (far from the prior's 0).
     assert track.vx_mps > 3.0
-    outside = tracker_class(gate_chi2=GATE_CHI2)
+    outside = tracker_class(gate_chi2=GATE_CHI2, gate_precise_only=precise_only)
     outside.update([onboard(0.0)], 0.0)
     track = outside.update([onboard(1.03 * radius)], STEP_S)[0]
     # Started afresh: exactly at the new position, with the prior's zero velocity.
@@ -65,13 +69,12 @@ def test_a_position_just_inside_the_gate_is_folded_in_and_one_just_outside_start
     assert ungated.update([onboard(1.03 * radius)], STEP_S)[0].vx_mps > 3.0
 
 
-def hand_over(gate: float | None, walk_mps: float, onboard_after_s: float, seed: int) -> list:
+def hand_over(tracker: ImmTracker, walk_mps: float, onboard_after_s: float, seed: int) -> list:
     """A person standing 10 s at x = 0 seen over V2I alone (the true position 0.1 s earlier plus 0.2 m noise
     per axis), who then walks along x at `walk_mps`; from `onboard_after_s` after the step-off the onboard
     sensors measure them exactly. The tracks of the first 1.5 s after the step-off, as (t after the
     step-off, true x, track)."""
     rng = np.random.default_rng(seed)
-    tracker = ImmTracker(gate_chi2=gate)
     start_s = 10.0
     out = []
     for k in range(1, int((start_s + 1.5) / STEP_S) + 1):
@@ -90,14 +93,15 @@ def hand_over(gate: float | None, walk_mps: float, onboard_after_s: float, seed:
     return out
 
 
+@pytest.mark.parametrize("precise_only", [False, True])
 @pytest.mark.parametrize("seed", range(10))
-def test_a_walker_handed_over_from_v2i_to_onboard_sensors_is_moving_within_two_steps(seed):
+def test_a_walker_handed_over_from_v2i_to_onboard_sensors_is_moving_within_two_steps(seed, precise_only):
     # 1.4 m/s (a usual walk), onboard positions from 0.6 s after the step-off: the V2I-built estimate
     # lags by then (the person is 0.84 m out; a V2I position is 0.14 m behind them and the filter takes
     # about a second to take up the start), the first onboard position is outside its gate, the track
     # restarts there and its second onboard position gives the velocity (1.4 m/s against the prior's
     # 1.5 m/s standard deviation: moving at 99.9 % from the second exact position).
-    steps = hand_over(GATE_CHI2, 1.4, 0.6, seed)
+    steps = hand_over(ImmTracker(gate_chi2=GATE_CHI2, gate_precise_only=precise_only), 1.4, 0.6, seed)
     after_onboard = [(dt, x, tr) for dt, x, tr in steps if dt >= 0.6 - 1e-9]
     moving_from = next(dt for dt, _, tr in after_onboard if tr.moving)
     assert moving_from <= 0.6 + 2 * STEP_S + 1e-9
@@ -114,10 +118,39 @@ def test_without_the_gate_the_same_walker_can_be_held_standing_while_measured_wa
     # collapse onto the exact positions and the walker stays "standing" for the rest of the 1.5 s.
     held = 0
     for seed in range(10):
-        steps = hand_over(None, 2.35, 0.65, seed)
+        steps = hand_over(ImmTracker(), 2.35, 0.65, seed)
         if not any(tr.moving for dt, _, tr in steps if dt >= 0.65 + 0.5):
             held += 1
     assert held >= 1
+
+
+def v2i_start_tracks(tracker: ImmTracker, seed: int) -> list[tuple[float, float, float, float]]:
+    """The track estimates over a stander's start seen over V2I alone: 5 s standing, then 1.4 m/s."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(1, 161):
+        t = k * STEP_S
+        x = 1.4 * max(t - 0.1 - 5.0, 0.0) + rng.normal(0, 0.2)
+        (track,) = tracker.update([v2i(x, rng.normal(0, 0.2))], t)
+        out.append((track.x_m, track.y_m, track.vx_mps, track.vy_mps))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_under_precise_a_v2i_position_outside_the_gate_is_folded_in_as_without_a_gate(seed):
+    # A V2I position's variance (0.04 m2) is above a converged track's predicted one (under 0.01 m2): under
+    # "precise" it never restarts the track, whose estimates are then those of the ungated filter, step for
+    # step; "reinitialise" restarts on the lagging estimate of the start in some of these draws.
+    ungated = v2i_start_tracks(ImmTracker(), seed)
+    assert v2i_start_tracks(ImmTracker(gate_chi2=GATE_CHI2, gate_precise_only=True), seed) == ungated
+
+
+def test_reinitialise_restarts_on_v2i_positions_where_precise_does_not():
+    restarted = sum(
+        v2i_start_tracks(ImmTracker(gate_chi2=GATE_CHI2), seed) != v2i_start_tracks(ImmTracker(), seed)
+        for seed in range(10)
+    )
+    assert restarted >= 1
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -134,7 +167,9 @@ def test_a_person_standing_under_v2i_noise_is_never_told_moving_with_the_gate(se
 def test_the_stack_takes_the_gate_from_its_config_and_refuses_an_unknown_one():
     stack = BaselineStack()
     stack.setup({"initial_speed_mps": 10.0, "tracker_motion_model": "imm", "tracker_gate": "reinitialise"})
-    assert stack.tracker.gate_chi2 == GATE_CHI2
+    assert stack.tracker.gate_chi2 == GATE_CHI2 and not stack.tracker.gate_precise_only
+    stack.setup({"initial_speed_mps": 10.0, "tracker_motion_model": "cv", "tracker_gate": "precise"})
+    assert stack.tracker.gate_chi2 == GATE_CHI2 and stack.tracker.gate_precise_only
     stack.setup({"initial_speed_mps": 10.0})  # a config from before the key existed: no gate
     assert stack.tracker.gate_chi2 is None
     with pytest.raises(ValueError, match="tracker_gate"):
