@@ -73,12 +73,12 @@ def _standing_transition(dt_s: float, psd_m2ps: float) -> tuple[np.ndarray, np.n
     return frozen(f), frozen(q)
 
 
-def _log_gaussian(innovation: np.ndarray, s: np.ndarray) -> float:
+def _log_gaussian(mahalanobis: float, s: np.ndarray) -> float:
+    """Log density of an innovation whose squared Mahalanobis distance under `s` is `mahalanobis`."""
     sign, logdet = np.linalg.slogdet(s)
     if sign <= 0:
         return -math.inf
-    mahalanobis = float(innovation @ np.linalg.solve(s, innovation))
-    return -0.5 * (mahalanobis + logdet + len(innovation) * math.log(2 * math.pi))
+    return -0.5 * (mahalanobis + logdet + len(s) * math.log(2 * math.pi))
 
 
 class _ImmTrack:
@@ -188,41 +188,37 @@ class ImmTracker:
             r = self._r[v2i] = frozen(sigma * sigma * np.eye(2))
         return r
 
-    def _outside_gate(self, track: _ImmTrack, z: np.ndarray, source: str) -> bool:
-        """Whether `z` lies outside the validation gate of both models' predictions (and, with
-        `gate_precise_only`, is more precise than the combined predicted position)."""
-        assert self.gate_chi2 is not None
+    def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> bool:
+        """Fold `z` into the track; False (the track untouched) when `z` lies outside the validation gate
+        of both models' predictions (and, with `gate_precise_only`, is more precise than the combined
+        predicted position): the estimate has lost the person."""
         v2i = source == V2I_SOURCE
         r = self._noise(v2i)
+        parts = []
         for j in (_WALK, _STAND):
             h = self._measurement(v2i, j)
-            innovation = z - h @ track.states[j]
             s = h @ track.covs[j] @ h.T + r
-            if float(innovation @ np.linalg.solve(s, innovation)) <= self.gate_chi2:
+            innovation = z - h @ track.states[j]
+            parts.append((h, s, innovation, float(innovation @ np.linalg.solve(s, innovation))))
+        if self.gate_chi2 is not None and all(part[3] > self.gate_chi2 for part in parts):
+            if not self.gate_precise_only:
                 return False
-        if self.gate_precise_only:
             _, p = track.combined()
-            return float(r[0, 0]) < (p[0, 0] + p[1, 1]) / 2
-        return True
-
-    def _update(self, track: _ImmTrack, z: np.ndarray, source: str) -> None:
-        v2i = source == V2I_SOURCE
-        r = self._noise(v2i)
+            if float(r[0, 0]) < (p[0, 0] + p[1, 1]) / 2:
+                return False
         log_likelihoods = np.zeros(2)
-        for j in (_WALK, _STAND):
-            h = self._measurement(v2i, j)
+        for j, (h, s, innovation, mahalanobis) in enumerate(parts):
             x, p = track.states[j], track.covs[j]
-            s = h @ p @ h.T + r
-            innovation = z - h @ x
             gain = p @ h.T @ np.linalg.inv(s)
             i_kh = EYE4 - gain @ h
             track.states[j] = x + gain @ innovation
             track.covs[j] = i_kh @ p @ i_kh.T + gain @ r @ gain.T
-            log_likelihoods[j] = _log_gaussian(innovation, s)
+            log_likelihoods[j] = _log_gaussian(mahalanobis, s)
         weighted = log_likelihoods + np.log(np.maximum(track.probs, 1e-300))
         weighted -= weighted.max()
         probs = np.exp(weighted)
         track.probs = probs / probs.sum()
+        return True
 
     def update(self, pedestrians: Iterable[PerceivedPedestrian], time_s: float) -> list[Track]:
         """Mix and predict every track to `time_s`, fold in this step's positions, drop tracks unseen for
@@ -235,15 +231,12 @@ class ImmTracker:
         walk_prior = self.mean_walk_s / (self.mean_walk_s + self.mean_stand_s)
         for ped in pedestrians:
             track = self._tracks.get(ped.ped_id)
-            z = np.array([ped.x_m, ped.y_m])
-            if track is not None and self.gate_chi2 is not None and self._outside_gate(track, z, ped.source):
-                track = None  # the estimate has lost the person: taken up afresh from this position
-            if track is None:
-                sigma = self.v2i_sigma_m if ped.source == V2I_SOURCE else self.onboard_sigma_m
-                self._tracks[ped.ped_id] = _ImmTrack(ped.x_m, ped.y_m, sigma, time_s, walk_prior)
+            if track is not None and self._update(track, np.array([ped.x_m, ped.y_m]), ped.source):
+                track.seen_s = time_s
                 continue
-            self._update(track, z, ped.source)
-            track.seen_s = time_s
+            # A new pedestrian, or a position outside the gate: the track starts (afresh) from it.
+            sigma = self.v2i_sigma_m if ped.source == V2I_SOURCE else self.onboard_sigma_m
+            self._tracks[ped.ped_id] = _ImmTrack(ped.x_m, ped.y_m, sigma, time_s, walk_prior)
         for ped_id in [k for k, t in self._tracks.items() if time_s - t.seen_s > self.memory_s + 1e-9]:
             del self._tracks[ped_id]
         out = []

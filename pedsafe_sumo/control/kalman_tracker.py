@@ -222,22 +222,24 @@ class KalmanTracker:
             if r is None:
                 r = self._r[sigma] = frozen(sigma * sigma * np.eye(2))
             track = self._tracks.get(ped.ped_id)
-            if track is not None and self.gate_chi2 is not None:
-                innovation = z - h @ track[0]
-                s = h @ track[1] @ h.T + r
-                outside = float(innovation @ np.linalg.solve(s, innovation)) > self.gate_chi2
-                predicted_var = (track[1][0, 0] + track[1][1, 1]) / 2
-                if outside and (not self.gate_precise_only or sigma * sigma < predicted_var):
+            if track is not None:
+                x, p = track[0], track[1]
+                s = h @ p @ h.T + r
+                s_inv = np.linalg.inv(s)
+                innovation = z - h @ x
+                if (
+                    self.gate_chi2 is not None
+                    and float(innovation @ s_inv @ innovation) > self.gate_chi2
+                    and (not self.gate_precise_only or sigma * sigma < (p[0, 0] + p[1, 1]) / 2)
+                ):
                     track = None  # outside the validation gate: taken up afresh below
             if track is None:
                 state = np.array([ped.x_m, ped.y_m, 0.0, 0.0])
                 cov = np.diag([sigma**2, sigma**2, INITIAL_SPEED_SIGMA_MPS**2, INITIAL_SPEED_SIGMA_MPS**2])
                 self._tracks[ped.ped_id] = [state, cov, time_s, time_s]
                 continue
-            x, p = track[0], track[1]
-            s = h @ p @ h.T + r
-            gain = p @ h.T @ np.linalg.inv(s)
-            x = x + gain @ (z - h @ x)
+            gain = p @ h.T @ s_inv
+            x = x + gain @ innovation
             i_kh = EYE4 - gain @ h
             p = i_kh @ p @ i_kh.T + gain @ r @ gain.T  # Joseph form: stays symmetric and positive
             track[0], track[1], track[3] = x, p, time_s
