@@ -9,7 +9,8 @@ For each run (LABEL=DIR, a batch run directory, finished or not: a run still goi
 finished chunks and the page says how far it is): Table I beside the paper's (the paper's three
 scenarios), whether each collision interval meets the study's precision target (half-width under a third
 of the rate, or under 0.005), the paired SV/V2I tests, the first-detection and impact-speed figures, the
-injury curves, and the paper's four qualitative findings on its point estimates. For each sweep
+injury curves, why each collision happened (from its case log: perceived too late to stop, perceived in
+time, never perceived), and the paper's four qualitative findings on its point estimates. For each sweep
 (python -m pedsafe_sumo.sweep's --out): the findings in each combination, so that every verdict on the
 page shows the settings under which it holds. Nothing on the page is typed by hand: rerun the tool when
 the runs have grown.
@@ -24,6 +25,7 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -109,6 +111,87 @@ def paired_markdown(episodes: pd.DataFrame) -> str:
                 f"| {row['scenario']} | {outcome} | {int(row['n_pairs']):,} | {int(row['sv_only'])} | "
                 f"{int(row['v2i_only'])} | {row['p_value']:.3g} |"
             )
+    return "\n".join(lines)
+
+
+#: The case log's columns the collision timing reads.
+TIMING_COLUMNS = [
+    "time_s", "ego_x_m", "ego_y_m", "ego_speed_mps", "perceived", "braking", "clearance_m", "ped_state",
+]  # fmt: skip
+#: Pedestrian states before the step-off (safety/log.py): not yet a threat to a vehicle on the road.
+BEFORE_STEP_OFF = {"absent", "walking_in", "waiting"}
+
+
+def collision_timing(log: pd.DataFrame, reaction_s: float, decel_mps2: float) -> dict[str, float | str]:
+    """Why a collision's ego did not stop, from its case log. From the first step at which the pedestrian
+    had stepped off and was perceived: the distance the ego then drove to the contact (along its logged
+    positions) against the distance the stack's own reaction time and hardest braking need from the speed
+    it had (v t + v^2 / 2a). "late": inside that distance, no stack could have stopped; "in time": with
+    room to stop, the stack did not use it; "never": not perceived after the step-off before the contact."""
+    log = log.reset_index(drop=True)
+    contact = log.index[log["clearance_m"] <= 0]
+    before = log.loc[: contact[0]] if len(contact) else log
+    off = before.index[~before["ped_state"].isin(BEFORE_STEP_OFF)]
+    step_off = off[0] if len(off) else 0
+    seen = before.index[before["perceived"].astype(bool) & (before.index >= step_off)]
+    if not len(seen):
+        return {"kind": "never"}
+    first = seen[0]
+    path = before.loc[first:, ["ego_x_m", "ego_y_m"]].to_numpy()
+    driven_m = float(np.hypot(*np.diff(path, axis=0).T).sum()) if len(path) > 1 else 0.0
+    speed = float(before.at[first, "ego_speed_mps"])
+    needed_m = speed * reaction_s + speed * speed / (2 * decel_mps2)
+    braked = before.index[before["braking"].astype(bool) & (before.index >= first)]
+    brake_after_s = (
+        float(before.at[braked[0], "time_s"] - before.at[first, "time_s"]) if len(braked) else math.nan
+    )
+    return {
+        "kind": "late" if driven_m < needed_m else "in time",
+        "driven_m": driven_m,
+        "needed_m": needed_m,
+        "brake_after_s": brake_after_s,
+    }
+
+
+def collision_timing_markdown(run: RunDirectory, info: dict) -> str:
+    """Per scenario and condition: the collisions by collision_timing's kind, from their case logs."""
+    algorithm = info.get("parameters", {}).get("algorithm", {})
+    reaction_s = float(algorithm.get("reaction_time_s", math.nan))
+    decel_mps2 = float(algorithm.get("max_decel_mps2", math.nan))
+    if not (math.isfinite(reaction_s) and math.isfinite(decel_mps2)):
+        return "The run does not record the stack's reaction time and deceleration: no collision timing."
+    lines = [
+        "Each collision's case log: the distance the ego drove from the first step at which the pedestrian "
+        "had stepped off the kerb and was perceived to the contact, against what the stack's reaction time "
+        f"({reaction_s:g} s) and hardest braking ({decel_mps2:g} m/s²) need from the speed it then had. "
+        "*Late*: perceived inside that distance, no stack with them could have stopped; *in time*: "
+        "perceived with room to stop, the stack did not use it; *never*: not perceived between the "
+        "step-off and the contact. The last column: from that step to the first braking step.",
+        "",
+        "| scenario | condition | collisions | never | late | in time | no case log "
+        "| in time: braking began after (median) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    episodes = run.episodes
+    hits = episodes[episodes["collision"].astype(bool)]
+    for (scenario, condition), group in hits.groupby(["scenario", "condition"], sort=False):
+        counts = {"never": 0, "late": 0, "in time": 0, "missing": 0}
+        delays = []
+        for _, row in group.iterrows():
+            approach = row["approach"] if "approach" in row and isinstance(row["approach"], str) else ""
+            path = run.case_path(scenario, condition, int(row["seed"]), approach)
+            if not path.is_file():
+                counts["missing"] += 1
+                continue
+            timing = collision_timing(pd.read_parquet(path, columns=TIMING_COLUMNS), reaction_s, decel_mps2)
+            counts[str(timing["kind"])] += 1
+            if timing["kind"] == "in time" and math.isfinite(float(timing["brake_after_s"])):
+                delays.append(float(timing["brake_after_s"]))
+        delay = f"{float(np.median(delays)):.2f} s" if delays else ""
+        lines.append(
+            f"| {scenario} | {condition.upper()} | {len(group)} | {counts['never']} | {counts['late']} | "
+            f"{counts['in time']} | {counts['missing']} | {delay} |"
+        )
     return "\n".join(lines)
 
 
@@ -198,6 +281,10 @@ def main(argv: list[str] | None = None) -> int:
             table_one_markdown(episodes),
             "",
             paired_markdown(episodes),
+            "",
+            "### Why the collisions happened",
+            "",
+            collision_timing_markdown(run, info),
             "",
         ]
         slug = "".join(c if c.isalnum() else "_" for c in label.lower()).strip("_")

@@ -6,6 +6,7 @@ import math
 import subprocess
 import sys
 
+import pandas as pd
 import pytest
 from report_runs import write_standard_run
 
@@ -13,7 +14,7 @@ from pedsafe_sumo import REPO_ROOT
 
 TOOL = REPO_ROOT / "tools" / "results_page.py"
 sys.path.insert(0, str(TOOL.parent))
-from results_page import meets_target  # noqa: E402
+from results_page import collision_timing, meets_target  # noqa: E402
 
 
 def _wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -67,3 +68,38 @@ def test_a_missing_run_directory_is_one_line_exit_2(tmp_path):
     )  # fmt: skip
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert not (tmp_path / "p.md").exists()
+
+
+def _log(contact_after_m: float, perceived_from_s: float | None, step_off_s: float = 1.0) -> pd.DataFrame:
+    """An ego at 10 m/s along x, 0.05 s steps; the pedestrian steps off at `step_off_s`; the contact comes
+    `contact_after_m` after the step-off's position; perceived from `perceived_from_s` (None: never)."""
+    rows = []
+    contact_s = step_off_s + contact_after_m / 10.0
+    for k in range(int(round((contact_s + 0.5) / 0.05)) + 1):
+        t = k * 0.05
+        rows.append(
+            {
+                "time_s": t,
+                "ego_x_m": 10.0 * t,
+                "ego_y_m": 0.0,
+                "ego_speed_mps": 10.0,
+                "perceived": perceived_from_s is not None and t >= perceived_from_s - 1e-9,
+                "braking": False,
+                "clearance_m": 10.0 * (contact_s - t),
+                "ped_state": "waiting" if t < step_off_s - 1e-9 else "walking",
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def test_a_collision_is_late_when_the_stack_could_not_have_stopped_from_the_step_off():
+    # 10 m/s, 0.4 s and 6 m/s2 need 10 * 0.4 + 100 / 12 = 12.33 m.
+    late = collision_timing(_log(10.0, 0.0), 0.4, 6.0)
+    assert late["kind"] == "late"
+    # The distance is counted from the step-off, though the pedestrian was perceived long before it.
+    assert late["driven_m"] == pytest.approx(10.0, abs=1e-9)
+    assert late["needed_m"] == pytest.approx(12.333333, abs=1e-6)
+    assert collision_timing(_log(13.0, 0.0), 0.4, 6.0)["kind"] == "in time"
+    # Perceived 0.2 s after the step-off: 2 m fewer to stop in.
+    assert collision_timing(_log(13.0, 1.2), 0.4, 6.0)["kind"] == "late"
+    assert collision_timing(_log(13.0, None), 0.4, 6.0)["kind"] == "never"
