@@ -19,6 +19,7 @@ import sys
 import time
 from pathlib import Path
 
+import tomllib
 from tqdm import tqdm
 
 from pedsafe_sumo.cli import OneLineParser, check_range
@@ -29,7 +30,7 @@ from pedsafe_sumo.conflicts.places import NetError, PlaceFinder
 from pedsafe_sumo.conflicts.sizes import SizeBook, TypesError
 from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.network.sites import SiteError, resolve_site
-from pedsafe_sumo.params import ParameterError, load_params
+from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params
 from pedsafe_sumo.usage import UsageError
 
 #: Every vehicle-pedestrian pair within the radius is followed step by step: a kilometre is beyond any
@@ -89,6 +90,17 @@ def site_net(net: Path | None, site: str | None) -> Path | None:
         raise UsageError(str(exc)) from None
 
 
+def conflicts_section(params_path: Path | None) -> dict:
+    """The [conflicts] parameters. With a parameter file, the whole file is laid over the defaults and
+    checked as every command checks it (`load_params`). Without one, the defaults' section is read as it
+    stands: the defaults pass those checks (tests/params), and checking them would import the modules
+    of every section (the perception kernels, numba: some 0.3 s of CPU, as much as a short run)."""
+    if params_path is not None:
+        return load_params(params_path)["conflicts"]
+    with open(DEFAULTS_PATH, "rb") as handle:
+        return tomllib.load(handle)["conflicts"]
+
+
 def run(args: argparse.Namespace) -> dict[str, float]:
     if args.out.suffix.lower() not in TABLE_SUFFIXES:
         raise UsageError(f"--out must end in .csv or .parquet, got {args.out}")
@@ -100,7 +112,7 @@ def run(args: argparse.Namespace) -> dict[str, float]:
     if args.ssm is not None:
         check_output_file(args.ssm, "--ssm", UsageError)
     args.net = site_net(args.net, args.site)
-    section = load_params(args.params)["conflicts"]
+    section = conflicts_section(args.params)
     for key, value in section.items():
         if (
             isinstance(value, bool)
