@@ -225,9 +225,10 @@ class InteractionTracker:
     ) -> tuple[dict[str, int], np.ndarray]:
         """(the codes of this timestep's ids as a dict and as an array): ids of the last timestep with near
         pairs keep their code, the others get a new one (never given before)."""
-        codes = list(map(known.get, ids))
-        if None in codes:
-            for k, code in enumerate(codes):
+        found = list(map(known.get, ids))
+        codes: list[int] = found  # type: ignore[assignment]  # the None among them replaced next
+        if None in found:
+            for k, code in enumerate(found):
                 if code is None:
                     codes[k] = self._next_code
                     self._next_code += 1
@@ -370,7 +371,9 @@ class InteractionTracker:
         metas = [self._meta.pop(slot) for slot in ended.tolist()]
         self._measure(table, starts, stops, metas)
 
-    def _measure(self, table: np.ndarray, starts: list[int], stops: list[int], metas: list) -> None:
+    def _measure(
+        self, table: np.ndarray, starts: list[int], stops: list[int], metas: list[tuple[str, str, str, str]]
+    ) -> None:
         """The rows of interactions stacked one after another (table; interaction k from starts[k] to
         stops[k]): the per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them
         in one call (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
@@ -413,9 +416,13 @@ class InteractionTracker:
                 names[int(own[3, m.min_clearance_step])],
             )
             judged_places = (names[int(own[2, k])], names[int(own[3, k])])
+            vehicle_id, person_id, vehicle_type, person_type = meta
             self.emit(
                 interaction_row(
-                    *meta,
+                    vehicle_id,
+                    person_id,
+                    vehicle_type,
+                    person_type,
                     log,
                     own[:2],
                     m,

@@ -156,11 +156,12 @@ class PlaceFinder:
         # the nearest lane, ties to the smallest id: the least id rank among the lanes at that distance
         rank = np.where(lane_distance == nearest, self._id_rank, len(self._id_rank)).argmin(axis=1)
         answers = []
+        lanes = self._lanes or []
         for k, d in zip(rank.tolist(), nearest[:, 0].tolist()):
             if d == math.inf:
                 answers.append(("", ""))
                 continue
-            lane = self._lanes[k][0]
+            lane = lanes[k][0]
             edge = lane.getEdge()
             answers.append((lane.getID(), edge.getID() if edge.getFunction() == "crossing" else ""))
         return answers
@@ -174,9 +175,12 @@ class PlaceFinder:
         return lane.getID(), edge.getID() if edge.getFunction() == "crossing" else ""
 
 
-def _point_to_segments_m(x_m: float, y_m: float, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+def _point_to_segments_m(
+    x_m: float | np.ndarray, y_m: float | np.ndarray, start: np.ndarray, end: np.ndarray
+) -> np.ndarray:
     """Distance from the point to each segment start[i] -> end[i], m: sumolib's
-    `geomhelper.distancePointToLine` (not perpendicular) operation for operation, so the same floats."""
+    `geomhelper.distancePointToLine` (not perpendicular) operation for operation, so the same floats. With
+    points as a column (arrays of shape (n, 1)): a points x segments table, each element the same float."""
     sx, sy, ex, ey = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
     length = np.sqrt((sx - ex) * (sx - ex) + (sy - ey) * (sy - ey))
     u = (x_m - sx) * (ex - sx) + (y_m - sy) * (ey - sy)

@@ -3,8 +3,8 @@
 - Memory stays flat: the Python memory the tool holds at its peak (tracemalloc) is the same for a file
   ten times longer with the same traffic in it. CSV output, which writes each row as it comes: the
   Parquet writer holds up to one row group (4096 rows) by design, which a short file never fills. The
-  tracker measures the interactions that ended FLUSH_INTERACTIONS at a time: the short file fills two
-  such batches.
+  tracker measures the interactions that have ended a batch at a time (FLUSH_INTERACTIONS): the batch is
+  made small here (8), so that the short file already fills it three times.
 - A real SUMO run of the site's whole demand (routes/, vehicles and persons) with `--fcd-output`: the
   interactions the tool finds are exactly the runs of consecutive timesteps at which a vehicle's centre
   is within the radius of a person, counted here by an independent pass over the file with sumolib's
@@ -25,8 +25,8 @@ import pytest
 import sumolib
 
 from pedsafe_sumo import REPO_ROOT
+from pedsafe_sumo.conflicts import interactions
 from pedsafe_sumo.conflicts.__main__ import main
-from pedsafe_sumo.conflicts.interactions import FLUSH_INTERACTIONS
 from pedsafe_sumo.safety.geometry import rectangle_circle_distance_m
 from pedsafe_sumo.sumo_binaries import sumo_binary
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
@@ -63,8 +63,9 @@ def peak_traced_bytes(fcd: Path, out: Path) -> int:
 
 
 @pytest.mark.slow
-def test_memory_does_not_grow_with_the_length_of_the_file(tmp_path):
-    cycles = 2 * FLUSH_INTERACTIONS
+def test_memory_does_not_grow_with_the_length_of_the_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(interactions, "FLUSH_INTERACTIONS", 8)
+    cycles = 25
     short = write_repeating_fcd(tmp_path / "short.fcd.xml", cycles)
     long = write_repeating_fcd(tmp_path / "long.fcd.xml", 10 * cycles)
     assert main([str(short), "--out", str(tmp_path / "warm.csv"), "--quiet"]) == 0  # imports done untraced
