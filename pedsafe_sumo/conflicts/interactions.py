@@ -220,6 +220,11 @@ class InteractionTracker:
         self._ended_count = 0
         self._ended_rows = 0
 
+    @property
+    def open_interactions(self) -> int:
+        """How many interactions are open (their pair near at the last timestep)."""
+        return len(self._open_keys)
+
     def _codes(
         self, ids: list[str], known: dict[str, int], kind: str, time_s: float
     ) -> tuple[dict[str, int], np.ndarray]:
