@@ -1,8 +1,9 @@
 """Streaming reader of SUMO floating car data (`sumo --fcd-output`), one timestep at a time.
 
-The file is read with `xml.etree.ElementTree.iterparse` and every timestep is dropped from the tree
-once it has been handed on, so memory does not grow with the length of the simulation. `.xml.gz` is
-read through gzip.
+The file is parsed by expat (`xml.parsers.expat`) in chunks, without building an element tree: its
+handlers keep the attributes of the current timestep's road users only, handed on when the timestep's
+end tag is parsed, so memory does not grow with the length of the simulation. `.xml.gz` is read through
+gzip.
 
 What is read, per `<timestep time="..">`:
 - `<vehicle id x y angle type speed [lane] [length] [width]>`: x, y the middle of the front bumper,

@@ -3,8 +3,9 @@
 An interaction of vehicle V and person P is a run of consecutive timesteps at which both are in the file
 and V's footprint centre lies within the interaction radius of P. It ends at the first timestep that
 breaks the run (one of them gone, or apart); if they meet again later, that is a new interaction. Only
-open interactions are held in memory, so memory depends on how many pairs are near each other at once,
-never on the length of the simulation.
+the open interactions and at most a batch of ended ones waiting to be measured (FLUSH_INTERACTIONS,
+FLUSH_ROWS) are held in memory, so memory depends on how many pairs are near each other at once, never
+on the length of the simulation.
 
 The measures of a finished interaction come from `pedsafe_sumo.safety.interaction` (the same functions
 as a batch episode's indexes), on a log built in the contract of `pedsafe_sumo.safety.log`: the vehicle's
