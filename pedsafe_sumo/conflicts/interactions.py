@@ -77,13 +77,14 @@ _VEHICLE_ROW_COLUMNS = [1, 2, 3, 4, 5, 6, 12, 14]
 _PERSON_ROW_COLUMNS = [7, 8, 9, 10, 11, 13, 15]
 
 #: The interactions that have ended are measured together once this many have ended (or at the end of the
-#: file): they share the fixed cost of some hundred numpy operations and of one place lookup over the net.
-#: Stated assumption: a few dozen interactions of a few dozen steps hold some 100 kB, and measuring more
-#: at once saves little more per interaction.
-FLUSH_INTERACTIONS = 64
+#: file): they share the fixed cost of some hundred numpy operations, of one place lookup over the net and
+#: of taking their rows out of the table of held rows. Measured (BENCHMARKS.md, "Pedestrian conflicts: CPU
+#: per interaction"): on Xueqing's FCD 256 costs 4 % less CPU than 64; a batch of a few hundred
+#: interactions of a few dozen steps holds a few MB while it is measured.
+FLUSH_INTERACTIONS = 256
 #: ... or once the ended interactions waiting hold this many rows, so that what waits stays bounded however
-#: long they are (some 500 kB).
-FLUSH_ROWS = 4096
+#: long they are (16 numbers a row: 2 MB).
+FLUSH_ROWS = 16384
 #: The rows of this many timesteps are kept as separate small tables before they are joined into the one
 #: table of all held rows (fewer small arrays held; one join per so many steps).
 CHUNK_STEPS = 32
