@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree
 
-from pedsafe_sumo.conflicts.interactions import (
+from pedsafe_sumo.conflicts.row import (
     BOOL_COLUMNS,
     BOTH_LEFT_CONFLICT_AREA,
     ROW_COLUMNS,
