@@ -231,7 +231,6 @@ def read_fcd(path: str | Path, progress: Callable[[int], None] | None = None) ->
             position = raw.tell()
             for step_attrs, vehicles, persons in done:
                 time_s = _number("timestep", step_attrs, "time", path, last_time_s)
-
                 if time_s <= last_time_s:
                     raise FcdError(f"{path}: timestep time {time_s:g} s does not follow {last_time_s:g} s")
                 last_time_s = time_s

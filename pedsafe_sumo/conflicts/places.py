@@ -133,7 +133,11 @@ class PlaceFinder:
         found: list[tuple[str, str] | None] = [self._found.get((x, y)) for x, y in zip(xs, ys)]
         if self._lanes is None or self._seg_lane is None:  # sumolib's own search, or a lane of one point
             return [known if known is not None else self(x, y) for known, x, y in zip(found, xs, ys)]
-        todo = [k for k, known in enumerate(found) if known is None and math.isfinite(xs[k] + ys[k])]
+        todo = [
+            k
+            for k, known in enumerate(found)
+            if known is None and math.isfinite(xs[k]) and math.isfinite(ys[k])
+        ]
         for first in range(0, len(todo), POINTS_AT_ONCE):
             part = todo[first : first + POINTS_AT_ONCE]
             px, py = np.array([xs[k] for k in part]), np.array([ys[k] for k in part])
