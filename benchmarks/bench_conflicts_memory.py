@@ -40,7 +40,7 @@ def main(fcd: str, out: str, every: int = 400) -> None:
         tracker.step(step)
         if tracker.steps % every == 0:
             print(
-                f"t={step.time_s:6.0f} s  RSS {rss_mb():6.1f} MB  open {len(tracker.open):5d}  "
+                f"t={step.time_s:6.0f} s  RSS {rss_mb():6.1f} MB  open {tracker.open_interactions:5d}  "
                 f"finished {tracker.interactions:6d}  CPU {time.process_time() - started:6.0f} s",
                 flush=True,
             )

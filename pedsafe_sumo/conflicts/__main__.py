@@ -18,8 +18,9 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
-from tqdm import tqdm
+import tomllib
 
 from pedsafe_sumo.cli import OneLineParser, check_range
 from pedsafe_sumo.conflicts.fcd import FcdError, read_fcd
@@ -29,7 +30,7 @@ from pedsafe_sumo.conflicts.places import NetError, PlaceFinder
 from pedsafe_sumo.conflicts.sizes import SizeBook, TypesError
 from pedsafe_sumo.io.outputs import check_output_file
 from pedsafe_sumo.network.sites import SiteError, resolve_site
-from pedsafe_sumo.params import ParameterError, load_params
+from pedsafe_sumo.params import DEFAULTS_PATH, ParameterError, load_params
 from pedsafe_sumo.usage import UsageError
 
 #: Every vehicle-pedestrian pair within the radius is followed step by step: a kilometre is beyond any
@@ -37,6 +38,38 @@ from pedsafe_sumo.usage import UsageError
 MAX_RADIUS_M = 1000.0
 #: A run shorter than this shows no progress bar: a few seconds is when waiting without news starts.
 PROGRESS_DELAY_S = 3.0
+
+
+class _Progress:
+    """The progress bar over the bytes of the file (as stored), on stderr: made, and tqdm imported, only
+    once a run has lasted PROGRESS_DELAY_S (a shorter run, or --quiet, does not pay tqdm's import); its
+    clock starts with the run."""
+
+    def __init__(self, fcd: Path, quiet: bool) -> None:
+        self.fcd, self.quiet = fcd, quiet
+        self.started = time.perf_counter()
+        self.bar: Any = None
+
+    def __call__(self, position: int) -> None:
+        if self.bar is None:
+            if self.quiet or time.perf_counter() - self.started < PROGRESS_DELAY_S:
+                return
+            from tqdm import tqdm  # here, not at the top: see the class docstring
+
+            self.bar = tqdm(
+                total=self.fcd.stat().st_size,
+                unit="B",
+                unit_scale=True,
+                desc=self.fcd.name,
+                mininterval=1.0,
+                file=sys.stderr,
+            )
+            self.bar.start_t -= time.perf_counter() - self.started  # the run began before the bar
+        self.bar.update(position - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -89,6 +122,17 @@ def site_net(net: Path | None, site: str | None) -> Path | None:
         raise UsageError(str(exc)) from None
 
 
+def conflicts_section(params_path: Path | None) -> dict:
+    """The [conflicts] parameters. With a parameter file, the whole file is laid over the defaults and
+    checked as every command checks it (`load_params`). Without one, the defaults' section is read as it
+    stands: the defaults pass those checks (tests/params), and checking them would import the modules
+    of every section (the perception kernels, numba: some 0.3 s of CPU, as much as a short run)."""
+    if params_path is not None:
+        return load_params(params_path)["conflicts"]
+    with open(DEFAULTS_PATH, "rb") as handle:
+        return tomllib.load(handle)["conflicts"]
+
+
 def run(args: argparse.Namespace) -> dict[str, float]:
     if args.out.suffix.lower() not in TABLE_SUFFIXES:
         raise UsageError(f"--out must end in .csv or .parquet, got {args.out}")
@@ -100,7 +144,7 @@ def run(args: argparse.Namespace) -> dict[str, float]:
     if args.ssm is not None:
         check_output_file(args.ssm, "--ssm", UsageError)
     args.net = site_net(args.net, args.site)
-    section = load_params(args.params)["conflicts"]
+    section = conflicts_section(args.params)
     for key, value in section.items():
         if (
             isinstance(value, bool)
@@ -142,26 +186,14 @@ def run(args: argparse.Namespace) -> dict[str, float]:
 
     tracker = InteractionTracker(radius_m, sizes, emit, place, place.meeting if place is not None else None)
     started = time.perf_counter()
-    # Over the bytes of the file (as stored), shown on stderr only once a run has lasted PROGRESS_DELAY_S.
-    bar = tqdm(
-        total=args.fcd.stat().st_size,
-        unit="B",
-        unit_scale=True,
-        desc=args.fcd.name,
-        delay=PROGRESS_DELAY_S,
-        mininterval=1.0,
-        disable=args.quiet,
-        file=sys.stderr,
-    )
-
-    def advance(position: int) -> None:
-        bar.update(position - bar.n)
-
+    progress = _Progress(args.fcd, quiet=args.quiet)
     try:
-        with bar:
-            for step in read_fcd(args.fcd, progress=advance):
+        try:
+            for step in read_fcd(args.fcd, progress=progress):
                 tracker.step(step)
             tracker.finish()
+        finally:
+            progress.close()
     except BaseException:
         table.abort()
         if ssm is not None:

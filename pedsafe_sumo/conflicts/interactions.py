@@ -3,8 +3,9 @@
 An interaction of vehicle V and person P is a run of consecutive timesteps at which both are in the file
 and V's footprint centre lies within the interaction radius of P. It ends at the first timestep that
 breaks the run (one of them gone, or apart); if they meet again later, that is a new interaction. Only
-open interactions are held in memory, so memory depends on how many pairs are near each other at once,
-never on the length of the simulation.
+the open interactions and at most a batch of ended ones waiting to be measured (FLUSH_INTERACTIONS,
+FLUSH_ROWS) are held in memory, so memory depends on how many pairs are near each other at once, never
+on the length of the simulation.
 
 The measures of a finished interaction come from `pedsafe_sumo.safety.interaction` (the same functions
 as a batch episode's indexes), on a log built in the contract of `pedsafe_sumo.safety.log`: the vehicle's
@@ -14,19 +15,16 @@ person's velocity its speed along its angle.
 
 from __future__ import annotations
 
-import math
-from array import array
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from pedsafe_sumo.conflicts.fcd import FcdStep
+from pedsafe_sumo.conflicts.fcd import FcdError, FcdStep
+from pedsafe_sumo.conflicts.row import MeetingLookup, interaction_row, step_turns_rad, turn_degrees
 from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
-from pedsafe_sumo.safety.geometry import first_polyline_crossing
-from pedsafe_sumo.safety.interaction import InteractionMeasures, measures_of_steps, step_measures_of_rows
+from pedsafe_sumo.safety.interaction import measures_of_steps, step_measures_of_rows
 from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
@@ -69,103 +67,44 @@ _STEP_COLUMNS = (
     steplog.PED_RADIUS,
 )
 
-#: Numbers held per step of an open interaction: the log columns and the two FCD speeds.
-_ROW_WIDTH = len(_STEP_COLUMNS) + 2
+#: Numbers held per step of an interaction: the log columns, the vehicle's and the person's FCD speed,
+#: and the codes of the vehicle's lane and the person's edge (InteractionTracker's place names).
+_ROW_WIDTH = len(_STEP_COLUMNS) + 4
+#: Where a pair's row takes its vehicle's numbers (centre x, y, yaw, speed (not below 0), length, width,
+#: FCD speed, lane code) and its person's (x, y, vx, vy, radius, FCD speed, edge code); column 0 is the time.
+_VEHICLE_ROW_COLUMNS = [1, 2, 3, 4, 5, 6, 12, 14]
+_PERSON_ROW_COLUMNS = [7, 8, 9, 10, 11, 13, 15]
 
-#: The output columns, in order (docs/conflicts.md defines each).
-ROW_COLUMNS = (
-    "vehicle_id",
-    "person_id",
-    "vehicle_type",
-    "person_type",
-    "begin_s",
-    "end_s",
-    "time_s",
-    "x_m",
-    "y_m",
-    "vehicle_lane",
-    "person_edge",
-    "lane_id",
-    "crossing_id",
-    "vehicle_speed_mps",
-    "person_speed_mps",
-    "min_clearance_m",
-    "meeting",
-    "collision",
-    "geometry_artefact",
-    "contact_time_s",
-    "ttc_s",
-    "ttc_time_s",
-    "ttc_x_m",
-    "ttc_y_m",
-    "ttc_speed_mps",
-    "pet_s",
-    "pet_time_s",
-    "pet_x_m",
-    "pet_y_m",
-    "pet_speed_mps",
-    "drac_mps2",
-    "drac_time_s",
-    "drac_x_m",
-    "drac_y_m",
-    "drac_speed_mps",
-    "encounter_type",
-    "md_m",
-    "tmd_s",
-    "cs_mps",
-    "conflict_probability",
-    "conflict",
-    "conflict_time_s",
-    "fcd_period_s",
-    "vehicle_turn_deg",
-    "uncertain",
-)
-STRING_COLUMNS = (
-    "vehicle_id",
-    "person_id",
-    "vehicle_type",
-    "person_type",
-    "vehicle_lane",
-    "person_edge",
-    "lane_id",
-    "crossing_id",
-    "meeting",
-)
-BOOL_COLUMNS = ("collision", "geometry_artefact", "conflict", "uncertain")
-
-#: Above this FCD period the measures that extrapolate at constant velocity (TTC, DRAC, the Amini
-#: conflict) are not trusted for a turning vehicle. Stated assumption: a car at 14 m/s on a 10 m turning
-#: radius drifts d^2 / (2 R) from its path when extrapolated straight over d: 0.39 m after 0.2 s, under
-#: half a car width (0.9 m), but 9.8 m after 1 s.
-COARSE_PERIOD_S = 0.2
-#: A vehicle whose heading changes by more than this over the interaction is turning (stated
-#: assumption: lane changes and curve-following of a straight road stay below it).
-TURN_DEG = 10.0
-
-
-@dataclass
-class _Open:
-    """An open interaction: its per-step values so far."""
-
-    vehicle_type: str
-    person_type: str
-    #: per step, flat: the log columns (_STEP_COLUMNS), then the vehicle's and the person's FCD speed
-    values: array = field(default_factory=lambda: array("d"))
-    #: per step: the vehicle's lane and the person's edge from the FCD
-    places: list[tuple[str, str]] = field(default_factory=list)
-
+#: The interactions that have ended are measured together once this many have ended (or at the end of the
+#: file): they share the fixed cost of some hundred numpy operations, of one place lookup over the net and
+#: of taking their rows out of the table of held rows. Measured (BENCHMARKS.md, "Pedestrian conflicts: CPU
+#: per interaction"): on Xueqing's FCD 256 costs 4 % less CPU than 64; a batch of a few hundred
+#: interactions of a few dozen steps holds a few MB while it is measured.
+FLUSH_INTERACTIONS = 256
+#: ... or once the ended interactions waiting hold this many rows, so that what waits stays bounded however
+#: long they are (16 numbers a row: 2 MB).
+FLUSH_ROWS = 16384
+#: The rows of this many timesteps are kept as separate small tables before they are joined into the one
+#: table of all held rows (fewer small arrays held; one join per so many steps).
+CHUNK_STEPS = 32
 
 #: Finds the lane and the crossing at a point: (x_m, y_m) -> (lane_id, crossing_id); "" where none.
+#: An object with a `many(x_m, y_m)` method (arrays -> a list of such pairs) is asked for all the
+#: interactions measured together at once (`pedsafe_sumo.conflicts.places.PlaceFinder`).
 PlaceLookup = Callable[[float, float], tuple[str, str]]
-#: Whether the network lets them meet: (vehicle lane, person edge) -> (kind of place, True / False / None
-#: for not known), `pedsafe_sumo.conflicts.meeting.MeetingRules`.
-MeetingLookup = Callable[[str, str], tuple[str, "bool | None"]]
 
 
 class InteractionTracker:
-    """Feed it FCD timesteps in order; it calls `emit(row)` for every interaction as it ends.
+    """Feed it FCD timesteps in order; it calls `emit(row)` for every interaction, in the order the
+    interactions end (those ending at one timestep in the order they began), some timesteps after it ends:
+    the ended interactions are measured together (FLUSH_INTERACTIONS, FLUSH_ROWS).
 
-    `finish()` ends the interactions still open at the end of the file.
+    `finish()` ends the interactions still open at the end of the file and measures all that are left.
+
+    The rows of all interactions are held in one table, each row tagged with its interaction's number
+    (its slot: numbered in the order the interactions began). A vehicle and a person get an integer code
+    while they are in the file; a pair's key is the two codes, and the open pairs are found among a
+    timestep's near pairs by a sorted search, not pair by pair.
     """
 
     def __init__(
@@ -181,20 +120,67 @@ class InteractionTracker:
         self.emit = emit
         self.place = place
         self.meeting = meeting
-        self.open: dict[tuple[str, str], _Open] = {}
-        #: the interactions that ended at this timestep, measured together (`_flush`)
-        self.closed: list[tuple[tuple[str, str], _Open]] = []
         self.steps = 0
         self.vehicle_rows = 0
         self.person_rows = 0
         self.interactions = 0
+        #: codes of the vehicles and persons of the last timestep with near pairs (codes start at 1)
+        self._vehicle_codes: dict[str, int] = {}
+        self._person_codes: dict[str, int] = {}
+        self._next_code = 1
+        #: lane and edge names -> their codes in the rows (the names of the network or of the file)
+        self._place_codes: dict[str, int] = {}
+        #: keys (vehicle code << 32 | person code) of the open interactions, sorted, and their slots
+        self._open_keys = np.empty(0, dtype=np.int64)
+        self._open_slots = np.empty(0, dtype=np.int64)
+        #: how many steps each open interaction has so far (aligned with _open_keys)
+        self._open_steps = np.empty(0, dtype=np.int64)
+        self._next_slot = 0
+        #: slot -> (vehicle id, person id, vehicle type, person type) of the interactions not yet measured
+        self._meta: dict[int, tuple[str, str, str, str]] = {}
+        #: the held rows (all steps of the open interactions and of the ended ones not yet measured)
+        self._rows = np.empty((0, _ROW_WIDTH))
+        self._slots = np.empty(0, dtype=np.int64)
+        self._chunks: list[tuple[np.ndarray, np.ndarray]] = []
+        #: slots of the interactions that ended and wait to be measured, in the order they ended
+        self._ended: list[np.ndarray] = []
+        self._ended_count = 0
+        self._ended_rows = 0
+
+    @property
+    def open_interactions(self) -> int:
+        """How many interactions are open (their pair near at the last timestep)."""
+        return len(self._open_keys)
+
+    def _codes(
+        self, ids: list[str], known: dict[str, int], kind: str, time_s: float
+    ) -> tuple[dict[str, int], np.ndarray]:
+        """(the codes of this timestep's ids as a dict and as an array): ids of the last timestep with near
+        pairs keep their code, the others get a new one (never given before)."""
+        found = list(map(known.get, ids))
+        codes: list[int] = found  # type: ignore[assignment]  # the None among them replaced next
+        if None in found:
+            for k, code in enumerate(found):
+                if code is None:
+                    codes[k] = self._next_code
+                    self._next_code += 1
+        present = dict(zip(ids, codes))
+        if len(present) != len(ids):
+            seen: set[str] = set()
+            twice = next(i for i in ids if i in seen or seen.add(i))  # type: ignore[func-returns-value]
+            raise FcdError(f"{kind} '{twice}' appears more than once at t={time_s:g} s")
+        return present, np.array(codes, dtype=np.int64)
+
+    def _place_code_array(self, places: list[str]) -> np.ndarray:
+        known = self._place_codes
+        return np.array([known.setdefault(name, len(known)) for name in places], dtype=float)
 
     def step(self, step: FcdStep) -> None:
         self.steps += 1
         vehicles, persons = step.vehicles, step.persons
         self.vehicle_rows += len(vehicles)
         self.person_rows += len(persons)
-        near: set[tuple[str, str]] = set()
+        keys = slots = counts = np.empty(0, dtype=np.int64)
         if len(vehicles) and len(persons):
             length, width = self.sizes.vehicle_sizes(vehicles.types, vehicles.length_m, vehicles.width_m)
             yaw = sumo_angle_to_yaw_rad(vehicles.angle_deg)
@@ -203,225 +189,179 @@ class InteractionTracker:
             p_yaw = sumo_angle_to_yaw_rad(persons.angle_deg)
             pvx, pvy = persons.speed_mps * np.cos(p_yaw), persons.speed_mps * np.sin(p_yaw)
             vi, pj = pairs_within(cx, cy, persons.x_m, persons.y_m, self.radius_m)
-            rows = np.column_stack(
-                (
-                    np.full(len(vi), step.time_s),
-                    cx[vi],
-                    cy[vi],
-                    yaw[vi],
-                    np.maximum(vehicles.speed_mps[vi], 0.0),
-                    length[vi],
-                    width[vi],
-                    persons.x_m[pj],
-                    persons.y_m[pj],
-                    pvx[pj],
-                    pvy[pj],
-                    radius[pj],
-                    vehicles.speed_mps[vi],
-                    persons.speed_mps[pj],
+            if len(vi):
+                time_s = step.time_s
+                self._vehicle_codes, v_codes = self._codes(
+                    vehicles.ids, self._vehicle_codes, "vehicle", time_s
                 )
-            )
-            # Each pair's row appended as its 8-byte doubles (no Python float per number); the pairs'
-            # keys and places gathered by whole lists first (fewer Python steps per pair).
-            raw, width = memoryview(rows.tobytes()), 8 * _ROW_WIDTH
-            v_list, p_list = vi.tolist(), pj.tolist()
-            keys = list(zip(map(vehicles.ids.__getitem__, v_list), map(persons.ids.__getitem__, p_list)))
-            places = zip(map(vehicles.places.__getitem__, v_list), map(persons.places.__getitem__, p_list))
-            near = set(keys)
-            open_records, start = self.open, 0
-            for key, place, i, j in zip(keys, places, v_list, p_list):
-                record = open_records.get(key)
-                if record is None:
-                    record = open_records[key] = _Open(vehicles.types[i], persons.types[j])
-                record.values.frombytes(raw[start : start + width])
-                record.places.append(place)
-                start += width
-        for key in [k for k in self.open if k not in near]:
-            self.closed.append((key, self.open.pop(key)))
-        self._flush()
+                self._person_codes, p_codes = self._codes(persons.ids, self._person_codes, "person", time_s)
+                keys = (v_codes[vi] << 32) | p_codes[pj]
+                vehicle_columns = np.column_stack(
+                    (
+                        cx,
+                        cy,
+                        yaw,
+                        np.maximum(vehicles.speed_mps, 0.0),
+                        length,
+                        width,
+                        vehicles.speed_mps,
+                        self._place_code_array(vehicles.places),
+                    )
+                )
+                person_columns = np.column_stack(
+                    (
+                        persons.x_m,
+                        persons.y_m,
+                        pvx,
+                        pvy,
+                        radius,
+                        persons.speed_mps,
+                        self._place_code_array(persons.places),
+                    )
+                )
+                rows = np.empty((len(vi), _ROW_WIDTH))
+                rows[:, 0] = time_s
+                rows[:, _VEHICLE_ROW_COLUMNS] = vehicle_columns[vi]
+                rows[:, _PERSON_ROW_COLUMNS] = person_columns[pj]
+                slots, counts = self._slots_of(keys, vi, pj, vehicles, persons)
+                self._chunks.append((rows, slots))
+                if len(self._chunks) >= CHUNK_STEPS:
+                    self._join_chunks()
+        order = np.argsort(keys)
+        sorted_keys = keys[order]
+        if len(self._open_keys):
+            # the open interactions whose pair is not near at this timestep end here, in slot order
+            still = np.zeros(len(self._open_keys), dtype=bool)
+            if len(keys):
+                at = np.minimum(np.searchsorted(sorted_keys, self._open_keys), len(keys) - 1)
+                still = sorted_keys[at] == self._open_keys
+            self._end(self._open_slots[~still], self._open_steps[~still])
+        self._open_keys, self._open_slots, self._open_steps = sorted_keys, slots[order], counts[order]
+        if self._ended_count >= FLUSH_INTERACTIONS or self._ended_rows >= FLUSH_ROWS:
+            self._flush()
+
+    def _slots_of(
+        self, keys: np.ndarray, vi: np.ndarray, pj: np.ndarray, vehicles, persons
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(the slot of each near pair: its open interaction's, or a new one numbered in pair order; how
+        many steps its interaction has with this one)."""
+        slots = np.empty(len(keys), dtype=np.int64)
+        counts = np.ones(len(keys), dtype=np.int64)
+        found = np.zeros(len(keys), dtype=bool)
+        if len(self._open_keys):
+            at = np.minimum(np.searchsorted(self._open_keys, keys), len(self._open_keys) - 1)
+            found = self._open_keys[at] == keys
+            slots[found] = self._open_slots[at[found]]
+            counts[found] += self._open_steps[at[found]]
+        new = np.flatnonzero(~found)
+        if len(new):
+            first = self._next_slot
+            self._next_slot += len(new)
+            slots[new] = np.arange(first, self._next_slot)
+            for slot, i, j in zip(range(first, self._next_slot), vi[new].tolist(), pj[new].tolist()):
+                self._meta[slot] = (vehicles.ids[i], persons.ids[j], vehicles.types[i], persons.types[j])
+        return slots, counts
+
+    def _end(self, slots: np.ndarray, steps: np.ndarray) -> None:
+        """The interactions of `slots` (with so many steps each) end: queued in slot order."""
+        if len(slots):
+            self._ended.append(np.sort(slots))
+            self._ended_count += len(slots)
+            self._ended_rows += int(steps.sum())
+
+    def _join_chunks(self) -> None:
+        if self._chunks:
+            self._rows = np.concatenate([self._rows, *(rows for rows, _ in self._chunks)])
+            self._slots = np.concatenate([self._slots, *(slots for _, slots in self._chunks)])
+            self._chunks = []
 
     def finish(self) -> None:
-        self.closed.extend(self.open.items())
-        self.open.clear()
+        self._end(self._open_slots, self._open_steps)
+        self._open_keys = self._open_slots = self._open_steps = np.empty(0, dtype=np.int64)
         self._flush()
 
     def _flush(self) -> None:
-        """Measure and emit the interactions that ended at this timestep, in the order they ended: the
-        per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them in one call
-        (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
-        operations) they share; the reductions and the row interaction by interaction. Nothing is held
-        from one timestep to the next but the open interactions."""
-        if not self.closed:
+        """Measure and emit the interactions that have ended, in the order they ended: their rows taken
+        out of the held table and stacked interaction after interaction (`_measure`)."""
+        if not self._ended:
             return
-        tables = [
-            np.frombuffer(record.values, dtype=float).reshape(-1, _ROW_WIDTH) for _, record in self.closed
-        ]
-        stops = np.cumsum([len(table) for table in tables]).tolist()
+        ended = np.concatenate(self._ended)
+        self._ended, self._ended_count, self._ended_rows = [], 0, 0
+        self._join_chunks()
+        # each held row's rank among the ended interactions (in the order they ended), if it is of one
+        by_slot = np.argsort(ended)
+        sorted_ended = ended[by_slot]
+        at = np.minimum(np.searchsorted(sorted_ended, self._slots), len(ended) - 1)
+        of_ended = sorted_ended[at] == self._slots
+        rank = by_slot[at]
+        taken = np.flatnonzero(of_ended)
+        taken = taken[np.argsort(rank[taken], kind="stable")]  # stable: each one's steps stay in order
+        table = self._rows[taken]
+        self._rows, self._slots = self._rows[~of_ended], self._slots[~of_ended]
+        stops = np.cumsum(np.bincount(rank[of_ended], minlength=len(ended))).tolist()
         starts = [0, *stops[:-1]]
+        metas = [self._meta.pop(slot) for slot in ended.tolist()]
+        self._measure(table, starts, stops, metas)
+
+    def _measure(
+        self, table: np.ndarray, starts: list[int], stops: list[int], metas: list[tuple[str, str, str, str]]
+    ) -> None:
+        """The rows of interactions stacked one after another (table; interaction k from starts[k] to
+        stops[k]): the per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them
+        in one call (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
+        operations) they share; the reductions interaction by interaction; the places in one lookup."""
         # one contiguous array per column: the element-wise measures run faster on it than on strides
-        stacked = np.ascontiguousarray(np.concatenate(tables).T)
+        stacked = np.ascontiguousarray(table.T)
         columns = {name: stacked[k] for k, name in enumerate(_STEP_COLUMNS)}
         if not steplog.logs_pass(columns, starts):
-            for table in tables:  # raises the contract's message for the first log that breaks it
-                kinematic_arrays({name: table[:, k] for k, name in enumerate(_STEP_COLUMNS)})
+            for start, stop in zip(starts, stops):  # raises the contract's message for the first that fails
+                kinematic_arrays({name: values[start:stop] for name, values in columns.items()})
         steps = step_measures_of_rows(columns)
-        turns = _step_turns_rad(columns[steplog.EGO_YAW])
-        for (key, record), start, stop in zip(self.closed, starts, stops):
+        logs = [
+            {name: values[start:stop] for name, values in columns.items()}
+            for start, stop in zip(starts, stops)
+        ]
+        measures = [
+            measures_of_steps(log, steps.part(start, stop)) for log, start, stop in zip(logs, starts, stops)
+        ]
+        turns_deg = turn_degrees(step_turns_rad(columns[steplog.EGO_YAW]), starts, stops)
+        # the place of each interaction: where the person was at the minimum clearance
+        at_min = np.array([start + m.min_clearance_step for start, m in zip(starts, measures)], dtype=np.intp)
+        px, py = columns[steplog.PED_X][at_min], columns[steplog.PED_Y][at_min]
+        if self.place is None:
+            found = [("", "")] * len(measures)
+        elif hasattr(self.place, "many"):
+            found = self.place.many(px, py)
+        else:
+            found = [self.place(x, y) for x, y in zip(px.tolist(), py.tolist())]
+        names = list(self._place_codes)
+        extra = stacked[len(_STEP_COLUMNS) :]
+        for meta, log, start, stop, m, turn_deg, lane_crossing in zip(
+            metas, logs, starts, stops, measures, turns_deg, found
+        ):
             self.interactions += 1
-            log = {name: values[start:stop] for name, values in columns.items()}
-            speeds = stacked[len(_STEP_COLUMNS) :, start:stop]
-            m = measures_of_steps(log, steps.part(start, stop))
-            row = interaction_row(
-                key[0], key[1], record, log, speeds, m, turns[start : stop - 1], self.place, self.meeting
+            own = extra[:, start:stop]
+            k = m.contact_step if m.contact_step is not None else m.min_clearance_step
+            # the FCD's vehicle lane and person edge at the minimum clearance and at the judged step
+            at_min_places = (
+                names[int(own[2, m.min_clearance_step])],
+                names[int(own[3, m.min_clearance_step])],
             )
-            self.emit(row)
-        self.closed = []
-
-
-#: SUMO's SSM encounter type codes (SSM device documentation, "Encounter types") used for a vehicle and
-#: a person: the vehicle comes up behind a person on its own path (no crossing of the two paths).
-FOLLOWING_FOLLOWER = 2
-#: The two centre paths cross and the vehicle reaches the crossing point first.
-CROSSING_LEADER = 10
-#: The two centre paths cross and the person reaches the crossing point first.
-CROSSING_FOLLOWER = 11
-#: The type SUMO gives a PET: both have passed the conflict area.
-BOTH_LEFT_CONFLICT_AREA = 17
-
-
-def _nearest_step(x_m: np.ndarray, y_m: np.ndarray, point: tuple[float, float]) -> int:
-    """The first step at which the track (x_m, y_m) is nearest to `point`."""
-    return int(np.argmin(np.hypot(x_m - point[0], y_m - point[1])))
-
-
-def _step_turns_rad(yaw_rad: np.ndarray) -> np.ndarray:
-    """The heading's change from each step to the next, taken the short way round (crossing +-180 deg is
-    no turn), rad. Element by element: over the steps of many interactions stacked, each interaction's
-    turns are its own slice (one fewer than its steps)."""
-    return (np.diff(yaw_rad) + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def _turn_deg(step_turns_rad: np.ndarray) -> float:
-    """How far the heading ranges over the steps, deg: the spread of the summed step-to-step turns
-    (`_step_turns_rad`), the heading at the first step counting as 0."""
-    if len(step_turns_rad) == 0:
-        return 0.0
-    heading = np.cumsum(step_turns_rad)
-    return math.degrees(float(max(0.0, float(heading.max())) - min(0.0, float(heading.min()))))
-
-
-def _encounter_type(ex, ey, px, py, path_crossing: tuple[float, float] | None) -> int:
-    """SUMO's encounter type of the interaction's TTC and DRAC: who reaches the crossing of the two
-    centre paths first, or FOLLOWING_FOLLOWER when the paths do not cross (the person on the car's path)."""
-    if path_crossing is None:
-        return FOLLOWING_FOLLOWER
-    vehicle_first = _nearest_step(ex, ey, path_crossing) <= _nearest_step(px, py, path_crossing)
-    return CROSSING_LEADER if vehicle_first else CROSSING_FOLLOWER
-
-
-def interaction_row(
-    vehicle_id: str,
-    person_id: str,
-    record: _Open,
-    log: dict[str, np.ndarray],
-    speeds: np.ndarray,
-    m: InteractionMeasures,
-    step_turns_rad: np.ndarray,
-    place: PlaceLookup | None,
-    meeting: MeetingLookup | None = None,
-) -> dict[str, Any]:
-    """The output row of one finished interaction (ROW_COLUMNS): its log (_STEP_COLUMNS), its vehicle's
-    and person's FCD speeds (two rows), its measures (`measures_of_steps`) and its vehicle's turns from
-    step to step (`_step_turns_rad`)."""
-    t = log[steplog.TIME]
-    k = m.min_clearance_step
-    x_m, y_m = float(log[steplog.PED_X][k]), float(log[steplog.PED_Y][k])
-    lane_id, crossing_id = place(x_m, y_m) if place is not None else ("", "")
-    vehicle_speed, person_speed = speeds[0], speeds[1]
-    ex, ey, px, py = log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
-    drac_step = m.drac_step
-    # Where the centre paths cross: the PET's point without a contact and the encounter type of a TTC or
-    # DRAC. The measures found it without a contact; with one it is sought only for a TTC or DRAC.
-    path_crossing = m.path_crossing
-    if m.collision and (m.ttc_step is not None or drac_step is not None):
-        path_crossing = first_polyline_crossing(ex, ey, px, py)
-    # The encroachment point: where the two met for a contact, else where the centre paths cross.
-    point: tuple[float, float] | None
-    if m.collision:
-        point = (float(px[m.contact_step]), float(py[m.contact_step]))
-    else:
-        point = path_crossing if math.isfinite(m.pet_s) else None
-    pet_step = None
-    if m.collision:
-        pet_step = m.contact_step
-    elif point is not None:
-        pet_step = max(_nearest_step(ex, ey, point), _nearest_step(px, py, point))
-    # Judged where they touched first, else at the minimum clearance: a contact is a collision only where
-    # the network lets the two meet (docs/conflicts.md, "Where vehicles and persons meet").
-    judged = m.contact_step if m.contact_step is not None else k
-    meeting_kind, may_meet = meeting(*record.places[judged]) if meeting is not None else ("", None)
-    # On coarse FCD a turning vehicle extrapolated straight makes conflicts that are not there: flagged.
-    period_s = float(t[-1] - t[0]) / (len(t) - 1) if len(t) > 1 else math.nan
-    turn_deg = _turn_deg(step_turns_rad)
-    extrapolated = m.conflict or math.isfinite(m.ttc_s)
-    uncertain = bool(not m.collision and extrapolated and period_s > COARSE_PERIOD_S and turn_deg > TURN_DEG)
-    encounter_type = math.nan
-    if m.ttc_step is not None or drac_step is not None:
-        encounter_type = float(_encounter_type(ex, ey, px, py, path_crossing))
-
-    def at(step: int | None) -> float:
-        return float(t[step]) if step is not None else math.nan
-
-    def speed_at(step: int | None) -> float:
-        return float(vehicle_speed[step]) if step is not None else math.nan
-
-    def person_at(step: int | None) -> tuple[float, float]:
-        return (float(px[step]), float(py[step])) if step is not None else (math.nan, math.nan)
-
-    return {
-        "vehicle_id": vehicle_id,
-        "person_id": person_id,
-        "vehicle_type": record.vehicle_type,
-        "person_type": record.person_type,
-        "begin_s": float(t[0]),
-        "end_s": float(t[-1]),
-        "time_s": float(t[k]),
-        "x_m": x_m,
-        "y_m": y_m,
-        "vehicle_lane": record.places[k][0],
-        "person_edge": record.places[k][1],
-        "lane_id": lane_id,
-        "crossing_id": crossing_id,
-        "vehicle_speed_mps": float(vehicle_speed[k]),
-        "person_speed_mps": float(person_speed[k]),
-        "min_clearance_m": m.min_clearance_m,
-        "meeting": meeting_kind,
-        "collision": m.collision and may_meet is not False,
-        "geometry_artefact": m.collision and may_meet is False,
-        "contact_time_s": at(m.contact_step),
-        "ttc_s": m.ttc_s,
-        "ttc_time_s": at(m.ttc_step),
-        "ttc_x_m": person_at(m.ttc_step)[0],
-        "ttc_y_m": person_at(m.ttc_step)[1],
-        "ttc_speed_mps": speed_at(m.ttc_step),
-        "pet_s": m.pet_s,
-        "pet_time_s": at(pet_step),
-        "pet_x_m": point[0] if point is not None else math.nan,
-        "pet_y_m": point[1] if point is not None else math.nan,
-        "pet_speed_mps": speed_at(pet_step),
-        "drac_mps2": m.drac_mps2,
-        "drac_time_s": at(drac_step),
-        "drac_x_m": person_at(drac_step)[0],
-        "drac_y_m": person_at(drac_step)[1],
-        "drac_speed_mps": speed_at(drac_step),
-        "encounter_type": encounter_type,
-        "md_m": m.md_m,
-        "tmd_s": m.tmd_s,
-        "cs_mps": m.cs_mps,
-        "conflict_probability": m.conflict_probability,
-        "conflict": m.conflict,
-        "conflict_time_s": at(m.conflict_step),
-        "fcd_period_s": period_s,
-        "vehicle_turn_deg": turn_deg,
-        "uncertain": uncertain,
-    }
+            judged_places = (names[int(own[2, k])], names[int(own[3, k])])
+            vehicle_id, person_id, vehicle_type, person_type = meta
+            self.emit(
+                interaction_row(
+                    vehicle_id,
+                    person_id,
+                    vehicle_type,
+                    person_type,
+                    log,
+                    own[:2],
+                    m,
+                    turn_deg,
+                    lane_crossing,
+                    at_min_places,
+                    judged_places,
+                    self.meeting,
+                )
+            )

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree
 
-from pedsafe_sumo.conflicts.interactions import (
+from pedsafe_sumo.conflicts.row import (
     BOOL_COLUMNS,
     BOTH_LEFT_CONFLICT_AREA,
     ROW_COLUMNS,
@@ -93,9 +93,9 @@ class TableWriter(_Staged):
     def write(self, row: dict[str, Any]) -> None:
         self.rows += 1
         if self._csv_handle is not None:
-            # the values in ROW_COLUMNS' order (a row holds exactly those keys), NaN as an empty field
-            values = [row[k] for k in ROW_COLUMNS]
-            self._csv.writerow(["" if isinstance(v, float) and math.isnan(v) else v for v in values])
+            # the values in ROW_COLUMNS' order (a row holds exactly those keys), NaN as an empty field: the
+            # values are str, bool and float, and only a NaN differs from itself
+            self._csv.writerow(["" if v != v else v for v in map(row.__getitem__, ROW_COLUMNS)])
             return
         self._buffer.append(row)
         if len(self._buffer) >= ROW_GROUP_ROWS:

@@ -16,6 +16,9 @@ SEARCH_RADIUS_M = 5.0
 #: Points whose lane is remembered (exact coordinates); the memory is emptied when full. Stated
 #: assumption: a few thousand waiting places cover a district, at some 200 bytes each.
 FOUND_POINTS = 4096
+#: Points looked up together by `PlaceFinder.many`: a points x segments table of a few MB at most
+#: (Xueqing: 496 segments; the course block: 699).
+POINTS_AT_ONCE = 128
 
 
 class NetError(ValueError):
@@ -77,6 +80,10 @@ class PlaceFinder:
         self._seg_start = np.array(starts, dtype=float).reshape(-1, 2)
         self._seg_end = np.array(ends, dtype=float).reshape(-1, 2)
         self._seg_lane = np.array(owner, dtype=int)
+        # where each lane's segments begin (every lane has one at least), and each lane's place in id order
+        self._lane_first_segment = np.flatnonzero(np.r_[True, self._seg_lane[1:] != self._seg_lane[:-1]])
+        ids = [lane.getID() for lane, _ in self._lanes or []]
+        self._id_rank = np.argsort(np.argsort(np.array(ids, dtype=object), kind="stable"), kind="stable")
 
     def _neighbouring_lanes(self, x_m: float, y_m: float) -> list:
         """(lane, distance) of the lanes closer than SEARCH_RADIUS_M, as sumolib's getNeighboringLanes
@@ -118,6 +125,51 @@ class PlaceFinder:
         self._found[(x_m, y_m)] = found
         return found
 
+    def many(self, x_m: np.ndarray, y_m: np.ndarray) -> list[tuple[str, str]]:
+        """`finder(x, y)` of many points: the distances of all of them to all lanes' segments in a few
+        numpy calls over a points x segments table (POINTS_AT_ONCE points at a time), element for element
+        the floats of the lookup of one point."""
+        xs, ys = np.asarray(x_m, dtype=float).tolist(), np.asarray(y_m, dtype=float).tolist()
+        found: list[tuple[str, str] | None] = [self._found.get((x, y)) for x, y in zip(xs, ys)]
+        if self._lanes is None or self._seg_lane is None:  # sumolib's own search, or a lane of one point
+            return [known if known is not None else self(x, y) for known, x, y in zip(found, xs, ys)]
+        todo = [
+            k
+            for k, known in enumerate(found)
+            if known is None and math.isfinite(xs[k]) and math.isfinite(ys[k])
+        ]
+        for first in range(0, len(todo), POINTS_AT_ONCE):
+            part = todo[first : first + POINTS_AT_ONCE]
+            px, py = np.array([xs[k] for k in part]), np.array([ys[k] for k in part])
+            for k, answer in zip(part, self._nearest_lanes(px, py)):
+                if len(self._found) >= FOUND_POINTS:
+                    self._found.clear()
+                found[k] = self._found[(xs[k], ys[k])] = answer
+        return [known if known is not None else ("", "") for known in found]
+
+    def _nearest_lanes(self, px: np.ndarray, py: np.ndarray) -> list[tuple[str, str]]:
+        """(lane, crossing) of each point from the distances to every segment (`_neighbouring_lanes` and
+        `_find` for many points: a lane outside a point's widened box is left out as there)."""
+        x, y = px[:, None], py[:, None]
+        distance = _point_to_segments_m(x, y, self._seg_start, self._seg_end)  # points x segments
+        lane_distance = np.minimum.reduceat(distance, self._lane_first_segment, axis=1)  # points x lanes
+        b = self._boxes
+        in_box = (b[:, 0] <= x) & (x <= b[:, 2]) & (b[:, 1] <= y) & (y <= b[:, 3])
+        lane_distance = np.where(in_box & (lane_distance < SEARCH_RADIUS_M), lane_distance, np.inf)
+        nearest = lane_distance.min(axis=1, keepdims=True)
+        # the nearest lane, ties to the smallest id: the least id rank among the lanes at that distance
+        rank = np.where(lane_distance == nearest, self._id_rank, len(self._id_rank)).argmin(axis=1)
+        answers = []
+        lanes = self._lanes or []
+        for k, d in zip(rank.tolist(), nearest[:, 0].tolist()):
+            if d == math.inf:
+                answers.append(("", ""))
+                continue
+            lane = lanes[k][0]
+            edge = lane.getEdge()
+            answers.append((lane.getID(), edge.getID() if edge.getFunction() == "crossing" else ""))
+        return answers
+
     def _find(self, x_m: float, y_m: float) -> tuple[str, str]:
         lanes = self._neighbouring_lanes(x_m, y_m)
         if not lanes:
@@ -127,9 +179,12 @@ class PlaceFinder:
         return lane.getID(), edge.getID() if edge.getFunction() == "crossing" else ""
 
 
-def _point_to_segments_m(x_m: float, y_m: float, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+def _point_to_segments_m(
+    x_m: float | np.ndarray, y_m: float | np.ndarray, start: np.ndarray, end: np.ndarray
+) -> np.ndarray:
     """Distance from the point to each segment start[i] -> end[i], m: sumolib's
-    `geomhelper.distancePointToLine` (not perpendicular) operation for operation, so the same floats."""
+    `geomhelper.distancePointToLine` (not perpendicular) operation for operation, so the same floats. With
+    points as a column (arrays of shape (n, 1)): a points x segments table, each element the same float."""
     sx, sy, ex, ey = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
     length = np.sqrt((sx - ex) * (sx - ex) + (sy - ey) * (sy - ey))
     u = (x_m - sx) * (ex - sx) + (y_m - sy) * (ey - sy)

@@ -40,7 +40,7 @@ import sumolib.xml
 from fcd_files import TYPES_XML, stander, walker, write_fcd
 
 from pedsafe_sumo.conflicts.__main__ import main
-from pedsafe_sumo.conflicts.interactions import ROW_COLUMNS
+from pedsafe_sumo.conflicts.row import ROW_COLUMNS
 
 
 def sigmoid(z: float) -> float:

@@ -79,3 +79,23 @@ def test_lane_distances_are_sumolibs_own_floats():
         assert found == expected
         compared += len(found)
     assert compared > 200
+
+
+def test_many_points_at_once_give_the_answers_of_one_at_a_time():
+    """`many` measures all points against all segments in one table: each answer must be the one point's
+    own, with the same tie rule (nearest, then smallest lane id) and the same empty answers."""
+    finder = PlaceFinder(NET)
+    rng = np.random.default_rng(7)
+    lanes = [lane for edge in finder.net.getEdges(withInternal=True) for lane in edge.getLanes()]
+    points = []
+    for _ in range(300):  # near lane vertices (where lanes meet, ties of distance are likely), and off them
+        x, y = lanes[rng.integers(len(lanes))].getShape(True)[rng.integers(2)][:2]
+        points.append((x + rng.choice([0.0, rng.uniform(-7, 7)]), y + rng.choice([0.0, rng.uniform(-7, 7)])))
+    (x0, y0), (x1, y1) = finder.net.getBBoxXY()
+    points += [(rng.uniform(x0, x1), rng.uniform(y0, y1)) for _ in range(100)]
+    points += [(float("nan"), 0.0), points[0], points[0]]
+    one_at_a_time = [PlaceFinder(NET)(x, y) for x, y in points]
+    xs, ys = np.array([p[0] for p in points]), np.array([p[1] for p in points])
+    assert finder.many(xs, ys) == one_at_a_time
+    assert finder.many(xs, ys) == one_at_a_time  # the second time from the memory of found points
+    assert any(crossing for _, crossing in one_at_a_time) and ("", "") in one_at_a_time

@@ -9,8 +9,8 @@ from xml.etree import ElementTree
 
 import sumolib.xml
 
-from pedsafe_sumo.conflicts.interactions import BOOL_COLUMNS, ROW_COLUMNS, STRING_COLUMNS
 from pedsafe_sumo.conflicts.output import SsmWriter
+from pedsafe_sumo.conflicts.row import BOOL_COLUMNS, ROW_COLUMNS, STRING_COLUMNS
 from pedsafe_sumo.replay.fcd import PersonState, Timestep, VehicleState, write_fcd
 
 OSM = (
