@@ -20,7 +20,12 @@ def test_defaults_hold_the_issue_numbers(params):
     assert (lid["channels"], lid["elevation_min_deg"], lid["elevation_max_deg"]) == (32, -25, 15)
     assert (lid["horizontal_resolution_deg"], lid["range_m"], lid["min_returns"]) == (0.2, 100, 5)
     assert lid["cluster_tolerance_m"] == 0.5
-    assert p["v2i"] == {"latency_s": 0.1, "packet_loss_probability": 0.01, "position_noise_sigma_m": 0.2}
+    assert p["v2i"] == {
+        "latency_s": 0.1,
+        "packet_loss_probability": 0.01,
+        "position_noise_sigma_m": 0.2,
+        "signal_source": "fresher",
+    }
     assert p["roadside_camera"]["default_height_m"] == 6.0 and p["roadside_camera"]["hfov_deg"] == 90
 
 

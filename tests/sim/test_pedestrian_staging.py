@@ -243,8 +243,11 @@ def test_an_unaware_pedestrian_walks_into_the_side_of_the_moving_ego(runner, cro
 
     params = load_params()
     for dotted, value in VALUES_BEFORE["parameters"].items():
-        table, key = dotted.split(".")
-        params[table][key] = value
+        *tables, key = dotted.split(".")
+        section = params
+        for table in tables:
+            section = section[table]
+        section[key] = value
     before = _runner(params)
     try:
         old = before.run(SPEC, "sv", SEED, setup=setup)
