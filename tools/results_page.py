@@ -12,8 +12,8 @@ of the rate, or under 0.005), the paired SV/V2I tests, the first-detection and i
 injury curves, why each collision happened (from its case log: perceived too late to stop, perceived in
 time, never perceived), and the paper's four qualitative findings on its point estimates. For each sweep
 (python -m pedsafe_sumo.sweep's --out): the findings in each combination, so that every verdict on the
-page shows the settings under which it holds. Nothing on the page is typed by hand: rerun the tool when
-the runs have grown.
+page shows the settings under which it holds. Nothing on the page is typed by hand but the --notes file
+(the mechanisms behind the numbers, with their commands): rerun the tool when the runs have grown.
 """
 
 from __future__ import annotations
@@ -149,6 +149,7 @@ def collision_timing(log: pd.DataFrame, reaction_s: float, decel_mps2: float) ->
         "kind": "late" if driven_m < needed_m else "in time",
         "driven_m": driven_m,
         "needed_m": needed_m,
+        "spare_s": (driven_m - needed_m) / speed if speed > 0 else math.nan,
         "brake_after_s": brake_after_s,
     }
 
@@ -166,17 +167,18 @@ def collision_timing_markdown(run: RunDirectory, info: dict) -> str:
         f"({reaction_s:g} s) and hardest braking ({decel_mps2:g} m/s²) need from the speed it then had. "
         "*Late*: perceived inside that distance, no stack with them could have stopped; *in time*: "
         "perceived with room to stop, the stack did not use it; *never*: not perceived between the "
-        "step-off and the contact. The last column: from that step to the first braking step.",
+        "step-off and the contact. For the *in time* ones, the median time to spare (the room beyond "
+        "what was needed, at the speed then) and the median time from that step to the first braking step.",
         "",
         "| scenario | condition | collisions | never | late | in time | no case log "
-        "| in time: braking began after (median) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|",
+        "| in time: time to spare | in time: braking began after |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     episodes = run.episodes
     hits = episodes[episodes["collision"].astype(bool)]
     for (scenario, condition), group in hits.groupby(["scenario", "condition"], sort=False):
         counts = {"never": 0, "late": 0, "in time": 0, "missing": 0}
-        delays = []
+        delays, spares = [], []
         for _, row in group.iterrows():
             approach = row["approach"] if "approach" in row and isinstance(row["approach"], str) else ""
             path = run.case_path(scenario, condition, int(row["seed"]), approach)
@@ -185,12 +187,15 @@ def collision_timing_markdown(run: RunDirectory, info: dict) -> str:
                 continue
             timing = collision_timing(pd.read_parquet(path, columns=TIMING_COLUMNS), reaction_s, decel_mps2)
             counts[str(timing["kind"])] += 1
-            if timing["kind"] == "in time" and math.isfinite(float(timing["brake_after_s"])):
-                delays.append(float(timing["brake_after_s"]))
+            if timing["kind"] == "in time":
+                spares.append(float(timing["spare_s"]))
+                if math.isfinite(float(timing["brake_after_s"])):
+                    delays.append(float(timing["brake_after_s"]))
         delay = f"{float(np.median(delays)):.2f} s" if delays else ""
+        spare = f"{float(np.nanmedian(spares)):.2f} s" if spares else ""
         lines.append(
             f"| {scenario} | {condition.upper()} | {len(group)} | {counts['never']} | {counts['late']} | "
-            f"{counts['in time']} | {counts['missing']} | {delay} |"
+            f"{counts['in time']} | {counts['missing']} | {spare} | {delay} |"
         )
     return "\n".join(lines)
 
@@ -238,6 +243,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="the Markdown page to write")
     parser.add_argument("--figures", type=Path, required=True, help="folder of the page's figures")
     parser.add_argument("--title", default="Results")
+    parser.add_argument(
+        "--notes",
+        type=Path,
+        metavar="FILE.md",
+        help="Markdown written by hand (the mechanisms behind the numbers, each with its command), "
+        "placed after the findings",
+    )
     args = parser.parse_args(argv)
     runs: dict[str, tuple[Path, RunDirectory, dict]] = {}
     for text in args.run:
@@ -253,6 +265,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {folder}: {exc}", file=sys.stderr)
             return 2
         runs[label] = (Path(folder), run, info)
+    notes = ""
+    if args.notes is not None:
+        try:
+            notes = args.notes.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            print(f"error: --notes {args.notes}: {exc}", file=sys.stderr)
+            return 2
     args.figures.mkdir(parents=True, exist_ok=True)
     page_dir = args.out.parent
     young, old = eq4_at_rest()
@@ -293,6 +312,8 @@ def main(argv: list[str] | None = None) -> int:
     out += ["## The paper's findings", "", findings, ""]
     for sweep_dir in args.sweep:
         out += [f"### Sensitivity: `{sweep_dir.name}`", "", sweep_markdown(sweep_dir), ""]
+    if notes:
+        out += [notes.rstrip(), ""]
     args.out.write_text("\n".join(out), encoding="utf-8")
     print(f"written: {args.out} and {len(list(args.figures.glob('*.png')))} figure(s) in {args.figures}")
     return 0

@@ -99,7 +99,10 @@ def test_a_collision_is_late_when_the_stack_could_not_have_stopped_from_the_step
     # The distance is counted from the step-off, though the pedestrian was perceived long before it.
     assert late["driven_m"] == pytest.approx(10.0, abs=1e-9)
     assert late["needed_m"] == pytest.approx(12.333333, abs=1e-6)
-    assert collision_timing(_log(13.0, 0.0), 0.4, 6.0)["kind"] == "in time"
+    in_time = collision_timing(_log(13.0, 0.0), 0.4, 6.0)
+    assert in_time["kind"] == "in time"
+    # 13 - 12.33 = 0.67 m to spare at 10 m/s: 0.067 s.
+    assert in_time["spare_s"] == pytest.approx(0.0666667, abs=1e-6)
     # Perceived 0.2 s after the step-off: 2 m fewer to stop in.
     assert collision_timing(_log(13.0, 1.2), 0.4, 6.0)["kind"] == "late"
     assert collision_timing(_log(13.0, None), 0.4, 6.0)["kind"] == "never"
