@@ -42,9 +42,11 @@ def test_the_precision_target_is_a_third_of_the_rate_or_half_a_percent(collision
 def test_the_page_holds_the_runs_numbers_beside_the_papers(tmp_path):
     run = write_standard_run(tmp_path / "run")
     page = tmp_path / "page" / "results.md"
+    notes = tmp_path / "notes.md"
+    notes.write_text("## Mechanisms\n\nWritten by hand.\n")
     proc = subprocess.run(
         [sys.executable, str(TOOL), "--run", f"Standard={run}", "--out", str(page),
-         "--figures", str(tmp_path / "page" / "figures")],
+         "--figures", str(tmp_path / "page" / "figures"), "--notes", str(notes)],
         capture_output=True, text=True, cwd=REPO_ROOT, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -57,6 +59,7 @@ def test_the_page_holds_the_runs_numbers_beside_the_papers(tmp_path):
     # jaywalking's pair with a V2I error is dropped: 5 SV-only of 10 pairs -> p = 2 / 2^5
     assert "| jaywalking | collision | 10 | 5 | 0 | 0.0625 |" in text
     assert "](figures/standard_first_detection_distance.png)" in text
+    assert text.rstrip().endswith("## Mechanisms\n\nWritten by hand.")
     assert (tmp_path / "page" / "figures" / "standard_first_detection_distance.png").stat().st_size > 10_000
 
 
