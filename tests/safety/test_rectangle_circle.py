@@ -84,6 +84,17 @@ def test_polylines_cross_where_hand_geometry_says():
     assert first_polyline_crossing([-5.0, 5.0], [0.0, 0.0], [1.0], [0.0]) is None
 
 
+def test_polylines_whose_boxes_are_apart_or_only_touch():
+    # B lies wholly right of A's box: no crossing
+    assert first_polyline_crossing([0.0, 1.0], [0.0, 0.0], [1.5, 1.5], [-1.0, 1.0]) is None
+    # B's box touches A's at A's end point, where B passes through it: the crossing at the vertex
+    assert first_polyline_crossing([0.0, 1.0], [0.0, 0.0], [1.0, 1.0], [-1.0, 1.0]) == pytest.approx(
+        (1.0, 0.0)
+    )
+    # boxes apart in y only
+    assert first_polyline_crossing([0.0, 2.0], [0.0, 0.0], [1.0, 1.0], [0.5, 3.0]) is None
+
+
 def test_polyline_crossing_found_across_blocks():
     # A: 1001 points along y = 0 from x = 0 to 1000; B crosses it at x = 700.5, in A's third block of 256
     ax = np.arange(1001.0)
