@@ -277,7 +277,8 @@ def main(argv: list[str] | None = None) -> int:
     young, old = eq4_at_rest()
     out = [f"# {args.title}", ""]
     out += [
-        "Made by `tools/results_page.py` from the run directories below: every number is read from the runs.",
+        "Made by `tools/results_page.py` from the run directories below: every number of the tables and "
+        "figures is read from the runs" + ("; the last section is written by hand." if notes else "."),
         f"The paper's eq. 4 gives an injury probability of {young:.3f} (age {AGES_AT_REST[0]:.0f}) to "
         f"{old:.3f} (age {AGES_AT_REST[1]:.0f}) at an impact speed of 0 km/h: its column counts a touch "
         "as an injury of that probability. The MAIS3+F "
@@ -306,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
             collision_timing_markdown(run, info),
             "",
         ]
-        slug = "".join(c if c.isalnum() else "_" for c in label.lower()).strip("_")
+        slug = "_".join("".join(c if c.isalnum() else " " for c in label.lower()).split())
         out += [*figures_of(run, slug, args.figures, page_dir), ""]
     findings = findings_markdown({label: run.episodes for label, (_, run, _) in runs.items()})
     out += ["## The paper's findings", "", findings, ""]
