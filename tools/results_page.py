@@ -49,8 +49,8 @@ PAPER_TABLE_ONE = {
 RELATIVE_HALF_WIDTH = 1 / 3
 ABSOLUTE_HALF_WIDTH = 0.005
 FINDING_WORDS = {
-    "v2i_safer_everywhere": "V2I is safer than SV in every scenario (point estimates; an equal collision rate "
-    "counts when V2I's conflict rate is no higher)",
+    "v2i_safer_everywhere": "V2I is safer than SV in every scenario (point estimates; an equal "
+    "collision rate counts when V2I's conflict rate is no higher)",
     "jaywalking_most_dangerous": "jaywalking is the most dangerous of the paper's three scenarios (SV)",
     "blending_safest": "background blending is the safest of them (SV)",
     "v2i_beyond_13m_in_90pct": "V2I first detects the pedestrian beyond 13 m in 90% of episodes",
