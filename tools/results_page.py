@@ -119,6 +119,12 @@ def paired_markdown(episodes: pd.DataFrame) -> str:
 TIMING_COLUMNS = [
     "time_s", "ego_x_m", "ego_y_m", "ego_speed_mps", "perceived", "braking", "clearance_m", "ped_state",
 ]  # fmt: skip
+#: The shipped stacks whose reaction time and hardest braking are [algorithm]'s reaction_time_s and
+#: max_decel_mps2 (the careful human driver draws its own: docs/human_driver.md).
+STACKS_READING_REACTION = {
+    "pedsafe_sumo.control.baseline:BaselineStack",
+    "pedsafe_sumo.control.reference:ReferenceStack",
+}
 #: Pedestrian states before the step-off (safety/log.py): not yet a threat to a vehicle on the road.
 BEFORE_STEP_OFF = {"absent", "walking_in", "waiting"}
 
@@ -162,9 +168,17 @@ def collision_timing_markdown(run: RunDirectory, info: dict) -> str:
     decel_mps2 = float(algorithm.get("max_decel_mps2", math.nan))
     if not (math.isfinite(reaction_s) and math.isfinite(decel_mps2)):
         return "The run does not record the stack's reaction time and deceleration: no collision timing."
+    own = info.get("algorithm", "") in STACKS_READING_REACTION
+    whose = (
+        "the stack's reaction time"
+        if own
+        else f"the reference stack's reaction time (the run's stack, `{info.get('algorithm', '')}`, has "
+        "its own: *in time* here means a stack with the reference's reaction and braking would have "
+        "stopped)"
+    )
     lines = [
         "Each collision's case log: the distance the ego drove from the first step at which the pedestrian "
-        "had stepped off the kerb and was perceived to the contact, against what the stack's reaction time "
+        f"had stepped off the kerb and was perceived to the contact, against what {whose} "
         f"({reaction_s:g} s) and hardest braking ({decel_mps2:g} m/s²) need from the speed it then had. "
         "*Late*: perceived inside that distance, no stack with them could have stopped; *in time*: "
         "perceived with room to stop, the stack did not use it; *never*: not perceived between the "
