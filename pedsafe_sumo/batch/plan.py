@@ -393,17 +393,17 @@ def stageable_units(
 
 
 def check_sampler_staging(arguments: dict[str, Any], specs: dict[str, Any]) -> None:
-    """--sampler is refused under approach staging: its proposal moves the fixed staging's inputs, not
-    the approach staging's (start distance, walk-in, appearance), and measured on protocol
-    paper-v8-xueqing it gained nothing on the SV collision rates and gave a crossing V2I interval that
-    excludes plain Monte Carlo's (docs/decisions/2026-11-27-is-refused-under-approach-staging.md)."""
+    """--sampler is refused under approach staging: no run of it there has been validated against plain
+    Monte Carlo (on paper-v8-xueqing it gained 0.9-1.4x on the SV collision rates and its crossing V2I
+    interval excluded Monte Carlo's; docs/decisions/2026-11-27-is-refused-under-approach-staging.md and
+    2026-11-28-is-under-approach-staging-measured.md)."""
     if arguments["sampler"] != SAMPLER_IS:
         return
     staged = sorted(name for name, spec in specs.items() if getattr(spec, "staging", "fixed") == "approach")
     if staged:
         raise UsageError(
-            f"--sampler is does not cover the approach staging of {', '.join(staged)}: its proposal moves "
-            "only the fixed staging's inputs (docs/sampling.md); run these with plain Monte Carlo"
+            f"--sampler is does not cover the approach staging of {', '.join(staged)}: it is not validated "
+            "there (docs/sampling.md); run these with plain Monte Carlo"
         )
 
 
