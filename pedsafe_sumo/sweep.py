@@ -25,6 +25,10 @@ each run directory records what it ran (pedsafe_sumo/sweep_protocol.py):
     python -m pedsafe_sumo.sweep --protocol protocols/approach-v2.toml --preset reaction --episodes 500 \
         --out results/approach-v2-reaction
 
+`--base-run RUN` (with --protocol): a complete run of that protocol file; the combination whose every
+value is the protocol's own takes RUN's first --episodes pairs instead of running them (the same seed
+gives the same rows; OUT/<label>/rows_from.json says where they came from).
+
 `--preset NAME` is one of the sensitivity sweeps (PRESETS: the parameters the paper
 does not report that move the indexes most, each over a range around its default), in place of --vary.
 `--combine DIR ... --out OUT` puts the findings of several one-key sweeps side by side:
@@ -68,7 +72,12 @@ from pedsafe_sumo.scenarios.errors import ScenarioError
 from pedsafe_sumo.scenarios.specs import SCENARIOS
 from pedsafe_sumo.settings import UsageError, check_roadside_units, configure
 from pedsafe_sumo.sim.episode import DEFAULT_ALGORITHM
-from pedsafe_sumo.sweep_protocol import write_derived_protocol
+from pedsafe_sumo.sweep_protocol import (
+    base_run_rows,
+    is_protocol_itself,
+    write_base_rows,
+    write_derived_protocol,
+)
 
 #: Combinations of one sweep: each is a run directory and a batch of its own, and every one is validated
 #: before the first runs; a thousand is three values of six keys.
@@ -162,6 +171,13 @@ def parse_args(argv):
         help="sweep a protocol's study: each combination is the protocol with the swept value(s) replaced "
         "(its scenarios, conditions, seed, site and stack; --episodes may ask for fewer)",
     )
+    parser.add_argument(
+        "--base-run",
+        type=Path,
+        metavar="RUN",
+        help="with --protocol: a complete run of that protocol file; a combination whose every value is the "
+        "protocol's own takes its first --episodes pairs from it instead of running them again",
+    )
     return parser.parse_args(argv)
 
 
@@ -176,6 +192,8 @@ def validate(args) -> list[dict[str, str]]:
         args.vary = [*args.vary, PRESETS[args.preset]]
     if args.protocol is not None:
         return validate_protocol_sweep(args)
+    if args.base_run is not None:
+        raise UsageError("--base-run needs --protocol (the run of that protocol file)")
     args.condition = args.condition or "both"
     args.episodes = 200 if args.episodes is None else args.episodes
     args.seed = 1 if args.seed is None else args.seed
@@ -237,11 +255,17 @@ def validate_protocol_sweep(args) -> list[dict[str, str]]:
             derived.specs()
             (Path(scratch) / "p.toml").unlink()
     n_conditions = 2 if protocol.header["conditions"] == "both" else 1
+    args.base_rows = None
+    own = [combo for combo in combos if is_protocol_itself(protocol, combo)]
+    if args.base_run is not None and own:
+        args.base_rows = base_run_rows(protocol, args.base_run, args.episodes)
+    to_run = len(combos) - (len(own) if args.base_rows is not None else 0)
     args.count_text = (
-        f"{len(combos)} combination(s) x {len(protocol.scenarios)} scenario(s) x {n_conditions} "
+        f"{to_run} combination(s) x {len(protocol.scenarios)} scenario(s) x {n_conditions} "
         f"condition(s) x {args.episodes:,} episodes of protocol {protocol.header['name']}"
+        + (f" ({len(own)} more from --base-run)" if args.base_rows is not None else "")
     )
-    args.total_episodes = len(combos) * len(protocol.scenarios) * n_conditions * args.episodes
+    args.total_episodes = to_run * len(protocol.scenarios) * n_conditions * args.episodes
     check_run_count(args.total_episodes, args.max_runs, args.count_text)
     args.loaded_protocol = protocol
     return combos
@@ -361,6 +385,15 @@ def main(argv: list[str] | None = None) -> int:
         run_dir = args.out / label(combo)
         if (run_dir / "episodes.parquet").exists():
             print(f"[{number}/{len(combos)}] {label(combo)}: done before, kept")
+            continue
+        base_rows = getattr(args, "base_rows", None)
+        own = base_rows is not None and is_protocol_itself(args.loaded_protocol, combo)
+        if own and not (run_dir / "run.json").exists():
+            write_base_rows(base_rows, args.base_run, run_dir)
+            print(
+                f"[{number}/{len(combos)}] {label(combo)}: the protocol's own values, the first "
+                f"{args.episodes:,} pairs of {args.base_run} (the same seed: the same rows)"
+            )
             continue
         try:
             argv = batch_argv(args, combo, run_dir)

@@ -22,11 +22,15 @@ import re
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 import tomllib
 
+from pedsafe_sumo.io.run_store import EPISODES_FILE, RUN_FILE
 from pedsafe_sumo.protocol import Protocol, _toml_value
 from pedsafe_sumo.settings import UsageError
 
+#: In a sweep's combination whose rows come from --base-run: where they came from.
+BASE_ROWS_FILE = "rows_from.json"
 _TABLE = re.compile(r"^\[([^\]]+)\]\s*$")
 _ASSIGNMENT = re.compile(r"^([A-Za-z0-9_]+)\s*=")
 
@@ -118,3 +122,55 @@ def write_derived_protocol(protocol: Protocol, changes: dict[str, str], path: Pa
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text, encoding="utf-8")
     return path
+
+
+def is_protocol_itself(protocol: Protocol, changes: dict[str, str]) -> bool:
+    """Whether every value of `changes`, read as the protocol's type, is the protocol's own."""
+    for key, value_text in changes.items():
+        _, _, like = _targets(protocol, key)
+        if _typed(value_text, like, key) != like:
+            return False
+    return True
+
+
+def base_run_rows(protocol: Protocol, base_dir: Path, episodes: int) -> pd.DataFrame:
+    """The first `episodes` pairs of every scenario and condition of `base_dir`, a complete plain Monte
+    Carlo run of the very file `protocol` (its run.json names the file's SHA-256). An episode's rows are a
+    function of the run seed and its number (the batch's seed rule), so these are the rows a run of the
+    protocol with --episodes `episodes` writes. UsageError in one line when `base_dir` is not that run."""
+    try:
+        record = json.loads((base_dir / RUN_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raise UsageError(f"--base-run: no readable {RUN_FILE} in {base_dir}") from None
+    named = record.get("protocol") if isinstance(record, dict) else None
+    if not isinstance(named, dict) or named.get("sha256") != protocol.sha256:
+        raise UsageError(f"--base-run: {base_dir} is not a run of {protocol.path.name} (its SHA-256 differs)")
+    if record.get("sampler") is not None:
+        raise UsageError(
+            f"--base-run: {base_dir} is an importance-sampled run; the sweep's runs are plain Monte Carlo"
+        )
+    if not (base_dir / EPISODES_FILE).is_file() or record.get("state") != "complete":
+        raise UsageError(f"--base-run: {base_dir} is not complete (finish it with batch --resume first)")
+    rows = pd.read_parquet(base_dir / EPISODES_FILE, partitioning=None)
+    rows = rows[rows["episode"] < episodes].reset_index(drop=True)
+    conditions = 2 if protocol.header["conditions"] == "both" else 1
+    expected = len(protocol.scenarios) * conditions * episodes
+    if len(rows) != expected:
+        raise UsageError(
+            f"--base-run: {base_dir} holds {len(rows):,} rows of its first {episodes:,} episodes, "
+            f"not {expected:,}"
+        )
+    return rows
+
+
+def write_base_rows(rows: pd.DataFrame, base_dir: Path, run_dir: Path) -> None:
+    """The protocol's own combination: its rows from the base run, and where they came from."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    note = {
+        "rows_from": str(base_dir.resolve()),
+        "episodes_per_scenario": int(rows["episode"].max()) + 1 if len(rows) else 0,
+        "why": "every swept value is the protocol's own: the first episodes of the protocol's run, "
+        "not run again",
+    }
+    (run_dir / BASE_ROWS_FILE).write_text(json.dumps(note, indent=2) + "\n", encoding="utf-8")
+    rows.to_parquet(run_dir / EPISODES_FILE, index=False)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import subprocess
+import sys
 
 import pandas as pd
 import pytest
@@ -91,3 +93,63 @@ def test_each_combination_runs_its_derived_protocol_and_records_it(tmp_path):
             pd.read_parquet(out / "occluder_class=car" / "episodes.parquet")["seed"]
         )  # the same worlds in every combination
     assert len(pd.read_csv(out / "sweep.csv")) == 2 * 2 * len(source["protocol"]["scenarios"])
+
+
+def _batch(*args, timeout=900):
+    return subprocess.run(
+        [sys.executable, "-m", "pedsafe_sumo.batch", *args],
+        capture_output=True, text=True, cwd=REPO_ROOT, timeout=timeout,
+    )  # fmt: skip
+
+
+def test_base_run_is_refused_in_one_line_unless_it_is_a_complete_run_of_that_protocol(tmp_path):
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "run.json").write_text(json.dumps({"protocol": {"sha256": "0" * 64}, "state": "complete"}))
+    incomplete = tmp_path / "incomplete"
+    incomplete.mkdir()
+    own_sha = hashlib.sha256(PROTOCOL.read_bytes()).hexdigest()
+    (incomplete / "run.json").write_text(json.dumps({"protocol": {"sha256": own_sha}, "state": "running"}))
+    cases = [
+        (["--scenario", "crossing", "--vary", "algorithm.reaction_time_s=0.4,1.0", "--base-run", str(other)],
+         "--base-run needs --protocol"),
+        (["--protocol", str(PROTOCOL), "--preset", "reaction", "--base-run", str(tmp_path / "nothing")],
+         "--base-run: no readable run.json"),
+        (["--protocol", str(PROTOCOL), "--preset", "reaction", "--base-run", str(other)],
+         "is not a run of approach-v2.toml"),
+        (["--protocol", str(PROTOCOL), "--preset", "reaction", "--base-run", str(incomplete)],
+         "is not complete"),
+    ]  # fmt: skip
+    for args, message in cases:
+        proc = sweep(*args, "--out", str(tmp_path / "s"))
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.count("\n") == 1 and message in proc.stderr, proc.stderr
+        assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.slow
+def test_the_protocols_own_combination_takes_the_base_runs_rows_which_a_run_of_it_reproduces(tmp_path):
+    base = tmp_path / "base"
+    proc = _batch("--protocol", str(PROTOCOL), "--episodes", "2", "--workers", "1", "--out", str(base))
+    assert proc.returncode == 0, proc.stderr
+    # occluder_class "suv" is the protocol's own value (its [scenarios.*] tables), "car" is not.
+    assert tomllib.loads(PROTOCOL.read_text())["scenarios"]["crossing"]["occluder_class"] == "suv"
+    taken, ran = tmp_path / "taken", tmp_path / "ran"
+    proc = sweep("--protocol", str(PROTOCOL), "--vary", "occluder_class=suv", "--episodes", "1",
+                 "--workers", "1", "--base-run", str(base), "--out", str(taken))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "0 combination(s)" in proc.stdout and "(1 more from --base-run)" in proc.stdout
+    own = taken / "occluder_class=suv"
+    assert not (own / "run.json").exists()  # not run
+    assert json.loads((own / "rows_from.json").read_text())["rows_from"] == str(base.resolve())
+    # The witness: the same combination run by the batch gives the same rows.
+    proc = sweep("--protocol", str(PROTOCOL), "--vary", "occluder_class=suv", "--episodes", "1",
+                 "--workers", "1", "--out", str(ran))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    key = ["scenario", "condition", "episode"]
+    rows_taken = pd.read_parquet(own / "episodes.parquet").sort_values(key).reset_index(drop=True)
+    rows_ran = pd.read_parquet(ran / "occluder_class=suv" / "episodes.parquet")
+    rows_ran = rows_ran.sort_values(key).reset_index(drop=True)
+    assert len(rows_taken) == 2 * len(tomllib.loads(PROTOCOL.read_text())["protocol"]["scenarios"])
+    pd.testing.assert_frame_equal(rows_taken, rows_ran[rows_taken.columns], check_dtype=False)
+    assert pd.read_csv(taken / "sweep.csv").equals(pd.read_csv(ran / "sweep.csv"))
