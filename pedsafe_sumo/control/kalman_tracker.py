@@ -28,6 +28,7 @@ from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
+from numpy.linalg import _umath_linalg  # the gufuncs np.linalg.solve, inv and slogdet call: see lapack_call
 
 from pedsafe_sumo.control.agent import PerceivedPedestrian
 
@@ -117,7 +118,7 @@ class Track:
         v = np.array([self.vx_mps, self.vy_mps])
         cov = self.covariance[2:, 2:]
         try:
-            return float(v @ np.linalg.solve(cov, v)) > MOVING_CHI2
+            return float(v @ lapack_call(_umath_linalg.solve1, cov, v)) > MOVING_CHI2
         except np.linalg.LinAlgError:
             return bool(np.any(v != 0.0))
 
@@ -139,6 +140,18 @@ class Track:
         h[:, 0, 2], h[:, 0, 3] = d[:, 0] * t, d[:, 1] * t
         variances = np.matmul(np.matmul(h, self.covariance), np.ascontiguousarray(h.transpose(0, 2, 1)))
         return [math.sqrt(max(v, 0.0)) for v in variances[:, 0, 0].tolist()]
+
+
+def _raise_singular(err: str, flag: int) -> None:
+    raise np.linalg.LinAlgError("Singular matrix")
+
+
+def lapack_call(gufunc, *arrays: np.ndarray):
+    """One of numpy.linalg's LAPACK gufuncs on float64 stacks, as np.linalg.solve, inv and slogdet call
+    it (the same LAPACK routine per matrix, so the same bits), without their per-call checks and
+    conversions: the tracker calls them several times a track and step."""
+    with np.errstate(call=_raise_singular, invalid="call", over="ignore", divide="ignore", under="ignore"):
+        return gufunc(*arrays, signature="dd->d" if len(arrays) == 2 else "d->d")
 
 
 def frozen(array: np.ndarray) -> np.ndarray:
@@ -225,7 +238,7 @@ class KalmanTracker:
             if track is not None:
                 x, p = track[0], track[1]
                 s = h @ p @ h.T + r
-                s_inv = np.linalg.inv(s)
+                s_inv = lapack_call(_umath_linalg.inv, s)
                 innovation = z - h @ x
                 if (
                     self.gate_chi2 is not None
