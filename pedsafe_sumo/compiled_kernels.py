@@ -15,6 +15,7 @@ from typing import TextIO
 
 import numpy as np
 
+from pedsafe_sumo.control.path_kernels import project_points
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -48,7 +49,7 @@ def kernels_cached() -> bool:
 def run_every_kernel() -> None:
     """One frame through every compiled kernel, with the argument types the episodes use: the perception
     pipeline with a roadside unit and its V2I link, the ray casting of the sight and vehicle-detection
-    callers, and the clearance kernels."""
+    callers, the clearance kernels and the reference stack's path projection."""
     grey, red = (120, 120, 120), (200, 30, 30)
     vehicles = VehicleBoxes.build(
         ["ego", "car"], [0.0, 15.0], [0.0, 3.0], [0.0, 0.3], [4.5, 4.8], [1.8, 1.9], [1.5, 1.6], [grey, grey]
@@ -77,6 +78,18 @@ def run_every_kernel() -> None:
             snapshot, origin, direction, np.full(2, 50.0), np.arange(2), ones, np.full(2, -1), skip_vehicle
         )
     rectangle_circle_clearance_m(0.0, 0.0, 0.0, 4.5, 1.8, 3.0, 1.0, 0.25)
+    segment = np.array([0.0])
+    project_points(
+        np.array([1.0]),
+        np.array([1.0]),
+        segment,
+        segment,
+        segment + 1.0,
+        segment,
+        -np.inf + segment,
+        np.inf + segment,
+        segment,
+    )
     walks_into_body(
         *(np.array([v]) for v in (0.0, 0.0, 0.0, 4.5, 1.8, 2.4)), 5.0, 0.0, 4.0, 0.0, 0.25, 0.3, 0.05
     )

@@ -19,6 +19,7 @@ import numpy as np
 
 from pedsafe_sumo.control.agent import Crosswalk, EgoState, RoadMap, TrafficLightState
 from pedsafe_sumo.control.kalman_tracker import Track
+from pedsafe_sumo.control.path_kernels import project_points
 from pedsafe_sumo.control.reference import PlannedPath, Segment
 
 #: Spacing of the path samples used to find where the corridor meets a crosswalk [m].
@@ -73,7 +74,14 @@ class PathArrays:
     def project(self, px: Any, py: Any, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Distance along the path and signed lateral offset (positive left) of points, against the
         segments from `first` on: the nearest one, the first extended backwards without end and the
-        last forwards."""
+        last forwards. Compiled (control/path_kernels.py): the same bits as `project_numpy`."""
+        px = np.atleast_1d(np.asarray(px, dtype=float))
+        py = np.atleast_1d(np.asarray(py, dtype=float))
+        x, y, ux, uy, low, high, start = self._segment_rows(first)
+        return project_points(px, py, x, y, ux, uy, low, high, start)
+
+    def project_numpy(self, px: Any, py: Any, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """`project` in numpy (the reference the compiled form is checked against)."""
         px, py = np.atleast_1d(px), np.atleast_1d(py)
         x, y, ux, uy, neg_uy, low, high, start = self._from_segment(first)
         rx = px[:, None] - x
@@ -108,6 +116,20 @@ class PathArrays:
             kept = (*(row[None, :] for row in rows), self.start_m[k])
             self._segments_from[first] = kept
         return kept
+
+    def _segment_rows(self, first: int) -> tuple[np.ndarray, ...]:
+        """The segments from `first` on (x, y, ux, uy, the bounds of the distance along each, their
+        starts), contiguous for the compiled projection: kept per `first`."""
+        kept = self._segment_rows_from.get(first)
+        if kept is None:
+            x, y, ux, uy, _, low, high, start = self._from_segment(first)
+            kept = tuple(np.ascontiguousarray(row.reshape(-1)) for row in (x, y, ux, uy, low, high, start))
+            self._segment_rows_from[first] = kept
+        return kept
+
+    @cached_property
+    def _segment_rows_from(self) -> dict[int, tuple[np.ndarray, ...]]:
+        return {}
 
     @cached_property
     def _segment_floats(self) -> tuple[list[float], ...]:

@@ -1,0 +1,60 @@
+"""PathArrays.project (compiled, control/path_kernels.py): the distance along the path and the signed
+lateral offset, by hand on a known path, and bit for bit the numpy form on random paths and points (the
+stack's commands feed the simulation)."""
+
+import math
+
+import numpy as np
+
+from pedsafe_sumo.control.baseline_planner import PathArrays
+
+
+def l_path() -> PathArrays:
+    # East 10 m from (0, 0), then north 5 m from (10, 0).
+    return PathArrays(
+        np.array([0.0, 10.0]),
+        np.array([0.0, 0.0]),
+        np.array([1.0, 0.0]),
+        np.array([0.0, 1.0]),
+        np.array([0.0, 10.0]),
+        np.array([10.0, 5.0]),
+        1,
+    )
+
+
+def test_hand_worked_points():
+    path = l_path()
+    # (4, 2): 4 m along the first segment, 2 m to its left. (12, 3): 3 m up the second (13 m along), 2 m
+    # to its right (east of a northward segment). (-3, -1): before the start, the first segment extended
+    # backwards: -3 m, 1 m right. (10, 9): past the end, the last one extended: 19 m, on it.
+    s, lat = path.project(np.array([4.0, 12.0, -3.0, 10.0]), np.array([2.0, 3.0, -1.0, 9.0]))
+    assert s.tolist() == [4.0, 13.0, -3.0, 19.0]
+    assert lat.tolist() == [2.0, -2.0, -1.0, 0.0]
+    # A point at the corner's outside: nearest to the end of the first segment and the start of the
+    # second at the same offset; the first of the two counts (distance 10, offset sqrt(2) to the right).
+    s, lat = path.project(11.0, -1.0)
+    assert s.tolist() == [10.0] and math.isclose(lat[0], -math.sqrt(2.0), rel_tol=1e-15)
+
+
+def test_equal_bit_for_bit_to_the_numpy_form():
+    rng = np.random.default_rng(3)
+    for _ in range(2000):
+        n_seg = int(rng.integers(1, 6))
+        heading = np.cumsum(rng.uniform(-1.0, 1.0, n_seg))
+        ux, uy = np.cos(heading), np.sin(heading)
+        length = rng.uniform(0.5, 40.0, n_seg)
+        start = np.concatenate(([0.0], np.cumsum(length)[:-1]))
+        x = rng.uniform(-100, 100) + np.concatenate(([0.0], np.cumsum(ux * length)[:-1]))
+        y = rng.uniform(-100, 100) + np.concatenate(([0.0], np.cumsum(uy * length)[:-1]))
+        path = PathArrays(x, y, ux, uy, start, length, int(rng.integers(1, n_seg + 1)))
+        px = x[0] + rng.uniform(-60, 60, 31)
+        py = y[0] + rng.uniform(-60, 60, 31)
+        px[:3] = x[rng.integers(0, n_seg, 3)]  # on the path's corners: ties between segments
+        py[:3] = y[rng.integers(0, n_seg, 3)] if rng.random() < 0.5 else py[:3]
+        first = int(rng.integers(0, n_seg))
+        compiled = path.project(px, py, first)
+        reference = path.project_numpy(px, py, first)
+        assert compiled[0].tolist() == reference[0].tolist()
+        assert compiled[1].tolist() == reference[1].tolist()
+        one = path.project(float(px[5]), float(py[5]), first)
+        assert one[0].tolist() == reference[0][5:6].tolist() and one[1].tolist() == reference[1][5:6].tolist()
