@@ -162,8 +162,17 @@ class PathArrays:
 
     def normals_at(self, s_m: np.ndarray) -> np.ndarray:
         """normal_at for several distances: rows (nx, ny)."""
-        k = np.clip(np.searchsorted(self.start_m, s_m, side="right") - 1, 0, len(self.start_m) - 1)
-        return np.column_stack((-self.uy[k], self.ux[k]))
+        # The last segment starting at or before each distance (searchsorted's index less one is at
+        # most the last segment's), the first before the path's start.
+        k = np.searchsorted(self.start_m, s_m, side="right") - 1
+        np.maximum(k, 0, out=k)
+        return self._normal_rows[k]
+
+    @cached_property
+    def _normal_rows(self) -> np.ndarray:
+        normals = np.empty((len(self.ux), 2))
+        normals[:, 0], normals[:, 1] = -self.uy, self.ux
+        return normals
 
     def ego_position_m(self, ego: EgoState) -> tuple[float, int]:
         """The ego centre's distance along the path (projected onto its current lane) and the segment
@@ -236,7 +245,7 @@ def path_threat(
         if moving:
             if sigmas is None:  # the standard deviations from this sample on, worked out together
                 sigmas_from = i
-                sigmas = track.position_sigmas_m(path.normals_at(s_arr[i:]), times_list[i:])
+                sigmas = track.position_sigmas_m(path.normals_at(s_arr[i:]), times[i:])
             widen = sigma_factor * sigmas[i - sigmas_from]
         if abs(lat[i]) <= half_width_m + widen:
             return Threat(track.ped_id, max(gap, 0.0), t, "path")

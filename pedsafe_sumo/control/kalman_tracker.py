@@ -128,18 +128,20 @@ class Track:
         h = np.array([ux, uy, ux * after_s, uy * after_s])
         return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
 
-    def position_sigmas_m(self, directions: Any, after_s: list[float]) -> list[float]:
+    def position_sigmas_m(self, directions: Any, after_s: Any) -> list[float]:
         """position_sigma_m for several (direction, time) pairs at once, bit for bit: h C h' as a stack
         of 1 x 4 rows, so that numpy makes for each row the calls (vector-matrix, then dot) it makes for
         one (a 4 x 4 matrix product per row is rounded otherwise; tests/control pin the equality).
-        `directions`: unit vectors, as (x, y) pairs or the rows of an n x 2 array."""
-        d = np.array(directions, dtype=float).reshape(-1, 2)
-        t = np.array(after_s, dtype=float)
+        `directions`: unit vectors, as (x, y) pairs or the rows of an n x 2 array; `after_s`: the times,
+        a list or an array."""
+        d = np.asarray(directions, dtype=float).reshape(-1, 2)
+        t = np.asarray(after_s, dtype=float)
         h = np.empty((len(t), 1, 4))
         h[:, 0, 0], h[:, 0, 1] = d[:, 0], d[:, 1]
         h[:, 0, 2], h[:, 0, 3] = d[:, 0] * t, d[:, 1] * t
         variances = np.matmul(np.matmul(h, self.covariance), np.ascontiguousarray(h.transpose(0, 2, 1)))
-        return [math.sqrt(max(v, 0.0)) for v in variances[:, 0, 0].tolist()]
+        # np.sqrt and math.sqrt both round correctly (IEEE square root): the same floats.
+        return np.sqrt(np.maximum(variances[:, 0, 0], 0.0)).tolist()
 
 
 def _raise_singular(err: str, flag: int) -> None:
