@@ -15,7 +15,7 @@ from typing import TextIO
 
 import numpy as np
 
-from pedsafe_sumo.control.path_kernels import project_points
+from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -79,17 +79,15 @@ def run_every_kernel() -> None:
         )
     rectangle_circle_clearance_m(0.0, 0.0, 0.0, 4.5, 1.8, 3.0, 1.0, 0.25)
     segment = np.array([0.0])
-    project_points(
-        np.array([1.0]),
-        np.array([1.0]),
-        segment,
-        segment,
-        segment + 1.0,
-        segment,
-        -np.inf + segment,
-        np.inf + segment,
-        segment,
-    )
+    s_m, lat_m = project_points(
+        np.array([1.0]), np.array([1.0]), segment, segment, segment + 1.0, segment,
+        segment - np.inf, segment + np.inf, segment,
+    )  # fmt: skip
+    times = np.array([0.0])
+    times.setflags(write=False)  # the planner's sample times are read-only
+    start = first_ahead(s_m, times, 0.0, 1.0, 2.0, 4.5)
+    for sigmas in (np.zeros(0), np.ones(1)):
+        first_in_corridor(s_m, lat_m, times, max(start, 0), sigmas, 2.0, 0.0, 1.0, 2.0, 4.5, 1.9)
     walks_into_body(
         *(np.array([v]) for v in (0.0, 0.0, 0.0, 4.5, 1.8, 2.4)), 5.0, 0.0, 4.0, 0.0, 0.25, 0.3, 0.05
     )

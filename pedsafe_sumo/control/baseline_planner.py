@@ -19,7 +19,7 @@ import numpy as np
 
 from pedsafe_sumo.control.agent import Crosswalk, EgoState, RoadMap, TrafficLightState
 from pedsafe_sumo.control.kalman_tracker import Track
-from pedsafe_sumo.control.path_kernels import project_points
+from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points
 from pedsafe_sumo.control.reference import PlannedPath, Segment
 
 #: Spacing of the path samples used to find where the corridor meets a crosswalk [m].
@@ -227,29 +227,29 @@ def path_threat(
         times = times[:1]
         px, py = np.array([track.x_m]), np.array([track.y_m])
     s_arr, lat_arr = path.project(px, py, first)
-    # Python floats from here: the same values, without numpy's per-element overhead.
-    s, lat = s_arr.tolist(), lat_arr.tolist()
-    moving = track.moving
     front_offset = ego.length_m / 2
-    times_list = times.tolist()
-    sigmas: list[float] | None = None
-    sigmas_from = 0
-    for i, t in enumerate(times_list):
-        ped_lon = s[i] - ego_s_m
-        if ped_lon - ego.speed_mps * t < -front_offset:  # the ego has passed that point by then
-            continue
-        gap = ped_lon - front_offset
-        if gap < -ego.length_m:
-            continue
-        widen = 0.0
-        if moving:
-            if sigmas is None:  # the standard deviations from this sample on, worked out together
-                sigmas_from = i
-                sigmas = track.position_sigmas_m(path.normals_at(s_arr[i:]), times[i:])
-            widen = sigma_factor * sigmas[i - sigmas_from]
-        if abs(lat[i]) <= half_width_m + widen:
-            return Threat(track.ped_id, max(gap, 0.0), t, "path")
-    return None
+    # Compiled scans (control/path_kernels.py), the same float operations in the same order as a loop
+    # over the samples in Python: the standard deviations are worked out together, from the first
+    # sample the ego has not passed on.
+    start = first_ahead(s_arr, times, ego_s_m, ego.speed_mps, front_offset, ego.length_m)
+    if start < 0:
+        return None
+    sigmas = (
+        track.position_sigmas_array(path.normals_at(s_arr[start:]), times[start:])
+        if track.moving
+        else _NO_SIGMAS
+    )
+    i = first_in_corridor(
+        s_arr, lat_arr, times, start, sigmas, sigma_factor,
+        ego_s_m, ego.speed_mps, front_offset, ego.length_m, half_width_m,
+    )  # fmt: skip
+    if i < 0:
+        return None
+    gap = (float(s_arr[i]) - ego_s_m) - front_offset
+    return Threat(track.ped_id, max(gap, 0.0), float(times[i]), "path")
+
+
+_NO_SIGMAS = np.zeros(0)
 
 
 def point_in_polygon(x: float, y: float, polygon) -> bool:

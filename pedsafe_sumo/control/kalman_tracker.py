@@ -129,6 +129,10 @@ class Track:
         return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
 
     def position_sigmas_m(self, directions: Any, after_s: Any) -> list[float]:
+        """position_sigmas_array as a list."""
+        return self.position_sigmas_array(directions, after_s).tolist()
+
+    def position_sigmas_array(self, directions: Any, after_s: Any) -> np.ndarray:
         """position_sigma_m for several (direction, time) pairs at once, bit for bit: h C h' as a stack
         of 1 x 4 rows, so that numpy makes for each row the calls (vector-matrix, then dot) it makes for
         one (a 4 x 4 matrix product per row is rounded otherwise; tests/control pin the equality).
@@ -141,7 +145,7 @@ class Track:
         h[:, 0, 2], h[:, 0, 3] = d[:, 0] * t, d[:, 1] * t
         variances = np.matmul(np.matmul(h, self.covariance), np.ascontiguousarray(h.transpose(0, 2, 1)))
         # np.sqrt and math.sqrt both round correctly (IEEE square root): the same floats.
-        return np.sqrt(np.maximum(variances[:, 0, 0], 0.0)).tolist()
+        return np.sqrt(np.maximum(variances[:, 0, 0], 0.0))
 
 
 def _raise_singular(err: str, flag: int) -> None:

@@ -60,3 +60,53 @@ def project_points(
             side = 1.0
         lat_out[i] = side * best_off
     return s_out, lat_out
+
+
+@_jit  # type: ignore[untyped-decorator]
+def first_ahead(
+    s_m: np.ndarray,
+    times_s: np.ndarray,
+    ego_s_m: float,
+    speed_mps: float,
+    front_offset_m: float,
+    length_m: float,
+) -> int:
+    """The first predicted position (distance `s_m` along the path at `times_s`) the ego has not passed
+    by then and whose gap from the ego's front is not below minus its length; -1 when none."""
+    for i in range(s_m.shape[0]):
+        ped_lon = s_m[i] - ego_s_m
+        if ped_lon - speed_mps * times_s[i] < -front_offset_m:  # the ego has passed that point by then
+            continue
+        if ped_lon - front_offset_m < -length_m:
+            continue
+        return i
+    return -1
+
+
+@_jit  # type: ignore[untyped-decorator]
+def first_in_corridor(
+    s_m: np.ndarray,
+    lat_m: np.ndarray,
+    times_s: np.ndarray,
+    start: int,
+    sigmas_m: np.ndarray,
+    sigma_factor: float,
+    ego_s_m: float,
+    speed_mps: float,
+    front_offset_m: float,
+    length_m: float,
+    half_width_m: float,
+) -> int:
+    """From `start` (first_ahead) on, the first position as first_ahead takes them whose lateral offset
+    is within the corridor's half width widened by `sigma_factor` times its standard deviation
+    (`sigmas_m[i - start]`; none given: no widening); -1 when none."""
+    for i in range(start, s_m.shape[0]):
+        ped_lon = s_m[i] - ego_s_m
+        if ped_lon - speed_mps * times_s[i] < -front_offset_m:
+            continue
+        if ped_lon - front_offset_m < -length_m:
+            continue
+        widen = sigma_factor * sigmas_m[i - start] if sigmas_m.shape[0] > 0 else 0.0
+        if abs(lat_m[i]) <= half_width_m + widen:
+            return i
+    return -1

@@ -6,7 +6,9 @@ import math
 
 import numpy as np
 
-from pedsafe_sumo.control.baseline_planner import PathArrays
+from pedsafe_sumo.control.agent import EgoState
+from pedsafe_sumo.control.baseline_planner import PathArrays, path_threat
+from pedsafe_sumo.control.kalman_tracker import Track
 
 
 def l_path() -> PathArrays:
@@ -58,3 +60,53 @@ def test_equal_bit_for_bit_to_the_numpy_form():
         assert compiled[1].tolist() == reference[1].tolist()
         one = path.project(float(px[5]), float(py[5]), first)
         assert one[0].tolist() == reference[0][5:6].tolist() and one[1].tolist() == reference[1][5:6].tolist()
+
+
+def threat_one_sample_at_a_time(
+    track, ego, path, first, ego_s_m, horizon_s, half_width_m, sigma_factor, sample_s
+):
+    """path_threat's rule as a loop over the samples in Python floats: the first sample the ego has not
+    passed, within its length behind the ego's front, inside the corridor widened by sigma_factor
+    standard deviations (worked out one position at a time, Track.position_sigma_m)."""
+    times = np.arange(0.0, horizon_s + 1e-9, sample_s)
+    if not track.moving:
+        times = times[:1]
+    px, py = track.x_m + track.vx_mps * times, track.y_m + track.vy_mps * times
+    if not track.moving:
+        px, py = np.array([track.x_m]), np.array([track.y_m])
+    s, lat = (a.tolist() for a in path.project_numpy(px, py, first))
+    front_offset = ego.length_m / 2
+    for i, t in enumerate(times.tolist()):
+        ped_lon = s[i] - ego_s_m
+        if ped_lon - ego.speed_mps * t < -front_offset or ped_lon - front_offset < -ego.length_m:
+            continue
+        widen = sigma_factor * track.position_sigma_m(path.normal_at(s[i]), t) if track.moving else 0.0
+        if abs(lat[i]) <= half_width_m + widen:
+            return (track.ped_id, max(ped_lon - front_offset, 0.0), t, "path")
+    return None
+
+
+def test_path_threat_equals_the_loop_over_samples():
+    rng = np.random.default_rng(11)
+    found = 0
+    for _ in range(3000):
+        path = PathArrays(
+            np.array([0.0, 40.0]), np.array([0.0, 0.0]), np.array([1.0, 0.0]), np.array([0.0, 1.0]),
+            np.array([0.0, 40.0]), np.array([40.0, 30.0]), 1,
+        )  # fmt: skip
+        a = rng.normal(size=(4, 4)) * rng.uniform(0.01, 0.5)
+        speed = rng.uniform(0.0, 2.0) if rng.random() < 0.8 else 0.0
+        heading = rng.uniform(0, 2 * math.pi)
+        track = Track(
+            "p", rng.uniform(-5, 60), rng.uniform(-8, 8),
+            speed * math.cos(heading), speed * math.sin(heading), a @ a.T, 0.0,
+        )  # fmt: skip
+        ego = EgoState(rng.uniform(-10, 30), 0.0, 0.0, rng.uniform(0.0, 15.0), 4.5, 1.8)
+        ego_s_m = ego.x_m
+        args = (track, ego, path, 0, ego_s_m, 3.0, 1.9, 2.0, 0.1)
+        threat = path_threat(*args)
+        expected = threat_one_sample_at_a_time(*args)
+        got = None if threat is None else (threat.ped_id, threat.gap_m, threat.time_s, threat.reason)
+        assert got == expected
+        found += threat is not None
+    assert 300 < found < 2700  # both outcomes exercised
