@@ -33,7 +33,9 @@ from collections.abc import Iterable
 from functools import lru_cache
 
 import numpy as np
-from numpy.linalg import _umath_linalg  # the gufuncs np.linalg.solve, inv and slogdet call: see lapack_call
+from numpy.linalg import (
+    _umath_linalg,
+)  # the gufuncs np.linalg.solve, inv and slogdet call: see kalman_tracker.lapack_call
 
 from pedsafe_sumo.control.agent import PerceivedPedestrian
 from pedsafe_sumo.control.kalman_tracker import (
@@ -47,7 +49,7 @@ from pedsafe_sumo.control.kalman_tracker import (
     V2I_SOURCE,
     Track,
     frozen,
-    lapack_call,
+    linalg_errors,
     transition,
 )
 
@@ -252,7 +254,9 @@ class ImmTracker:
         x, p = track.states, track.covs
         s = h @ p @ h_t + r
         innovations = z - np.matmul(h, x[:, :, None])[:, :, 0]
-        solved = lapack_call(_umath_linalg.solve1, s, innovations)
+        with linalg_errors():  # as np.linalg.solve and inv, in one context for both calls
+            solved = _umath_linalg.solve1(s, innovations, signature="dd->d")
+            s_inv = _umath_linalg.inv(s, signature="d->d")
         # Each innovation @ its solution, a vector-vector dot as for one model alone.
         mahalanobis = np.matmul(innovations[:, None, :], solved[:, :, None])[:, 0, 0].tolist()
         if self.gate_chi2 is not None and all(m > self.gate_chi2 for m in mahalanobis):
@@ -261,7 +265,7 @@ class ImmTracker:
             _, p_combined = track.combined()
             if float(r[0, 0]) < (p_combined[0, 0] + p_combined[1, 1]) / 2:
                 return False
-        gain = p @ h_t @ lapack_call(_umath_linalg.inv, s)
+        gain = p @ h_t @ s_inv
         i_kh = EYE4 - gain @ h
         track.states = x + np.matmul(gain, innovations[:, :, None])[:, :, 0]
         track.covs = i_kh @ p @ _transposed(i_kh) + gain @ r @ _transposed(gain)

@@ -156,8 +156,14 @@ def lapack_call(gufunc, *arrays: np.ndarray):
     """One of numpy.linalg's LAPACK gufuncs on float64 stacks, as np.linalg.solve, inv and slogdet call
     it (the same LAPACK routine per matrix, so the same bits), without their per-call checks and
     conversions: the tracker calls them several times a track and step."""
-    with np.errstate(call=_raise_singular, invalid="call", over="ignore", divide="ignore", under="ignore"):
+    with linalg_errors():
         return gufunc(*arrays, signature="dd->d" if len(arrays) == 2 else "d->d")
+
+
+def linalg_errors() -> np.errstate:
+    """The floating-point error handling numpy.linalg's solve and inv set around their LAPACK call: a
+    singular matrix raises LinAlgError."""
+    return np.errstate(call=_raise_singular, invalid="call", over="ignore", divide="ignore", under="ignore")
 
 
 def frozen(array: np.ndarray) -> np.ndarray:
