@@ -15,7 +15,7 @@ from typing import TextIO
 
 import numpy as np
 
-from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points
+from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points, widening_rows
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -86,6 +86,7 @@ def run_every_kernel() -> None:
     times = np.array([0.0])
     times.setflags(write=False)  # the planner's sample times are read-only
     start = first_ahead(s_m, times, 0.0, 1.0, 2.0, 4.5)
+    widening_rows(s_m, times, 0, segment, segment + 1.0, segment)
     for sigmas in (np.zeros(0), np.ones(1)):
         first_in_corridor(s_m, lat_m, times, max(start, 0), sigmas, 2.0, 0.0, 1.0, 2.0, 4.5, 1.9)
     walks_into_body(

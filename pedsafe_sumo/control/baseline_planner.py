@@ -19,7 +19,7 @@ import numpy as np
 
 from pedsafe_sumo.control.agent import Crosswalk, EgoState, RoadMap, TrafficLightState
 from pedsafe_sumo.control.kalman_tracker import Track
-from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points
+from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points, widening_rows
 from pedsafe_sumo.control.reference import PlannedPath, Segment
 
 #: Spacing of the path samples used to find where the corridor meets a crosswalk [m].
@@ -75,8 +75,9 @@ class PathArrays:
         """Distance along the path and signed lateral offset (positive left) of points, against the
         segments from `first` on: the nearest one, the first extended backwards without end and the
         last forwards. Compiled (control/path_kernels.py): the same bits as `project_numpy`."""
-        px = np.atleast_1d(np.asarray(px, dtype=float))
-        py = np.atleast_1d(np.asarray(py, dtype=float))
+        px, py = np.asarray(px, dtype=float), np.asarray(py, dtype=float)
+        if px.ndim == 0:  # one point, as floats
+            px, py = px.reshape(1), py.reshape(1)
         x, y, ux, uy, low, high, start = self._segment_rows(first)
         return project_points(px, py, x, y, ux, uy, low, high, start)
 
@@ -235,7 +236,7 @@ def path_threat(
     if start < 0:
         return None
     sigmas = (
-        track.position_sigmas_array(path.normals_at(s_arr[start:]), times[start:])
+        track.position_sigmas_of_rows(widening_rows(s_arr, times, start, path.start_m, path.ux, path.uy))
         if track.moving
         else _NO_SIGMAS
     )

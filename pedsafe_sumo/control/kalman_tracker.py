@@ -143,6 +143,10 @@ class Track:
         h = np.empty((len(t), 1, 4))
         h[:, 0, 0], h[:, 0, 1] = d[:, 0], d[:, 1]
         h[:, 0, 2], h[:, 0, 3] = d[:, 0] * t, d[:, 1] * t
+        return self.position_sigmas_of_rows(h)
+
+    def position_sigmas_of_rows(self, h: np.ndarray) -> np.ndarray:
+        """The standard deviations sqrt(h C h') of the rows h = (ux, uy, ux t, uy t), (n, 1, 4)."""
         variances = np.matmul(np.matmul(h, self.covariance), np.ascontiguousarray(h.transpose(0, 2, 1)))
         # np.sqrt and math.sqrt both round correctly (IEEE square root): the same floats.
         return np.sqrt(np.maximum(variances[:, 0, 0], 0.0))

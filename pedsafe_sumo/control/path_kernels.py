@@ -110,3 +110,32 @@ def first_in_corridor(
         if abs(lat_m[i]) <= half_width_m + widen:
             return i
     return -1
+
+
+@_jit  # type: ignore[untyped-decorator]
+def widening_rows(
+    s_m: np.ndarray, times_s: np.ndarray, begin: int, starts_m: np.ndarray, ux: np.ndarray, uy: np.ndarray
+) -> np.ndarray:
+    """The rows h = (nx, ny, nx t, ny t) of the predicted positions from `begin` on, (n, 1, 4), n = the
+    positions from `begin`: (nx, ny) the unit normal (-uy, ux) of the path's segment at distance `s_m`
+    (the last segment starting at or before it, the first before the path's start; a NaN distance on the
+    last, as np.searchsorted places NaN), t the time. Track.position_sigmas_of_rows takes them on."""
+    n = s_m.shape[0] - begin
+    last = starts_m.shape[0] - 1
+    h = np.empty((n, 1, 4))
+    for i in range(n):
+        s = s_m[begin + i]
+        if s != s:
+            k = last
+        else:
+            k = 0
+            while k < last and starts_m[k + 1] <= s:
+                k += 1
+        nx = -uy[k]
+        ny = ux[k]
+        t = times_s[begin + i]
+        h[i, 0, 0] = nx
+        h[i, 0, 1] = ny
+        h[i, 0, 2] = nx * t
+        h[i, 0, 3] = ny * t
+    return h

@@ -9,6 +9,7 @@ import numpy as np
 from pedsafe_sumo.control.agent import EgoState
 from pedsafe_sumo.control.baseline_planner import PathArrays, path_threat
 from pedsafe_sumo.control.kalman_tracker import Track
+from pedsafe_sumo.control.path_kernels import widening_rows
 
 
 def l_path() -> PathArrays:
@@ -110,3 +111,23 @@ def test_path_threat_equals_the_loop_over_samples():
         assert got == expected
         found += threat is not None
     assert 300 < found < 2700  # both outcomes exercised
+
+
+def test_widening_rows_take_the_normals_of_normals_at():
+    # Segments starting at 0, 10, 10 (one of no length), 15 m; distances before the start, on the
+    # starts, between them, past the end, NaN (np.searchsorted places it last).
+    path = PathArrays(
+        np.zeros(4), np.zeros(4), np.array([1.0, 0.6, 0.0, -1.0]), np.array([0.0, 0.8, 1.0, 0.0]),
+        np.array([0.0, 10.0, 10.0, 15.0]), np.array([10.0, 0.0, 5.0, 20.0]), 1,
+    )  # fmt: skip
+    s = np.array([-3.0, 0.0, 5.0, 9.999, 10.0, 12.0, 15.0, 40.0, math.nan])
+    times = np.arange(len(s)) * 0.1
+    for begin in (0, 4):
+        rows = widening_rows(s, times, begin, path.start_m, path.ux, path.uy)
+        normals = path.normals_at(s[begin:])
+        expected = np.column_stack((normals, normals[:, 0] * times[begin:], normals[:, 1] * times[begin:]))
+        assert rows[:, 0, :].tolist() == expected.tolist()
+    # By hand: -3 m and 0 m on the first segment (normal (0, 1)), 10 m and 12 m on the third (its start
+    # ties with the second's, the later one counts: normal (-1, 0)), NaN on the last (normal (0, -1)).
+    rows = widening_rows(s, np.zeros(len(s)), 0, path.start_m, path.ux, path.uy)[:, 0, :2].tolist()
+    assert rows[0] == rows[1] == [-0.0, 1.0] and rows[4] == rows[5] == [-1.0, 0.0] and rows[8] == [-0.0, -1.0]
