@@ -52,6 +52,7 @@ from pedsafe_sumo.control.kalman_tracker import (
     linalg_errors,
     transition,
 )
+from pedsafe_sumo.control.tracker_kernels import mixed_estimates
 
 #: Mean time a pedestrian walks before stopping, and stands before walking on [s]. Assumption: walking
 #: outdoors comes in bouts of tens of steps with rests between them of seconds to tens of seconds
@@ -117,20 +118,9 @@ class _ImmTrack:
         self.seen_s = time_s
 
     def combined(self) -> tuple[np.ndarray, np.ndarray]:
-        return _mixed(self.probs, self.states, self.covs)
-
-
-def _mixed(weights: np.ndarray, states: np.ndarray, covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The `weights`-weighted mean of the two models' states, and their covariance with the spread of
-    the means: sum_i w_i (P_i + d_i d_i^T), d_i = x_i - x, summed from 0 in the models' order."""
-    w0, w1 = weights.tolist()
-    x = w0 * states[0] + w1 * states[1]
-    d = states - x  # d d^T below: the products np.outer forms, without its wrapper
-    spread = covs + d[:, :, None] * d[:, None, :]
-    p = np.zeros((4, 4))
-    p += w0 * spread[0]
-    p += w1 * spread[1]
-    return x, p
+        """The probability-weighted mean and covariance (with the spread of the means) of the models."""
+        x, p = mixed_estimates(self.probs[:, None], self.states, self.covs)
+        return x[0], p[0]
 
 
 class ImmTracker:
@@ -226,13 +216,7 @@ class ImmTracker:
             weights = np.array(
                 [switch[:, j] * probs / predicted[j] if predicted[j] > 0 else probs for j in (0, 1)]
             ).T
-        # Both models' mixed starts at once, element by element the sums _mixed forms for one.
-        x0s = weights[0][:, None] * states[0] + weights[1][:, None] * states[1]
-        d = states[None, :, :] - x0s[:, None, :]  # d[j, i] = x_i - x0_j
-        spread = track.covs[None, :, :, :] + d[:, :, :, None] * d[:, :, None, :]
-        p0s = np.zeros((2, 4, 4))
-        p0s += weights[0][:, None, None] * spread[:, 0]
-        p0s += weights[1][:, None, None] * spread[:, 1]
+        x0s, p0s = mixed_estimates(weights, states, track.covs)  # both models' mixed starts
         track.states = np.matmul(f, x0s[:, :, None])[:, :, 0]
         track.covs = f @ p0s @ f_t + q
         track.probs = predicted
