@@ -18,7 +18,7 @@ import numpy as np
 from pedsafe_sumo.perception.raycast_kernels import _jit, _nmax, _nmin
 
 
-@_jit  # type: ignore[untyped-decorator]  # numba compiles it; the annotations are for readers
+@_jit  # numba compiles it; the annotations are for readers
 def project_points(
     px: np.ndarray,
     py: np.ndarray,
@@ -62,7 +62,7 @@ def project_points(
     return s_out, lat_out
 
 
-@_jit  # type: ignore[untyped-decorator]
+@_jit
 def first_ahead(
     s_m: np.ndarray,
     times_s: np.ndarray,
@@ -83,7 +83,7 @@ def first_ahead(
     return -1
 
 
-@_jit  # type: ignore[untyped-decorator]
+@_jit
 def first_in_corridor(
     s_m: np.ndarray,
     lat_m: np.ndarray,
@@ -112,7 +112,7 @@ def first_in_corridor(
     return -1
 
 
-@_jit  # type: ignore[untyped-decorator]
+@_jit
 def widening_rows(
     s_m: np.ndarray, times_s: np.ndarray, begin: int, starts_m: np.ndarray, ux: np.ndarray, uy: np.ndarray
 ) -> np.ndarray:

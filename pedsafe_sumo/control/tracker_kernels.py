@@ -17,7 +17,7 @@ import numpy as np
 from pedsafe_sumo.perception.raycast_kernels import _jit
 
 
-@_jit  # type: ignore[untyped-decorator]  # numba compiles it; the annotations are for readers
+@_jit  # numba compiles it; the annotations are for readers
 def mixed_estimates(
     weights: np.ndarray, states: np.ndarray, covs: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
