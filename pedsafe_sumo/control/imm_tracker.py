@@ -33,9 +33,9 @@ from collections.abc import Iterable
 from functools import lru_cache
 
 import numpy as np
-from numpy.linalg import (
-    _umath_linalg,
-)  # the gufuncs np.linalg.solve, inv and slogdet call: see kalman_tracker.lapack_call
+
+# The gufuncs np.linalg.solve, inv and slogdet call (see kalman_tracker.lapack_call).
+from numpy.linalg import _umath_linalg
 
 from pedsafe_sumo.control.agent import PerceivedPedestrian
 from pedsafe_sumo.control.kalman_tracker import (

@@ -157,9 +157,10 @@ def _raise_singular(err: str, flag: int) -> None:
 
 
 def lapack_call(gufunc, *arrays: np.ndarray):
-    """One of numpy.linalg's LAPACK gufuncs on float64 stacks, as np.linalg.solve, inv and slogdet call
-    it (the same LAPACK routine per matrix, so the same bits), without their per-call checks and
-    conversions: the tracker calls them several times a track and step."""
+    """numpy.linalg's LAPACK gufunc of np.linalg.solve (`solve1`, a vector right-hand side) or inv on
+    float64 stacks, as those functions call it (the same LAPACK routine per matrix, so the same bits, and
+    LinAlgError on a singular matrix), without their per-call checks and conversions: the trackers call
+    them every track and step."""
     with linalg_errors():
         return gufunc(*arrays, signature="dd->d" if len(arrays) == 2 else "d->d")
 
