@@ -15,6 +15,8 @@ from typing import TextIO
 
 import numpy as np
 
+from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points, widening_rows
+from pedsafe_sumo.control.tracker_kernels import mixed_estimates
 from pedsafe_sumo.params import load_params
 from pedsafe_sumo.perception import (
     EgoPose,
@@ -48,7 +50,7 @@ def kernels_cached() -> bool:
 def run_every_kernel() -> None:
     """One frame through every compiled kernel, with the argument types the episodes use: the perception
     pipeline with a roadside unit and its V2I link, the ray casting of the sight and vehicle-detection
-    callers, and the clearance kernels."""
+    callers, the clearance kernels, the reference stack's path kernels and its tracker's mixing."""
     grey, red = (120, 120, 120), (200, 30, 30)
     vehicles = VehicleBoxes.build(
         ["ego", "car"], [0.0, 15.0], [0.0, 3.0], [0.0, 0.3], [4.5, 4.8], [1.8, 1.9], [1.5, 1.6], [grey, grey]
@@ -77,6 +79,20 @@ def run_every_kernel() -> None:
             snapshot, origin, direction, np.full(2, 50.0), np.arange(2), ones, np.full(2, -1), skip_vehicle
         )
     rectangle_circle_clearance_m(0.0, 0.0, 0.0, 4.5, 1.8, 3.0, 1.0, 0.25)
+    segment = np.array([0.0])
+    s_m, lat_m = project_points(
+        np.array([1.0]), np.array([1.0]), segment, segment, segment + 1.0, segment,
+        segment - np.inf, segment + np.inf, segment,
+    )  # fmt: skip
+    times = np.array([0.0])
+    times.setflags(write=False)  # the planner's sample times are read-only
+    start = first_ahead(s_m, times, 0.0, 1.0, 2.0, 4.5)
+    widening_rows(s_m, times, 0, segment, segment + 1.0, segment)
+    probs, states, covs = np.array([0.5, 0.5]), np.zeros((2, 4)), np.zeros((2, 4, 4))
+    for weights in (np.ones((2, 2)), probs[:, None]):  # the models' starts; the combined estimate
+        mixed_estimates(weights, states, covs)
+    for sigmas in (np.zeros(0), np.ones(1)):
+        first_in_corridor(s_m, lat_m, times, max(start, 0), sigmas, 2.0, 0.0, 1.0, 2.0, 4.5, 1.9)
     walks_into_body(
         *(np.array([v]) for v in (0.0, 0.0, 0.0, 4.5, 1.8, 2.4)), 5.0, 0.0, 4.0, 0.0, 0.25, 0.3, 0.05
     )

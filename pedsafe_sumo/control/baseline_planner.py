@@ -19,6 +19,7 @@ import numpy as np
 
 from pedsafe_sumo.control.agent import Crosswalk, EgoState, RoadMap, TrafficLightState
 from pedsafe_sumo.control.kalman_tracker import Track
+from pedsafe_sumo.control.path_kernels import first_ahead, first_in_corridor, project_points, widening_rows
 from pedsafe_sumo.control.reference import PlannedPath, Segment
 
 #: Spacing of the path samples used to find where the corridor meets a crosswalk [m].
@@ -73,7 +74,15 @@ class PathArrays:
     def project(self, px: Any, py: Any, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Distance along the path and signed lateral offset (positive left) of points, against the
         segments from `first` on: the nearest one, the first extended backwards without end and the
-        last forwards."""
+        last forwards. Compiled (control/path_kernels.py): the same bits as `project_numpy`."""
+        px, py = np.asarray(px, dtype=float), np.asarray(py, dtype=float)
+        if px.ndim == 0:  # one point, as floats
+            px, py = px.reshape(1), py.reshape(1)
+        x, y, ux, uy, low, high, start = self._segment_rows(first)
+        return project_points(px, py, x, y, ux, uy, low, high, start)
+
+    def project_numpy(self, px: Any, py: Any, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """`project` in numpy (the reference the compiled form is checked against)."""
         px, py = np.atleast_1d(px), np.atleast_1d(py)
         x, y, ux, uy, neg_uy, low, high, start = self._from_segment(first)
         rx = px[:, None] - x
@@ -109,6 +118,20 @@ class PathArrays:
             self._segments_from[first] = kept
         return kept
 
+    def _segment_rows(self, first: int) -> tuple[np.ndarray, ...]:
+        """The segments from `first` on (x, y, ux, uy, the bounds of the distance along each, their
+        starts), contiguous for the compiled projection: kept per `first`."""
+        kept = self._segment_rows_from.get(first)
+        if kept is None:
+            x, y, ux, uy, _, low, high, start = self._from_segment(first)
+            kept = tuple(np.ascontiguousarray(row.reshape(-1)) for row in (x, y, ux, uy, low, high, start))
+            self._segment_rows_from[first] = kept
+        return kept
+
+    @cached_property
+    def _segment_rows_from(self) -> dict[int, tuple[np.ndarray, ...]]:
+        return {}
+
     @cached_property
     def _segment_floats(self) -> tuple[list[float], ...]:
         # Python floats for the per-step loops over segments: the same values, without numpy scalars.
@@ -140,8 +163,17 @@ class PathArrays:
 
     def normals_at(self, s_m: np.ndarray) -> np.ndarray:
         """normal_at for several distances: rows (nx, ny)."""
-        k = np.clip(np.searchsorted(self.start_m, s_m, side="right") - 1, 0, len(self.start_m) - 1)
-        return np.column_stack((-self.uy[k], self.ux[k]))
+        # The last segment starting at or before each distance (searchsorted's index less one is at
+        # most the last segment's), the first before the path's start.
+        k = np.searchsorted(self.start_m, s_m, side="right") - 1
+        np.maximum(k, 0, out=k)
+        return self._normal_rows[k]
+
+    @cached_property
+    def _normal_rows(self) -> np.ndarray:
+        normals = np.empty((len(self.ux), 2))
+        normals[:, 0], normals[:, 1] = -self.uy, self.ux
+        return normals
 
     def ego_position_m(self, ego: EgoState) -> tuple[float, int]:
         """The ego centre's distance along the path (projected onto its current lane) and the segment
@@ -196,29 +228,29 @@ def path_threat(
         times = times[:1]
         px, py = np.array([track.x_m]), np.array([track.y_m])
     s_arr, lat_arr = path.project(px, py, first)
-    # Python floats from here: the same values, without numpy's per-element overhead.
-    s, lat = s_arr.tolist(), lat_arr.tolist()
-    moving = track.moving
     front_offset = ego.length_m / 2
-    times_list = times.tolist()
-    sigmas: list[float] | None = None
-    sigmas_from = 0
-    for i, t in enumerate(times_list):
-        ped_lon = s[i] - ego_s_m
-        if ped_lon - ego.speed_mps * t < -front_offset:  # the ego has passed that point by then
-            continue
-        gap = ped_lon - front_offset
-        if gap < -ego.length_m:
-            continue
-        widen = 0.0
-        if moving:
-            if sigmas is None:  # the standard deviations from this sample on, worked out together
-                sigmas_from = i
-                sigmas = track.position_sigmas_m(path.normals_at(s_arr[i:]), times_list[i:])
-            widen = sigma_factor * sigmas[i - sigmas_from]
-        if abs(lat[i]) <= half_width_m + widen:
-            return Threat(track.ped_id, max(gap, 0.0), t, "path")
-    return None
+    # Compiled scans (control/path_kernels.py), the same float operations in the same order as a loop
+    # over the samples in Python: the standard deviations are worked out together, from the first
+    # sample the ego has not passed on.
+    start = first_ahead(s_arr, times, ego_s_m, ego.speed_mps, front_offset, ego.length_m)
+    if start < 0:
+        return None
+    sigmas = (
+        track.position_sigmas_of_rows(widening_rows(s_arr, times, start, path.start_m, path.ux, path.uy))
+        if track.moving
+        else _NO_SIGMAS
+    )
+    i = first_in_corridor(
+        s_arr, lat_arr, times, start, sigmas, sigma_factor,
+        ego_s_m, ego.speed_mps, front_offset, ego.length_m, half_width_m,
+    )  # fmt: skip
+    if i < 0:
+        return None
+    gap = (float(s_arr[i]) - ego_s_m) - front_offset
+    return Threat(track.ped_id, max(gap, 0.0), float(times[i]), "path")
+
+
+_NO_SIGMAS = np.zeros(0)
 
 
 def point_in_polygon(x: float, y: float, polygon) -> bool:

@@ -34,6 +34,9 @@ from functools import lru_cache
 
 import numpy as np
 
+# The gufuncs np.linalg.solve, inv and slogdet call (see kalman_tracker.lapack_call).
+from numpy.linalg import _umath_linalg
+
 from pedsafe_sumo.control.agent import PerceivedPedestrian
 from pedsafe_sumo.control.kalman_tracker import (
     ACCEL_PSD_M2PS3,
@@ -46,8 +49,10 @@ from pedsafe_sumo.control.kalman_tracker import (
     V2I_SOURCE,
     Track,
     frozen,
+    linalg_errors,
     transition,
 )
+from pedsafe_sumo.control.tracker_kernels import mixed_estimates
 
 #: Mean time a pedestrian walks before stopping, and stands before walking on [s]. Assumption: walking
 #: outdoors comes in bouts of tens of steps with rests between them of seconds to tens of seconds
@@ -73,35 +78,49 @@ def _standing_transition(dt_s: float, psd_m2ps: float) -> tuple[np.ndarray, np.n
     return frozen(f), frozen(q)
 
 
-def _log_gaussian(mahalanobis: float, s: np.ndarray) -> float:
-    """Log density of an innovation whose squared Mahalanobis distance under `s` is `mahalanobis`."""
-    sign, logdet = np.linalg.slogdet(s)
-    if sign <= 0:
-        return -math.inf
-    return -0.5 * (mahalanobis + logdet + len(s) * math.log(2 * math.pi))
+def _log_gaussians(mahalanobis: list[float], s: np.ndarray) -> np.ndarray:
+    """Log densities of innovations whose squared Mahalanobis distances under the stacked covariances `s`
+    are `mahalanobis`."""
+    signs, logdets = _umath_linalg.slogdet(s, signature="d->dd")
+    dims = s.shape[-1]
+    return np.array(
+        [
+            -math.inf if sign <= 0 else -0.5 * (m + logdet + dims * math.log(2 * math.pi))
+            for m, sign, logdet in zip(mahalanobis, signs.tolist(), logdets.tolist())
+        ]
+    )
+
+
+def _transposed(stack: np.ndarray) -> np.ndarray:
+    """Each matrix of a stack transposed (a view, as `.T` of one matrix)."""
+    return stack.transpose(0, 2, 1)
 
 
 class _ImmTrack:
-    """One pedestrian's two model-conditioned estimates and the models' probabilities."""
+    """One pedestrian's two model-conditioned estimates and the models' probabilities.
+
+    The models are stacked (row 0 walking, row 1 standing): numpy's matmul and numpy.linalg's gufuncs
+    work matrix by matrix through a stack, making for each the BLAS or LAPACK call one matrix alone
+    makes, so a stacked step gives the bits of one model at a time (tests/control/test_imm_tracker.py)."""
 
     def __init__(self, x_m: float, y_m: float, sigma_m: float, time_s: float, walk_prior: float) -> None:
-        state = np.array([x_m, y_m, 0.0, 0.0])
-        self.states = [state.copy(), state.copy()]
-        self.covs = [
-            np.diag([sigma_m**2, sigma_m**2, INITIAL_SPEED_SIGMA_MPS**2, INITIAL_SPEED_SIGMA_MPS**2]),
-            np.diag([sigma_m**2, sigma_m**2, 0.0, 0.0]),
-        ]
+        #: (2, 4): each model's state.
+        self.states = np.array([[x_m, y_m, 0.0, 0.0], [x_m, y_m, 0.0, 0.0]])
+        #: (2, 4, 4): each model's covariance.
+        self.covs = np.array(
+            [
+                np.diag([sigma_m**2, sigma_m**2, INITIAL_SPEED_SIGMA_MPS**2, INITIAL_SPEED_SIGMA_MPS**2]),
+                np.diag([sigma_m**2, sigma_m**2, 0.0, 0.0]),
+            ]
+        )
         self.probs = np.array([walk_prior, 1.0 - walk_prior])
         self.time_s = time_s
         self.seen_s = time_s
 
     def combined(self) -> tuple[np.ndarray, np.ndarray]:
-        x = self.probs[0] * self.states[0] + self.probs[1] * self.states[1]
-        p = np.zeros((4, 4))
-        for j in (_WALK, _STAND):
-            d = self.states[j] - x  # d d^T below: the products np.outer forms, without its wrapper
-            p += self.probs[j] * (self.covs[j] + d[:, None] * d[None, :])
-        return x, p
+        """The probability-weighted mean and covariance (with the spread of the means) of the models."""
+        x, p = mixed_estimates(self.probs[:, None], self.states, self.covs)
+        return x[0], p[0]
 
 
 class ImmTracker:
@@ -133,10 +152,12 @@ class ImmTracker:
         self.onboard_sigma_m = onboard_sigma_m
         self.v2i_latency_s = v2i_latency_s
         self._tracks: dict[str, _ImmTrack] = {}
-        # Kept between steps (read-only): Markov matrices by step length; measurement matrices by
-        # (V2I position, model) and noise covariances by whether the position is V2I's.
+        # Kept between steps (read-only): Markov matrices and the models' stacked F, F^T and scaled Q by
+        # step length; stacked measurement matrices (and their transposes) by whether the position is
+        # V2I's, noise covariances likewise.
         self._switching: dict[float, np.ndarray] = {}
-        self._h: dict[tuple[bool, int], np.ndarray] = {}
+        self._motion: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._h: dict[bool, tuple[np.ndarray, np.ndarray]] = {}
         self._r: dict[bool, np.ndarray] = {}
 
     def switching(self, dt_s: float) -> np.ndarray:
@@ -154,32 +175,51 @@ class ImmTracker:
             switch = self._switching[dt_s] = frozen(self.switching(dt_s))
         return switch
 
-    def _measurement(self, v2i: bool, model: int) -> np.ndarray:
-        h = self._h.get((v2i, model))
-        if h is None:
-            h = np.zeros((2, 4))
-            h[0, 0] = h[1, 1] = 1.0
-            if v2i and model == _WALK:
-                h[0, 2] = h[1, 3] = -self.v2i_latency_s
-            h = self._h[(v2i, model)] = frozen(h)
-        return h
+    def _motion_kept(self, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The models' F stacked, its transposes, and their process noises (the walking model's Q scaled
+        by the acceleration PSD, the standing model's as it is)."""
+        motion = self._motion.get(dt_s)
+        if motion is None:
+            if len(self._motion) >= 64:
+                self._motion.clear()
+            (f_walk, q_walk), (f_stand, q_stand) = (
+                transition(dt_s),
+                _standing_transition(dt_s, self.standing_psd),
+            )
+            f = frozen(np.array([f_walk, f_stand]))
+            q = frozen(np.array([self.accel_psd * q_walk, 1.0 * q_stand]))
+            motion = self._motion[dt_s] = (f, _transposed(f), q)
+        return motion
+
+    def _measurements(self, v2i: bool) -> tuple[np.ndarray, np.ndarray]:
+        """H of both models stacked (a V2I position measures the walking model's x - latency * v), and
+        the stack transposed."""
+        kept = self._h.get(v2i)
+        if kept is None:
+            h = np.zeros((2, 2, 4))
+            h[:, 0, 0] = h[:, 1, 1] = 1.0
+            if v2i:
+                h[_WALK, 0, 2] = h[_WALK, 1, 3] = -self.v2i_latency_s
+            h = frozen(h)
+            kept = self._h[v2i] = (h, _transposed(h))
+        return kept
 
     def _predict(self, track: _ImmTrack, dt_s: float) -> None:
         switch = self._switching_kept(dt_s)
-        predicted = switch.T @ track.probs  # c_j = sum_i p_ij mu_i
-        models = (transition(dt_s), _standing_transition(dt_s, self.standing_psd))
-        states, covs = [], []
-        for j, (f, q) in enumerate(models):
-            weights = switch[:, j] * track.probs / predicted[j] if predicted[j] > 0 else track.probs
-            x0 = weights[0] * track.states[0] + weights[1] * track.states[1]
-            p0 = np.zeros((4, 4))
-            for i in (_WALK, _STAND):
-                d = track.states[i] - x0
-                p0 += weights[i] * (track.covs[i] + d[:, None] * d[None, :])
-            scale = self.accel_psd if j == _WALK else 1.0
-            states.append(f @ x0)
-            covs.append(f @ p0 @ f.T + scale * q)
-        track.states, track.covs, track.probs = states, covs, predicted
+        f, f_t, q = self._motion_kept(dt_s)
+        probs, states = track.probs, track.states
+        predicted = switch.T @ probs  # c_j = sum_i p_ij mu_i
+        if predicted[0] > 0 and predicted[1] > 0:
+            # weights[i, j] = p_ij mu_i / c_j: model j starts from model i's estimate with this weight.
+            weights = switch * probs[:, None] / predicted
+        else:
+            weights = np.array(
+                [switch[:, j] * probs / predicted[j] if predicted[j] > 0 else probs for j in (0, 1)]
+            ).T
+        x0s, p0s = mixed_estimates(weights, states, track.covs)  # both models' mixed starts
+        track.states = np.matmul(f, x0s[:, :, None])[:, :, 0]
+        track.covs = f @ p0s @ f_t + q
+        track.probs = predicted
 
     def _noise(self, v2i: bool) -> np.ndarray:
         r = self._r.get(v2i)
@@ -194,27 +234,26 @@ class ImmTracker:
         predicted position): the estimate has lost the person."""
         v2i = source == V2I_SOURCE
         r = self._noise(v2i)
-        parts = []
-        for j in (_WALK, _STAND):
-            h = self._measurement(v2i, j)
-            s = h @ track.covs[j] @ h.T + r
-            innovation = z - h @ track.states[j]
-            parts.append((h, s, innovation, float(innovation @ np.linalg.solve(s, innovation))))
-        if self.gate_chi2 is not None and all(part[3] > self.gate_chi2 for part in parts):
+        h, h_t = self._measurements(v2i)
+        x, p = track.states, track.covs
+        s = h @ p @ h_t + r
+        innovations = z - np.matmul(h, x[:, :, None])[:, :, 0]
+        with linalg_errors():  # as np.linalg.solve and inv, in one context for both calls
+            solved = _umath_linalg.solve1(s, innovations, signature="dd->d")
+            s_inv = _umath_linalg.inv(s, signature="d->d")
+        # Each innovation @ its solution, a vector-vector dot as for one model alone.
+        mahalanobis = np.matmul(innovations[:, None, :], solved[:, :, None])[:, 0, 0].tolist()
+        if self.gate_chi2 is not None and all(m > self.gate_chi2 for m in mahalanobis):
             if not self.gate_precise_only:
                 return False
-            _, p = track.combined()
-            if float(r[0, 0]) < (p[0, 0] + p[1, 1]) / 2:
+            _, p_combined = track.combined()
+            if float(r[0, 0]) < (p_combined[0, 0] + p_combined[1, 1]) / 2:
                 return False
-        log_likelihoods = np.zeros(2)
-        for j, (h, s, innovation, mahalanobis) in enumerate(parts):
-            x, p = track.states[j], track.covs[j]
-            gain = p @ h.T @ np.linalg.inv(s)
-            i_kh = EYE4 - gain @ h
-            track.states[j] = x + gain @ innovation
-            track.covs[j] = i_kh @ p @ i_kh.T + gain @ r @ gain.T
-            log_likelihoods[j] = _log_gaussian(mahalanobis, s)
-        weighted = log_likelihoods + np.log(np.maximum(track.probs, 1e-300))
+        gain = p @ h_t @ s_inv
+        i_kh = EYE4 - gain @ h
+        track.states = x + np.matmul(gain, innovations[:, :, None])[:, :, 0]
+        track.covs = i_kh @ p @ _transposed(i_kh) + gain @ r @ _transposed(gain)
+        weighted = _log_gaussians(mahalanobis, s) + np.log(np.maximum(track.probs, 1e-300))
         weighted -= weighted.max()
         probs = np.exp(weighted)
         track.probs = probs / probs.sum()

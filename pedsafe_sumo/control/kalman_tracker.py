@@ -28,6 +28,7 @@ from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
+from numpy.linalg import _umath_linalg  # the gufuncs np.linalg.solve, inv and slogdet call: see lapack_call
 
 from pedsafe_sumo.control.agent import PerceivedPedestrian
 
@@ -117,7 +118,7 @@ class Track:
         v = np.array([self.vx_mps, self.vy_mps])
         cov = self.covariance[2:, 2:]
         try:
-            return float(v @ np.linalg.solve(cov, v)) > MOVING_CHI2
+            return float(v @ lapack_call(_umath_linalg.solve1, cov, v)) > MOVING_CHI2
         except np.linalg.LinAlgError:
             return bool(np.any(v != 0.0))
 
@@ -127,18 +128,47 @@ class Track:
         h = np.array([ux, uy, ux * after_s, uy * after_s])
         return math.sqrt(max(float(h @ self.covariance @ h), 0.0))
 
-    def position_sigmas_m(self, directions: Any, after_s: list[float]) -> list[float]:
+    def position_sigmas_m(self, directions: Any, after_s: Any) -> list[float]:
+        """position_sigmas_array as a list."""
+        return self.position_sigmas_array(directions, after_s).tolist()
+
+    def position_sigmas_array(self, directions: Any, after_s: Any) -> np.ndarray:
         """position_sigma_m for several (direction, time) pairs at once, bit for bit: h C h' as a stack
         of 1 x 4 rows, so that numpy makes for each row the calls (vector-matrix, then dot) it makes for
         one (a 4 x 4 matrix product per row is rounded otherwise; tests/control pin the equality).
-        `directions`: unit vectors, as (x, y) pairs or the rows of an n x 2 array."""
-        d = np.array(directions, dtype=float).reshape(-1, 2)
-        t = np.array(after_s, dtype=float)
+        `directions`: unit vectors, as (x, y) pairs or the rows of an n x 2 array; `after_s`: the times,
+        a list or an array."""
+        d = np.asarray(directions, dtype=float).reshape(-1, 2)
+        t = np.asarray(after_s, dtype=float)
         h = np.empty((len(t), 1, 4))
         h[:, 0, 0], h[:, 0, 1] = d[:, 0], d[:, 1]
         h[:, 0, 2], h[:, 0, 3] = d[:, 0] * t, d[:, 1] * t
+        return self.position_sigmas_of_rows(h)
+
+    def position_sigmas_of_rows(self, h: np.ndarray) -> np.ndarray:
+        """The standard deviations sqrt(h C h') of the rows h = (ux, uy, ux t, uy t), (n, 1, 4)."""
         variances = np.matmul(np.matmul(h, self.covariance), np.ascontiguousarray(h.transpose(0, 2, 1)))
-        return [math.sqrt(max(v, 0.0)) for v in variances[:, 0, 0].tolist()]
+        # np.sqrt and math.sqrt both round correctly (IEEE square root): the same floats.
+        return np.sqrt(np.maximum(variances[:, 0, 0], 0.0))
+
+
+def _raise_singular(err: str, flag: int) -> None:
+    raise np.linalg.LinAlgError("Singular matrix")
+
+
+def lapack_call(gufunc, *arrays: np.ndarray):
+    """numpy.linalg's LAPACK gufunc of np.linalg.solve (`solve1`, a vector right-hand side) or inv on
+    float64 stacks, as those functions call it (the same LAPACK routine per matrix, so the same bits, and
+    LinAlgError on a singular matrix), without their per-call checks and conversions: the trackers call
+    them every track and step."""
+    with linalg_errors():
+        return gufunc(*arrays, signature="dd->d" if len(arrays) == 2 else "d->d")
+
+
+def linalg_errors() -> np.errstate:
+    """The floating-point error handling numpy.linalg's solve and inv set around their LAPACK call: a
+    singular matrix raises LinAlgError."""
+    return np.errstate(call=_raise_singular, invalid="call", over="ignore", divide="ignore", under="ignore")
 
 
 def frozen(array: np.ndarray) -> np.ndarray:
@@ -225,7 +255,7 @@ class KalmanTracker:
             if track is not None:
                 x, p = track[0], track[1]
                 s = h @ p @ h.T + r
-                s_inv = np.linalg.inv(s)
+                s_inv = lapack_call(_umath_linalg.inv, s)
                 innovation = z - h @ x
                 if (
                     self.gate_chi2 is not None

@@ -223,3 +223,94 @@ def test_the_stack_stops_braking_within_a_second_of_a_kerb_stop():
     assert all(any(t < 0 for t in times) for times in imm)  # braked for the walker
     assert all(t < 1.0 for times in imm for t in times)
     assert any(t >= 1.0 for times in cv for t in times)
+
+
+def one_model_at_a_time(
+    tracks: dict, peds: list, time_s: float, mean_sojourn_s: float, latency_s: float
+) -> None:
+    """The IMM step of the module's docstring written out for one model at a time with numpy.linalg
+    (no gate): mixing, prediction, Joseph-form update, model probabilities. `tracks`: id -> [states
+    (list of 2), covariances (list of 2), probabilities, time]."""
+    for track in tracks.values():
+        dt = time_s - track[3]
+        p_switch = dt / mean_sojourn_s
+        switch = np.array([[1.0 - p_switch, p_switch], [p_switch, 1.0 - p_switch]])
+        walk_f = np.eye(4)
+        walk_f[0, 2] = walk_f[1, 3] = dt
+        walk_q = np.zeros((4, 4))
+        for i in (0, 1):
+            walk_q[i, i], walk_q[i, i + 2], walk_q[i + 2, i], walk_q[i + 2, i + 2] = (
+                dt**3 / 3,
+                dt**2 / 2,
+                dt**2 / 2,
+                dt,
+            )
+        stand_f = np.diag([1.0, 1.0, 0.0, 0.0])
+        stand_q = np.diag([1e-4 * dt, 1e-4 * dt, 0.0, 0.0])
+        predicted = switch.T @ track[2]
+        states, covs = [], []
+        for j, (f, q) in enumerate(((walk_f, Q_M2PS3 * walk_q), (stand_f, 1.0 * stand_q))):
+            w = switch[:, j] * track[2] / predicted[j]
+            x0 = w[0] * track[0][0] + w[1] * track[0][1]
+            p0 = np.zeros((4, 4))
+            for i in (0, 1):
+                p0 += w[i] * (track[1][i] + np.outer(track[0][i] - x0, track[0][i] - x0))
+            states.append(f @ x0)
+            covs.append(f @ p0 @ f.T + q)
+        track[0], track[1], track[2], track[3] = states, covs, predicted, time_s
+    for ped in peds:
+        sigma = SIGMA_M if ped.source == "v2i" else 0.01
+        r = sigma * sigma * np.eye(2)
+        z = np.array([ped.x_m, ped.y_m])
+        track = tracks.get(ped.ped_id)
+        if track is None:
+            state = np.array([ped.x_m, ped.y_m, 0.0, 0.0])
+            covs = [np.diag([sigma**2, sigma**2, 1.5**2, 1.5**2]), np.diag([sigma**2, sigma**2, 0.0, 0.0])]
+            tracks[ped.ped_id] = [[state, state.copy()], covs, np.array([0.5, 0.5]), time_s]
+            continue
+        log_likelihoods = np.zeros(2)
+        for j in (0, 1):
+            h = np.zeros((2, 4))
+            h[0, 0] = h[1, 1] = 1.0
+            if ped.source == "v2i" and j == 0:
+                h[0, 2] = h[1, 3] = -latency_s
+            x, p = track[0][j], track[1][j]
+            s = h @ p @ h.T + r
+            innovation = z - h @ x
+            mahalanobis = float(innovation @ np.linalg.solve(s, innovation))
+            gain = p @ h.T @ np.linalg.inv(s)
+            i_kh = np.eye(4) - gain @ h
+            track[0][j] = x + gain @ innovation
+            track[1][j] = i_kh @ p @ i_kh.T + gain @ r @ gain.T
+            _, logdet = np.linalg.slogdet(s)
+            log_likelihoods[j] = -0.5 * (mahalanobis + logdet + 2 * math.log(2 * math.pi))
+        weighted = log_likelihoods + np.log(np.maximum(track[2], 1e-300))
+        weighted -= weighted.max()
+        probs = np.exp(weighted)
+        track[2] = probs / probs.sum()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_models_stacked_give_the_bits_of_one_model_at_a_time(seed):
+    # The tracker works on both models at once (stacked matrices); the same step for one model at a
+    # time (above) must give the same numbers bit for bit: the stack's commands feed the simulation.
+    rng = np.random.default_rng(seed)
+    tracker, reference = ImmTracker(), {}
+    x, y, vx, vy = 10.0, -3.0, 0.0, 0.0
+    for k in range(400):
+        if k % 80 == 40:
+            vx, vy = rng.normal(0.0, 1.2, 2)
+        elif k % 80 == 0:
+            vx = vy = 0.0
+        x, y = x + vx * STEP_S, y + vy * STEP_S
+        source = "v2i" if rng.random() < 0.6 else "camera"
+        noise = SIGMA_M if source == "v2i" else 0.01
+        peds = [
+            PerceivedPedestrian("p", float(x + rng.normal(0, noise)), float(y + rng.normal(0, noise)), source)
+        ]
+        tracks = tracker.update(peds, k * STEP_S)
+        one_model_at_a_time(reference, peds, k * STEP_S, 10.0, LATENCY_S)
+        states, covs, probs, _ = reference["p"]
+        combined = probs[0] * states[0] + probs[1] * states[1]
+        assert (tracks[0].x_m, tracks[0].y_m, tracks[0].vx_mps, tracks[0].vy_mps) == tuple(combined.tolist())
+        assert tracks[0].standing_probability == float(probs[1])
