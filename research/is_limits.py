@@ -175,9 +175,13 @@ def sqrt_pi_efficiency(
         held = y[fold == k]
         w = 1.0 / (defensive_share + (1 - defensive_share) * np.sqrt(pi) / np.mean(np.sqrt(pi)))
         p_k = float(np.mean(held))
+        if p_k == 0:  # no collision in this half (a handful in the run): nothing to score it on
+            efficiencies.append(math.nan)
+            r2.append(math.nan)
+            continue
         efficiencies.append(p_k * (1 - p_k) / (float(np.mean(w * held)) - p_k**2))
         r2.append(float(np.var(pi) / (p_k * (1 - p_k))))
-    return float(np.mean(efficiencies)), max(efficiencies) - min(efficiencies), float(np.mean(r2))
+    return float(np.nanmean(efficiencies)), max(efficiencies) - min(efficiencies), float(np.nanmean(r2))
 
 
 def main(argv: list[str] | None = None) -> int:
