@@ -99,6 +99,35 @@ def table_one_markdown(episodes: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def glance_markdown(runs: dict[str, pd.DataFrame]) -> str:
+    """Collision rate [95% Wilson] per scenario (rows) and run and condition (columns), and the paper's:
+    every run's Table I side by side. A scenario a run does not hold is left blank."""
+    columns: list[tuple[str, str]] = []
+    cells: dict[tuple[str, str, str], str] = {}
+    scenarios: list[str] = []
+    for label, episodes in runs.items():
+        table = table_one(episodes)
+        for _, row in table.iterrows():
+            column = (label, row["condition"])
+            if column not in columns:
+                columns.append(column)
+            if row["scenario"] not in scenarios:
+                scenarios.append(row["scenario"])
+            cells[(row["scenario"], *column)] = _interval(
+                row["collision_rate"], row["collision_low"], row["collision_high"]
+            )
+    head = ["scenario", *(f"{label}, {condition.upper()}" for label, condition in columns)]
+    head += ["paper, SV", "paper, V2I"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for scenario in sorted(scenarios):
+        row_cells = [cells.get((scenario, *column), "") for column in columns]
+        for condition in ("sv", "v2i"):
+            paper = PAPER_TABLE_ONE.get((scenario, condition))
+            row_cells.append(f"{paper[0]:g}" if paper else "")
+        lines.append("| " + " | ".join([scenario, *row_cells]) + " |")
+    return "\n".join(lines)
+
+
 def paired_markdown(episodes: pd.DataFrame) -> str:
     if set(episodes["condition"]) != {"sv", "v2i"}:
         return "One condition only: no paired test."
@@ -298,6 +327,10 @@ def main(argv: list[str] | None = None) -> int:
         f"{old:.3f} (age {AGES_AT_REST[1]:.0f}) at an impact speed of 0 km/h: its column counts a touch "
         "as an injury of that probability. The MAIS3+F "
         "column is the second injury model (docs/safety_indexes.md).",
+        "",
+        "## At a glance: collision rate per run",
+        "",
+        glance_markdown({label: run.episodes for label, (_, run, _) in runs.items()}),
         "",
     ]
     for label, (folder, run, info) in runs.items():

@@ -58,6 +58,13 @@ def test_the_page_holds_the_runs_numbers_beside_the_papers(tmp_path):
     assert "| crossing | collision | 10 | 3 | 0 | 0.25 |" in text
     # jaywalking's pair with a V2I error is dropped: 5 SV-only of 10 pairs -> p = 2 / 2^5
     assert "| jaywalking | collision | 10 | 5 | 0 | 0.0625 |" in text
+    # at a glance: the same interval under the run's label and condition, the paper's SV and V2I beside it
+    head = "| scenario | Standard, SV | Standard, V2I | paper, SV | paper, V2I |"
+    assert head in text
+    glance = text[text.index(head) :].splitlines()
+    crossing = next(line for line in glance if line.startswith("| crossing |"))
+    assert crossing.startswith(f"| crossing | 0.3000 [{low:.4f}, {high:.4f}] | ")
+    assert crossing.endswith(" | 0.23 | 0.0075 |")
     assert "](figures/standard_first_detection_distance.png)" in text
     assert text.rstrip().endswith("## Mechanisms\n\nWritten by hand.")
     assert (tmp_path / "page" / "figures" / "standard_first_detection_distance.png").stat().st_size > 10_000
