@@ -213,9 +213,14 @@ class _Selector:
         self.everyone: SensorDetections | None = None
 
     def __call__(self, mask: np.ndarray) -> SensorDetections:
-        n = np.count_nonzero(mask)
-        if n == 0:
-            return _EMPTY
+        if mask.shape[0] == 1:  # one pedestrian (every scenario's frames): no count to make
+            if not mask[0]:
+                return _EMPTY
+            n = 1
+        else:
+            n = np.count_nonzero(mask)
+            if n == 0:
+                return _EMPTY
         if self.everyone is None:
             peds, m = self.peds, len(self.peds)
             xy = np.empty((m, 2))

@@ -144,13 +144,15 @@ def drive(
             # subscribed vehicle has its body in `dims`, so the subscription's ids are the snapshot's;
             # the filter runs only when the set changes.
             ids = tuple(results)
-            if ids != body_ids:
+            if ids == body_ids:
+                values = list(results.values())  # in the order of `ids`, without looking each one up
+            else:
                 ids = tuple(vid for vid in results if vid in dims)
                 if ids != body_ids:
                     body_ids = ids
                     lengths, widths, heights, half_diagonals, colours, ego_index = vehicle_bodies(ids, dims)
                     half_lengths = 0.5 * lengths
-            values = list(map(results.__getitem__, ids))
+                values = list(map(results.__getitem__, ids))
             n_vehicles = len(ids)
             front_xy = np.fromiter(chain.from_iterable(map(position_of, values)), float, 2 * n_vehicles)
             front_xy = front_xy.reshape(n_vehicles, 2)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from itertools import chain
+from operator import itemgetter
 
 import numpy as np
 
@@ -21,10 +23,15 @@ def vehicle_bodies(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """(lengths, widths, heights, half_diagonals, colours, ego_index) of the vehicles `ids`, in order:
     the snapshot's body arrays, rebuilt only when a vehicle enters or leaves."""
-    sizes = np.array([dims[vid][:3] for vid in ids], dtype=float).reshape(-1, 3)
-    lengths, widths, heights = sizes[:, 0].copy(), sizes[:, 1].copy(), sizes[:, 2].copy()
+    # One column at a time from the bodies' tuples: the same doubles as an (N, 3) array's columns, a
+    # third of the time of building that array from N tuples (the loop rebuilds every few steps).
+    bodies = list(map(dims.__getitem__, ids))
+    n = len(bodies)
+    lengths = np.fromiter(map(itemgetter(0), bodies), float, n)
+    widths = np.fromiter(map(itemgetter(1), bodies), float, n)
+    heights = np.fromiter(map(itemgetter(2), bodies), float, n)
     half_diagonals = 0.5 * np.hypot(lengths, widths)
-    colours = np.array([dims[vid][3] for vid in ids], dtype=float).reshape(-1, 3)
+    colours = np.fromiter(chain.from_iterable(map(itemgetter(3), bodies)), float, 3 * n).reshape(n, 3)
     return lengths, widths, heights, half_diagonals, colours, ids.index(EGO_ID)
 
 
