@@ -39,17 +39,20 @@ def perceived_pedestrians(detections, wanted: set[str]) -> list[PerceivedPedestr
     """The pedestrians the sensors the stack gets (`wanted`) report, each once, by its first reporter
     in the order onboard camera, onboard LiDAR, V2I."""
     reported: list[PerceivedPedestrian] = []
+    seen: set[str] = set()
     sources = (
         ("onboard_camera", detections.camera),
         ("onboard_lidar", detections.lidar),
         ("v2i", detections.v2i_received),
     )
     for source, found in sources:
-        if source not in wanted:
+        if not found.ids or source not in wanted:
             continue
-        for pid, xy in zip(found.ids, found.xy_m):
-            if all(p.ped_id != pid for p in reported):
-                reported.append(PerceivedPedestrian(pid, float(xy[0]), float(xy[1]), source))
+        # tolist(): the positions as Python floats (the same doubles), without a numpy row per pedestrian.
+        for pid, (x_m, y_m) in zip(found.ids, found.xy_m.tolist()):
+            if pid not in seen:
+                seen.add(pid)
+                reported.append(PerceivedPedestrian(pid, x_m, y_m, source))
     return reported
 
 
