@@ -218,7 +218,7 @@ class _Selector:
                 return _EMPTY
             n = 1
         else:
-            n = np.count_nonzero(mask)
+            n = int(np.count_nonzero(mask))
             if n == 0:
                 return _EMPTY
         if self.everyone is None:
