@@ -255,10 +255,11 @@ def validate_protocol_sweep(args) -> list[dict[str, str]]:
             derived.specs()
             (Path(scratch) / "p.toml").unlink()
     n_conditions = 2 if protocol.header["conditions"] == "both" else 1
-    args.base_rows = None
+    args.base_rows, args.base_labels = None, set()
     own = [combo for combo in combos if is_protocol_itself(protocol, combo)]
     if args.base_run is not None and own:
         args.base_rows = base_run_rows(protocol, args.base_run, args.episodes)
+        args.base_labels = {label(combo) for combo in own}
     to_run = len(combos) - (len(own) if args.base_rows is not None else 0)
     args.count_text = (
         f"{to_run} combination(s) x {len(protocol.scenarios)} scenario(s) x {n_conditions} "
@@ -386,10 +387,8 @@ def main(argv: list[str] | None = None) -> int:
         if (run_dir / "episodes.parquet").exists():
             print(f"[{number}/{len(combos)}] {label(combo)}: done before, kept")
             continue
-        base_rows = getattr(args, "base_rows", None)
-        own = base_rows is not None and is_protocol_itself(args.loaded_protocol, combo)
-        if own and not (run_dir / "run.json").exists():
-            write_base_rows(base_rows, args.base_run, run_dir)
+        if label(combo) in getattr(args, "base_labels", ()) and not (run_dir / "run.json").exists():
+            write_base_rows(args.base_rows, args.base_run, run_dir)
             print(
                 f"[{number}/{len(combos)}] {label(combo)}: the protocol's own values, the first "
                 f"{args.episodes:,} pairs of {args.base_run} (the same seed: the same rows)"

@@ -209,13 +209,12 @@ class ImmTracker:
         f, f_t, q = self._motion_kept(dt_s)
         probs, states = track.probs, track.states
         predicted = switch.T @ probs  # c_j = sum_i p_ij mu_i
-        if predicted[0] > 0 and predicted[1] > 0:
-            # weights[i, j] = p_ij mu_i / c_j: model j starts from model i's estimate with this weight.
-            weights = switch * probs[:, None] / predicted
-        else:
-            weights = np.array(
-                [switch[:, j] * probs / predicted[j] if predicted[j] > 0 else probs for j in (0, 1)]
-            ).T
+        # weights[i, j] = p_ij mu_i / c_j: model j starts from model i's estimate with this weight; a model
+        # with c_j = 0 starts from the probabilities as they are.
+        reachable = predicted > 0
+        weights = np.where(
+            reachable, switch * probs[:, None] / np.where(reachable, predicted, 1.0), probs[:, None]
+        )
         x0s, p0s = mixed_estimates(weights, states, track.covs)  # both models' mixed starts
         track.states = np.matmul(f, x0s[:, :, None])[:, :, 0]
         track.covs = f @ p0s @ f_t + q

@@ -213,14 +213,10 @@ class _Selector:
         self.everyone: SensorDetections | None = None
 
     def __call__(self, mask: np.ndarray) -> SensorDetections:
-        if mask.shape[0] == 1:  # one pedestrian (every scenario's frames): no count to make
-            if not mask[0]:
-                return _EMPTY
-            n = 1
-        else:
-            n = int(np.count_nonzero(mask))
-            if n == 0:
-                return _EMPTY
+        # One pedestrian (every scenario's frames): the mask's one element is the count.
+        n = int(mask[0]) if mask.shape[0] == 1 else int(np.count_nonzero(mask))
+        if n == 0:
+            return _EMPTY
         if self.everyone is None:
             peds, m = self.peds, len(self.peds)
             xy = np.empty((m, 2))
