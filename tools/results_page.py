@@ -257,16 +257,103 @@ def findings_markdown(runs: dict[str, pd.DataFrame]) -> str:
     return "\n".join(lines)
 
 
+#: A paired difference counts as significant below this exact McNemar p-value.
+SIGNIFICANCE = 0.05
+
+
+def sweep_combinations(sweep_dir: Path) -> dict[str, pd.DataFrame] | None:
+    """Each combination's episodes by its label, in the sweep's order; None while the sweep runs (its
+    findings.csv is written when every combination has finished)."""
+    if not (sweep_dir / "findings.csv").is_file():
+        return None
+    labels = pd.read_csv(sweep_dir / "findings.csv")["run"].astype(str)
+    return {label: pd.read_parquet(sweep_dir / label / "episodes.parquet") for label in labels}
+
+
+def _value(label: str) -> str:
+    """A one-key combination's value ("algorithm.reaction_time_s=0.4" -> "0.4"); otherwise the label."""
+    return label.split("=", 1)[1] if label.count("=") == 1 else label
+
+
 def sweep_markdown(sweep_dir: Path) -> str:
+    """Per combination and scenario: both collision rates, the paired test; then the findings in each
+    combination."""
+    combinations = sweep_combinations(sweep_dir)
+    if combinations is None:
+        return "Still running: no combination's verdict yet."
+    lines = [
+        "| combination | scenario | SV collision [95%] | V2I collision [95%] | SV only | V2I only | p |",
+        "|---|---|---|---|---:|---:|---:|",
+    ]
+    for label, episodes in combinations.items():
+        table = table_one(episodes).set_index(["scenario", "condition"])
+        paired = paired_mcnemar(episodes, "collision").set_index("scenario")
+        for scenario in paired.index:
+            rates = [
+                _interval(*table.loc[(scenario, c), ["collision_rate", "collision_low", "collision_high"]])
+                for c in ("sv", "v2i")
+            ]
+            row = paired.loc[scenario]
+            lines.append(
+                f"| {label} | {scenario} | {rates[0]} | {rates[1]} | {int(row['sv_only'])} | "
+                f"{int(row['v2i_only'])} | {row['p_value']:.3g} |"
+            )
     findings = pd.read_csv(sweep_dir / "findings.csv")
     head = ["combination", *[f for f in FINDINGS if f in findings.columns]]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, row in findings.iterrows():
         cells = [str(row["run"])]
         for finding in head[1:]:
             value = row[finding]
             cells.append("n/a" if pd.isna(value) else ("holds" if value else "fails"))
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def significant_gains(episodes: pd.DataFrame) -> tuple[list[str], list[str]]:
+    """The scenarios where V2I collides significantly less than SV (paired), and those where more."""
+    paired = paired_mcnemar(episodes, "collision")
+    significant = paired[paired["p_value"] < SIGNIFICANCE]
+    fewer = significant.loc[significant["v2i_only"] < significant["sv_only"], "scenario"]
+    more = significant.loc[significant["v2i_only"] > significant["sv_only"], "scenario"]
+    return list(fewer), list(more)
+
+
+def sweep_verdicts_markdown(sweep_dirs: list[Path]) -> str:
+    """One row per finding, one column per finished sweep: whether the finding holds at every swept
+    value, or the values where it fails; and where V2I's collision gain is significant."""
+    finished = {d.name: c for d in sweep_dirs if (c := sweep_combinations(d)) is not None}
+    if not finished:
+        return "No sweep has finished."
+    head = ["finding", *finished]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    verdicts = {
+        name: {label: paper_findings(episodes) for label, episodes in combinations.items()}
+        for name, combinations in finished.items()
+    }
+    for finding in FINDINGS:
+        cells = [FINDING_WORDS[finding]]
+        for by_label in verdicts.values():
+            values = {label: by_label[label][finding] for label in by_label}
+            failing = [_value(label) for label, value in values.items() if value == 0]
+            if all(math.isnan(value) for value in values.values()):
+                cells.append("n/a")
+            elif failing:
+                cells.append("fails at " + ", ".join(failing))
+            else:
+                cells.append(f"holds at every value ({len(values)})")
+        lines.append("| " + " | ".join(cells) + " |")
+    cells = [f"V2I collides significantly less than SV (paired, p < {SIGNIFICANCE:g}) in"]
+    for combinations in finished.values():
+        parts = []
+        for label, episodes in combinations.items():
+            fewer, more = significant_gains(episodes)
+            text = ", ".join(fewer) if fewer else "none"
+            if more:
+                text += "; significantly MORE in " + ", ".join(more)
+            parts.append(f"{_value(label)}: {text}")
+        cells.append("; ".join(parts))
+    lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -359,6 +446,17 @@ def main(argv: list[str] | None = None) -> int:
         out += [*figures_of(run, slug, args.figures, page_dir), ""]
     findings = findings_markdown({label: run.episodes for label, (_, run, _) in runs.items()})
     out += ["## The paper's findings", "", findings, ""]
+    if args.sweep:
+        out += [
+            "### Each finding across the sensitivity sweeps",
+            "",
+            "Each sweep varies one setting of the protocol over the values named in its preset "
+            "(python -m pedsafe_sumo.sweep --preset NAME; docs/report.md), every other value the "
+            "protocol's own, on the same seeds; the verdicts are on point estimates, as the paper's.",
+            "",
+            sweep_verdicts_markdown(args.sweep),
+            "",
+        ]
     for sweep_dir in args.sweep:
         out += [f"### Sensitivity: `{sweep_dir.name}`", "", sweep_markdown(sweep_dir), ""]
     if notes:

@@ -8,13 +8,20 @@ import sys
 
 import pandas as pd
 import pytest
-from report_runs import write_standard_run
+from report_runs import episode_row, write_standard_run
 
 from pedsafe_sumo import REPO_ROOT
 
 TOOL = REPO_ROOT / "tools" / "results_page.py"
 sys.path.insert(0, str(TOOL.parent))
-from results_page import collision_timing, meets_target  # noqa: E402
+from results_page import (  # noqa: E402
+    collision_timing,
+    meets_target,
+    sweep_markdown,
+    sweep_verdicts_markdown,
+)
+
+from pedsafe_sumo.report.findings import findings_table  # noqa: E402
 
 
 def _wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -116,3 +123,52 @@ def test_a_collision_is_late_when_the_stack_could_not_have_stopped_from_the_step
     # Perceived 0.2 s after the step-off: 2 m fewer to stop in.
     assert collision_timing(_log(13.0, 1.2), 0.4, 6.0)["kind"] == "late"
     assert collision_timing(_log(13.0, None), 0.4, 6.0)["kind"] == "never"
+
+
+def _sweep_combination(folder, collisions: dict[tuple[str, str], set[int]], pairs: int = 20):
+    """episodes.parquet of one combination: `pairs` paired episodes per scenario, colliding where named."""
+    rows = [
+        episode_row(
+            scenario, condition, episode, collision=episode in collisions.get((scenario, condition), set())
+        )
+        for scenario in ("crossing", "jaywalking", "background_blending")
+        for condition in ("sv", "v2i")
+        for episode in range(pairs)
+    ]
+    folder.mkdir(parents=True)
+    pd.DataFrame(rows).to_parquet(folder / "episodes.parquet")
+
+
+def test_the_sweep_verdicts_name_the_values_where_a_finding_fails(tmp_path):
+    sweep = tmp_path / "study-reaction"
+    # k=1: crossing SV 8 of 20, V2I none (8 SV-only: p = 2 / 2^8); jaywalking SV 10, V2I 1 of the same
+    # (9 SV-only: p = 2 / 2^9); blending SV 1 (p = 1). Every finding holds.
+    _sweep_combination(
+        sweep / "k=1",
+        {("crossing", "sv"): set(range(8)), ("jaywalking", "sv"): set(range(10)),
+         ("jaywalking", "v2i"): {0}, ("background_blending", "sv"): {0}},
+    )  # fmt: skip
+    # k=2: crossing as above; jaywalking SV 2, V2I 3 (V2I worse, 1 V2I-only: p = 1): V2I is not safer
+    # everywhere and jaywalking (2) is below crossing (8).
+    _sweep_combination(
+        sweep / "k=2",
+        {("crossing", "sv"): set(range(8)), ("jaywalking", "sv"): {0, 1}, ("jaywalking", "v2i"): {0, 1, 2}},
+    )
+    findings_table({"k=1": sweep / "k=1", "k=2": sweep / "k=2"}).to_csv(sweep / "findings.csv", index=False)
+    running = tmp_path / "study-latency"
+    running.mkdir()
+
+    verdicts = sweep_verdicts_markdown([sweep, running]).splitlines()
+    assert verdicts[0] == "| finding | study-reaction |"  # the unfinished sweep has no column
+    rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ")[1].rstrip(" |") for line in verdicts[2:]}
+    assert rows["V2I is safer than SV in every scenario (point estimates; an equal collision rate counts "
+                "when V2I's conflict rate is no higher)"] == "fails at 2"  # fmt: skip
+    assert rows["jaywalking is the most dangerous of the paper's three scenarios (SV)"] == "fails at 2"
+    assert rows["background blending is the safest of them (SV)"] == "holds at every value (2)"
+    assert rows["V2I collides significantly less than SV (paired, p < 0.05) in"] == (
+        "1: crossing, jaywalking; 2: crossing"
+    )
+    table = sweep_markdown(sweep)
+    assert f"| k=1 | jaywalking | 0.5000 [{_wilson(10, 20)[0]:.4f}, {_wilson(10, 20)[1]:.4f}] | " in table
+    assert f"| 9 | 0 | {2 / 2**9:.3g} |" in table
+    assert sweep_markdown(running) == "Still running: no combination's verdict yet."
