@@ -13,6 +13,9 @@ Each RUN_DIR is a complete batch run of an approach-staged protocol with jaywalk
    the scenario's roadside pole (from the site's rsu.add.xml) and its bearing off the pole's optical axis,
    the pedestrian's projected height in the pole's image there, whether the pole saw them (`roadside_raw`,
    at the pole, before the link) at any waiting step, and when it first saw them after the step-off.
+   With `--kerb-corner-pole`: how many scenarios the build's hosting check (static occluders only) lets
+   the site host with its corner pole, and with the corner pole placed by the build's own rule on the
+   site's kerb corner (the corner the build tries first) at each setback it tries.
 2. `--rerun N`: the run's first N collision episodes of jaywalking under V2I and its first N without a
    collision, in episode order, run again in this process from their seeds with the
    protocol's values (the same seed gives the same episode; each re-run's collision flag is checked
@@ -22,7 +25,8 @@ Each RUN_DIR is a complete batch run of an approach-staged protocol with jaywalk
    samples in sight, what each blocked ray hits first (the queued vehicle just downstream or upstream of
    the gap the pedestrian steps out of, another queued vehicle, the ego, a background vehicle, a
    building, a tree), and the visible share with the vehicles taken away (static occluders only), with
-   only the kerb-lane queue, and with everything but the queue.
+   only the kerb-lane queue, and with everything but the queue; with `--kerb-corner-pole` also what the
+   kerb-corner pole (2 m setback) sees of the pedestrian in the same snapshot.
 
 Prints one table per part (markdown).
 """
@@ -42,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import sumolib
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -49,6 +54,8 @@ import pedsafe_sumo.sim.loop as sim_loop  # noqa: E402
 from pedsafe_sumo.batch.__main__ import parse_args, plan_batch  # noqa: E402
 from pedsafe_sumo.batch.chunks import Task, episode_seed  # noqa: E402
 from pedsafe_sumo.batch.runner import _close_runner, _run_pair  # noqa: E402
+from pedsafe_sumo.network.poles import place_roadside_unit  # noqa: E402
+from pedsafe_sumo.network.sites import get_site  # noqa: E402
 from pedsafe_sumo.perception.raycast import cast_rays_numpy  # noqa: E402
 from pedsafe_sumo.perception.sensors import finish_camera, plan_camera  # noqa: E402
 from pedsafe_sumo.perception.surfaces import (  # noqa: E402
@@ -57,7 +64,14 @@ from pedsafe_sumo.perception.surfaces import (  # noqa: E402
     KIND_PRISM,
     KIND_VEHICLE,
 )
-from pedsafe_sumo.perception.world import VehicleBoxes, WorldSnapshot, load_roadside_units  # noqa: E402
+from pedsafe_sumo.perception.world import (  # noqa: E402
+    RoadsideUnit,
+    VehicleBoxes,
+    WorldSnapshot,
+    load_roadside_units,
+)
+from pedsafe_sumo.scenarios.hosting import hosted_count  # noqa: E402
+from pedsafe_sumo.units import sumo_angle_to_yaw_rad  # noqa: E402
 
 SCENARIO = "jaywalking"
 CONDITION = "v2i"
@@ -91,6 +105,35 @@ def roadside_pole(run_dir: Path, info: dict):
     params = info["parameters"]["perception"]["roadside_camera"]
     units = load_roadside_units(rsu_file, params["default_height_m"], params["default_pitch_down_deg"])
     return next(u for u in units if u.id == wanted), params
+
+
+def corner_poles(info: dict, corner: str) -> list[tuple[dict, int]]:
+    """The watched arm's corner pole placed by the site build's own rule (network.poles.place_roadside_unit)
+    on `corner` at each setback the build tries, with the number of scenarios the build's hosting check
+    (scenarios.hosting.hosted_count, static occluders only) lets the site host with it and the far-side
+    pole; the build keeps the best of all corners, the kerb corner first."""
+    site = get_site(info["site"])
+    site_file = json.loads((site.directory / f"{site.name}.site.json").read_text())
+    net = sumolib.net.readNet(str(site.directory / f"{site.name}.net.xml"), withInternal=True)
+    junction = net.getNode(site_file["main_junction"])
+    arm = site_file["roadside_unit"]["watched_arm"]
+    across = next(u for u in site_file["roadside_units"] if u["id"] == "rsu_camera_1")
+    found = []
+    for setback_m in (2.0, 4.0, 6.0):  # network.poles.RSU_SETBACKS_TRIED_M
+        pole = {"id": "rsu_camera_0", **place_roadside_unit(net, junction, corner, arm, setback_m=setback_m)}
+        found.append((pole, hosted_count(site, [pole, across], f"{site.name}.poly.xml")))
+    return found
+
+
+def unit_of(pole: dict) -> RoadsideUnit:
+    return RoadsideUnit(
+        id=pole["id"],
+        x_m=pole["x"],
+        y_m=pole["y"],
+        height_m=pole["height_m"],
+        yaw_rad=float(sumo_angle_to_yaw_rad(pole["yaw_deg"])),
+        pitch_down_rad=math.radians(pole["pitch_deg"]),
+    )
 
 
 def projected_height_px(unit, params: dict, x_m: float, y_m: float, height_m: float) -> float:
@@ -212,7 +255,9 @@ def pole_view(snapshot: WorldSnapshot, sensors, pose, ped_index: int):
     )
 
 
-def rerun_table(run_dir: Path, info: dict, episodes: pd.DataFrame, n: int) -> pd.DataFrame:
+def rerun_table(
+    run_dir: Path, info: dict, episodes: pd.DataFrame, n: int, other_poles: dict[str, RoadsideUnit]
+) -> pd.DataFrame:
     protocol = Path(info["protocol"]["file"])
     if not protocol.is_absolute():
         protocol = Path(__file__).resolve().parents[1] / protocol
@@ -271,6 +316,11 @@ def rerun_table(run_dir: Path, info: dict, episodes: pd.DataFrame, n: int) -> pd
             if ahead is not None:
                 height = round(float(snapshot.vehicles.height_m[snapshot.vehicles.ids.index(ahead)]), 2)
                 ahead_class = CLASS_BY_HEIGHT_M.get(height, f"{height} m")
+            other = {}
+            for name, other_pole in other_poles.items():
+                view = pole_view(snapshot, sensors, sensors.roadside_pose(other_pole), ped_index)
+                outside = 30 if view[4] is None else int((~view[4]).sum())
+                other[name] = f"{view[1]}|{view[0]:.2f}|{outside}"
             rows.append(
                 {
                     "episode": int(episode),
@@ -284,6 +334,7 @@ def rerun_table(run_dir: Path, info: dict, episodes: pd.DataFrame, n: int) -> pd
                     "seen_waiting_rerun": bool(waiting.roadside_raw.any()),
                     **{f"visible_{k}": v for k, v in counterfactual.items()},
                     "blockers": dict(blockers),
+                    **other,
                 }
             )
             print(f"  episode {episode}: {rows[-1]}", file=sys.stderr, flush=True)
@@ -311,6 +362,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", type=Path, help="run directories (batch --out)")
     parser.add_argument("--rerun", type=int, default=0, help="episodes per run to run again with snapshots")
+    parser.add_argument(
+        "--kerb-corner-pole",
+        action="store_true",
+        help="also place the corner pole on the site's kerb corner (the build's first try, 2 m setback)",
+    )
     args = parser.parse_args()
     for run_dir in args.runs:
         if not (run_dir / "episodes.parquet").is_file() or not (run_dir / "run.json").is_file():
@@ -345,9 +401,39 @@ def main() -> None:
                 "first seen after step-off s (collisions, median)": median(hit.first_seen_after_step_off_s),
             }
         )
+        other_poles: dict[str, RoadsideUnit] = {}
+        if args.kerb_corner_pole:
+            site = get_site(info["site"])
+            actual = json.loads((site.directory / f"{site.name}.site.json").read_text())["roadside_units"]
+            across = next(u for u in actual if u["id"] == "rsu_camera_1")
+            pole0 = next(u for u in actual if u["id"] == unit.id)
+            hosted = hosted_count(site, [pole0, across], f"{site.name}.poly.xml")
+            tried = corner_poles(info, site.rsu_corner)
+            kerb = tried[0][0]
+            # The same pole aimed at the median waiting point (ground), pitch as the build computes it.
+            aim = (cases.wait_x_m.median() - kerb["x"], cases.wait_y_m.median() - kerb["y"])
+            aimed = kerb | {
+                "yaw_deg": math.degrees(math.atan2(aim[0], aim[1])) % 360.0,
+                "pitch_deg": math.degrees(math.atan2(kerb["height_m"], math.hypot(*aim))),
+            }
+            other_poles = {
+                "kerb corner, the build's aim": unit_of(kerb),
+                "kerb corner, aimed": unit_of(aimed),
+            }
+            summary[-1][f"scenarios hosted with {unit.id} (build's check)"] = hosted
+            summary[-1]["kerb corner: scenarios hosted at setback 2/4/6 m"] = "/".join(
+                str(count) for _, count in tried
+            )
+            summary[-1]["kerb-corner pole (2 m): place, yaw (deg from N)"] = (
+                f"{site.rsu_corner} ({kerb['x']:.1f}, {kerb['y']:.1f}), {kerb['yaw_deg']:.0f}"
+            )
+            summary[-1]["kerb-corner pole aimed at the median waiting point: yaw, hosted"] = (
+                f"{aimed['yaw_deg']:.0f}, {hosted_count(site, [aimed, across], f'{site.name}.poly.xml')}"
+            )
+            print(f"  {info['site']} hosting: {hosted}, kerb corner {tried}", file=sys.stderr, flush=True)
         if args.rerun:
             print(f"{info['site']}: running {args.rerun} episodes again", file=sys.stderr, flush=True)
-            table = rerun_table(run_dir, info, episodes, args.rerun)
+            table = rerun_table(run_dir, info, episodes, args.rerun, other_poles)
             table.insert(0, "site", info["site"])
             reruns.append(table)
     print(markdown(summary))
@@ -374,8 +460,20 @@ def main() -> None:
                     "below 0.3 with the queue only": f"{(part.visible_queue_only < 0.3).sum()}/{len(part)}",
                     "below 0.3 without the queue": f"{(part.visible_all_but_queue < 0.3).sum()}/{len(part)}",
                     "blocked samples by first hit (sum)": ranked,
+                    "visible share >= 0.3 yet not detected (colour contrast)": (
+                        f"{((part.visible_share >= 0.3) & ~part.detected).sum()}/{len(part)}"
+                    ),
                 }
             )
+            for name in ("kerb corner, the build's aim", "kerb corner, aimed"):
+                if name in part:
+                    fields = part[name].str.split("|", expand=True)
+                    detected = (fields[0] == "True").sum()
+                    share = fields[1].astype(float).median()
+                    outside = fields[2].astype(int).median()
+                    agg[-1][f"{name}: detected, median visible share, median samples outside the image"] = (
+                        f"{detected}/{len(part)}, {share:.2f}, {outside:.0f}"
+                    )
             for vehicle_class, group in part.groupby("ahead_class"):
                 agg[-1][
                     f"a {vehicle_class} ahead of the gap: detected, median visible share (queue only)"
