@@ -173,6 +173,7 @@ def case_table(run_dir: Path, unit, params: dict, episodes: pd.DataFrame) -> pd.
         along = to_pole[0] * math.cos(heading) + to_pole[1] * math.sin(heading)
         seen = log[log.roadside_raw]
         after = seen[seen.time_s > step_off_s]
+        before = seen[seen.time_s <= step_off_s]
         walking_in = log[log.ped_state == "walking_in"]
         rows.append(
             {
@@ -187,6 +188,7 @@ def case_table(run_dir: Path, unit, params: dict, episodes: pd.DataFrame) -> pd.
                 "seen_waiting": bool(waiting.roadside_raw.any()),
                 "seen_walking_in_share": float(walking_in.roadside_raw.mean()) if len(walking_in) else np.nan,
                 "first_seen_after_step_off_s": after.time_s.iloc[0] - step_off_s if len(after) else np.nan,
+                "last_seen_before_step_off_s": step_off_s - before.time_s.iloc[-1] if len(before) else np.nan,
             }
         )
     table = pd.DataFrame(rows)
@@ -398,6 +400,12 @@ def main() -> None:
                 "seen while waiting (cases)": f"{cases.seen_waiting.sum()}/{len(cases)}",
                 "seen while waiting (collisions)": f"{hit.seen_waiting.sum()}/{len(hit)}",
                 "seen share of walking-in steps (median)": f"{cases.seen_walking_in_share.median():.2f}",
+                "seen before the step-off (cases)": (
+                    f"{cases.last_seen_before_step_off_s.notna().sum()}/{len(cases)}"
+                ),
+                "last seen before the step-off, s before it (median)": median(
+                    cases.last_seen_before_step_off_s
+                ),
                 "first seen after step-off s (collisions, median)": median(hit.first_seen_after_step_off_s),
             }
         )
