@@ -56,6 +56,7 @@ from pedsafe_sumo.batch.chunks import Task, episode_seed  # noqa: E402
 from pedsafe_sumo.batch.runner import _close_runner, _run_pair  # noqa: E402
 from pedsafe_sumo.network.poles import place_roadside_unit  # noqa: E402
 from pedsafe_sumo.network.sites import get_site  # noqa: E402
+from pedsafe_sumo.perception.pipeline import SensorSuite  # noqa: E402
 from pedsafe_sumo.perception.raycast import cast_rays_numpy  # noqa: E402
 from pedsafe_sumo.perception.sensors import finish_camera, plan_camera  # noqa: E402
 from pedsafe_sumo.perception.surfaces import (  # noqa: E402
@@ -65,6 +66,7 @@ from pedsafe_sumo.perception.surfaces import (  # noqa: E402
     KIND_VEHICLE,
 )
 from pedsafe_sumo.perception.world import (  # noqa: E402
+    Pedestrians,
     RoadsideUnit,
     VehicleBoxes,
     WorldSnapshot,
@@ -104,7 +106,7 @@ def roadside_pole(run_dir: Path, info: dict):
     wanted = info["scenarios"][SCENARIO]["roadside_units"].split(",")[0]
     params = info["parameters"]["perception"]["roadside_camera"]
     units = load_roadside_units(rsu_file, params["default_height_m"], params["default_pitch_down_deg"])
-    return next(u for u in units if u.id == wanted), params
+    return next(u for u in units if u.id == wanted)
 
 
 def corner_poles(info: dict, corner: str) -> list[tuple[dict, int]]:
@@ -136,21 +138,14 @@ def unit_of(pole: dict) -> RoadsideUnit:
     )
 
 
-def projected_height_px(unit, params: dict, x_m: float, y_m: float, height_m: float) -> float:
-    """The pedestrian's axis in the pole's image, pinhole (docs/perception.md), bottom to top [px]."""
-    f = params["width_px"] / (2 * math.tan(math.radians(params["hfov_deg"]) / 2))
-    forward = np.array([math.cos(unit.yaw_rad), math.sin(unit.yaw_rad)])
-    d = np.array([x_m - unit.x_m, y_m - unit.y_m]) @ forward
-    c, s = math.cos(unit.pitch_down_rad), math.sin(unit.pitch_down_rad)
-
-    def v(z):  # image row of a point at ground distance d along the axis, height z
-        depth = d * c + (unit.height_m - z) * s
-        return f * (-d * s + (unit.height_m - z) * c) / depth
-
-    return abs(v(0.0) - v(height_m))
+def projected_height_px(suite: SensorSuite, x_m: float, y_m: float, height_m: float) -> float:
+    """The pedestrian's axis in the pole's image, bottom to top [px] (perception.sensors.plan_camera)."""
+    peds = Pedestrians.build(["ped"], [x_m], [y_m], [0.3], [height_m], [[0, 0, 0]])
+    return float(plan_camera(suite.roadside, suite.roadside_poses[0], peds).extra["height_px"][0])
 
 
-def case_table(run_dir: Path, unit, params: dict, episodes: pd.DataFrame) -> pd.DataFrame:
+def case_table(run_dir: Path, unit, info: dict, episodes: pd.DataFrame) -> pd.DataFrame:
+    suite = SensorSuite.from_params(info["parameters"]["perception"], [unit])
     rows = []
     yaw_deg = 90.0 - math.degrees(unit.yaw_rad)  # SUMO convention, clockwise from north
     for path in sorted(glob.glob(str(run_dir / "cases" / f"{SCENARIO}_{CONDITION}_*.parquet"))):
@@ -184,7 +179,7 @@ def case_table(run_dir: Path, unit, params: dict, episodes: pd.DataFrame) -> pd.
                 "off_axis_deg": (bearing - yaw_deg + 180) % 360 - 180,
                 "pole_kerb_side_m": lateral,
                 "sight_to_kerb_deg": math.degrees(math.atan2(abs(lateral), abs(along))),
-                "height_px": projected_height_px(unit, params, x, y, setup["pedestrian"]["height_m"]),
+                "height_px": projected_height_px(suite, x, y, setup["pedestrian"]["height_m"]),
                 "seen_waiting": bool(waiting.roadside_raw.any()),
                 "seen_walking_in_share": float(walking_in.roadside_raw.mean()) if len(walking_in) else np.nan,
                 "first_seen_after_step_off_s": after.time_s.iloc[0] - step_off_s if len(after) else np.nan,
@@ -376,10 +371,10 @@ def main() -> None:
     summary, reruns = [], []
     for run_dir in args.runs:
         info = run_info(run_dir)
-        unit, params = roadside_pole(run_dir, info)
+        unit = roadside_pole(run_dir, info)
         all_rows = pd.read_parquet(run_dir / "episodes.parquet")
         episodes = all_rows[(all_rows.scenario == SCENARIO) & (all_rows.condition == CONDITION)]
-        cases = case_table(run_dir, unit, params, episodes)
+        cases = case_table(run_dir, unit, info, episodes)
         hit = cases[cases.collision == True]  # noqa: E712 (NaN for seeds not in the run)
         summary.append(
             {
