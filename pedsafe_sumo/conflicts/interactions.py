@@ -24,6 +24,7 @@ from pedsafe_sumo.conflicts.fcd import FcdError, FcdStep
 from pedsafe_sumo.conflicts.row import MeetingLookup, interaction_row, step_turns_rad, turn_degrees
 from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
+from pedsafe_sumo.safety.geometry import path_boxes_apart
 from pedsafe_sumo.safety.interaction import measures_of_steps, step_measures_of_rows
 from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
@@ -321,8 +322,16 @@ class InteractionTracker:
             {name: values[start:stop] for name, values in columns.items()}
             for start, stop in zip(starts, stops)
         ]
+        apart = path_boxes_apart(
+            columns[steplog.EGO_X],
+            columns[steplog.EGO_Y],
+            columns[steplog.PED_X],
+            columns[steplog.PED_Y],
+            starts,
+        ).tolist()
         measures = [
-            measures_of_steps(log, steps.part(start, stop)) for log, start, stop in zip(logs, starts, stops)
+            measures_of_steps(log, steps.part(start, stop), paths_apart=far)
+            for log, start, stop, far in zip(logs, starts, stops, apart)
         ]
         turns_deg = turn_degrees(step_turns_rad(columns[steplog.EGO_YAW]), starts, stops)
         # the place of each interaction: where the person was at the minimum clearance

@@ -118,10 +118,14 @@ def interaction_measures(
 
 
 def measures_of_steps(
-    arrays: Mapping[str, np.ndarray], steps: StepMeasures, conflict_model: ConflictModel = AMINI_2022
+    arrays: Mapping[str, np.ndarray],
+    steps: StepMeasures,
+    conflict_model: ConflictModel = AMINI_2022,
+    paths_apart: bool = False,
 ) -> InteractionMeasures:
     """`interaction_measures` of one log's checked columns and its `StepMeasures` (one part of a stacked
-    call, or its own)."""
+    call, or its own). `paths_apart`: the caller has found that the two centre paths' bounding boxes are
+    apart (`path_boxes_apart`, for many logs at once), so they do not cross and are not searched."""
     hit = collision_of_steps(steps.clearance_m, arrays[steplog.EGO_SPEED], arrays[steplog.TIME])
     # the closest approach of the pair over the whole interaction window, whatever the pedestrian does
     proximity = proximity_of_steps(arrays, steps.clearance_m, steps.drac_mps2, _episode_scope(), hit.step)
@@ -131,7 +135,7 @@ def measures_of_steps(
     k_ttc = int(np.nanargmin(ttc)) if np.isfinite(ttc).any() else None
     conflict = conflict_of_columns(steps.conflict, conflict_model, last_step=hit.step)
     path_crossing = None
-    if not hit.collided:
+    if not hit.collided and not paths_apart:
         path_crossing = first_polyline_crossing(
             arrays[steplog.EGO_X], arrays[steplog.EGO_Y], arrays[steplog.PED_X], arrays[steplog.PED_Y]
         )
