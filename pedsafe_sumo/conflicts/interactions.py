@@ -24,8 +24,7 @@ from pedsafe_sumo.conflicts.fcd import FcdError, FcdStep
 from pedsafe_sumo.conflicts.row import MeetingLookup, interaction_row, step_turns_rad, turn_degrees
 from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
-from pedsafe_sumo.safety.geometry import path_boxes_apart
-from pedsafe_sumo.safety.interaction import measures_of_steps, step_measures_of_rows
+from pedsafe_sumo.safety.interaction import measures_of_stacked_steps, step_measures_of_rows
 from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
@@ -310,7 +309,9 @@ class InteractionTracker:
         """The rows of interactions stacked one after another (table; interaction k from starts[k] to
         stops[k]): the per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them
         in one call (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
-        operations) they share; the reductions interaction by interaction; the places in one lookup."""
+        operations) they share; their first contacts, minima and maxima over the stack too, the crossing
+        of the paths and PET interaction by interaction (`measures_of_stacked_steps`); the places in one
+        lookup."""
         # one contiguous array per column: the element-wise measures run faster on it than on strides
         stacked = np.ascontiguousarray(table.T)
         columns = {name: stacked[k] for k, name in enumerate(_STEP_COLUMNS)}
@@ -322,17 +323,7 @@ class InteractionTracker:
             {name: values[start:stop] for name, values in columns.items()}
             for start, stop in zip(starts, stops)
         ]
-        apart = path_boxes_apart(
-            columns[steplog.EGO_X],
-            columns[steplog.EGO_Y],
-            columns[steplog.PED_X],
-            columns[steplog.PED_Y],
-            starts,
-        ).tolist()
-        measures = [
-            measures_of_steps(log, steps.part(start, stop), paths_apart=far)
-            for log, start, stop, far in zip(logs, starts, stops, apart)
-        ]
+        measures = measures_of_stacked_steps(columns, steps, starts)
         turns_deg = turn_degrees(step_turns_rad(columns[steplog.EGO_YAW]), starts, stops)
         # the place of each interaction: where the person was at the minimum clearance
         at_min = np.array([start + m.min_clearance_step for start, m in zip(starts, measures)], dtype=np.intp)
