@@ -15,6 +15,10 @@ import numpy as np
 
 from pedsafe_sumo.safety.geometry import FloatOrArray
 
+#: Above this argument exp may overflow, where math.exp raises and the C function returns inf (exp
+#: overflows above ln(largest double) = 709.78).
+EXP_OVERFLOW_FROM = 709.0
+
 
 def _c_exp(x: float) -> float:
     """The C library's exp of x, inf where it overflows (as the C function returns; math.exp raises)."""
@@ -24,12 +28,18 @@ def _c_exp(x: float) -> float:
         return math.inf
 
 
+_MATH_EXP = np.frompyfunc(math.exp, 1, 1)
 _C_EXP = np.frompyfunc(_c_exp, 1, 1)
 
 
 def expit(x: FloatOrArray) -> np.ndarray:
     """1 / (1 + exp(-x)) element-wise in double precision: scipy.special.expit's floats."""
     minus_x = -np.asarray(x, dtype=float)
-    with np.errstate(over="ignore"):  # exp's overflow flag: inf is the C function's answer, as in scipy
-        exp_minus_x = np.asarray(_C_EXP(minus_x), dtype=float)
-    return 1.0 / (1.0 + exp_minus_x)
+    flat = minus_x.reshape(-1)
+    # math.exp itself (a builtin: the fastest call) where it cannot overflow, _c_exp where it may
+    may_overflow = flat > EXP_OVERFLOW_FROM
+    with np.errstate(over="ignore", under="ignore"):  # exp's own flags: its inf and 0 are the answers
+        exp_minus_x = np.asarray(_MATH_EXP(np.where(may_overflow, 0.0, flat)), dtype=float)
+        if may_overflow.any():
+            exp_minus_x[may_overflow] = np.asarray(_C_EXP(flat[may_overflow]), dtype=float)
+    return 1.0 / (1.0 + exp_minus_x.reshape(minus_x.shape))
