@@ -173,7 +173,12 @@ class InteractionTracker:
 
     def _place_code_array(self, places: list[str]) -> np.ndarray:
         known = self._place_codes
-        return np.array([known.setdefault(name, len(known)) for name in places], dtype=float)
+        codes = list(map(known.get, places))  # most names are known: looked up at C speed
+        if None in codes:
+            for k, name in enumerate(places):
+                if codes[k] is None:
+                    codes[k] = known.setdefault(name, len(known))
+        return np.array(codes, dtype=float)
 
     def step(self, step: FcdStep) -> None:
         self.steps += 1
