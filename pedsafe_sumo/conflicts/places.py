@@ -155,13 +155,15 @@ class PlaceFinder:
         # The distances of each point to the segments of the lanes whose widened box holds it, and to no
         # others (a point has a few such lanes among a net's hundreds): (point, segment) pairs by point,
         # then segment, so each lane's segments are one run within a point's.
-        point, segment = np.nonzero(in_box[:, self._seg_lane])
+        seg_lane = self._seg_lane
+        assert seg_lane is not None  # `many` asks only a net whose every lane has segments
+        point, segment = np.nonzero(in_box[:, seg_lane])
         lane_distance = np.full(in_box.shape, np.inf)
         if point.size:
             distance = _point_to_segments_m(
                 px[point], py[point], self._seg_start[segment], self._seg_end[segment]
             )
-            lane = self._seg_lane[segment]
+            lane = seg_lane[segment]
             run = np.flatnonzero(np.r_[True, (point[1:] != point[:-1]) | (lane[1:] != lane[:-1])])
             # a lane's distance: the least over its segments (sumolib's distancePointToPolygon)
             lane_distance[point[run], lane[run]] = np.minimum.reduceat(distance, run)

@@ -6,6 +6,8 @@ from +x; lengths in metres; velocities in m/s; times in s.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 #: A number or an array of numbers (the functions here broadcast over arrays, as numpy does).
@@ -195,7 +197,7 @@ def first_polyline_crossing(
 
 
 def path_boxes_apart(
-    ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray, starts: list[int]
+    ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray, starts: Sequence[int] | np.ndarray
 ) -> np.ndarray:
     """Of pairs of polylines stacked one pair after another (pair k: the points from starts[k] up to the
     next start, or to the end, of A and of B; at least one each): True where the bounding boxes of A's
