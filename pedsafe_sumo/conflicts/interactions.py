@@ -24,7 +24,7 @@ from pedsafe_sumo.conflicts.fcd import FcdError, FcdStep
 from pedsafe_sumo.conflicts.row import MeetingLookup, interaction_row, step_turns_rad, turn_degrees
 from pedsafe_sumo.conflicts.sizes import SizeBook
 from pedsafe_sumo.safety import log as steplog
-from pedsafe_sumo.safety.interaction import measures_of_steps, step_measures_of_rows
+from pedsafe_sumo.safety.interaction import measures_of_stacked_steps, step_measures_of_rows
 from pedsafe_sumo.safety.proximity import kinematic_arrays
 from pedsafe_sumo.units import sumo_angle_to_yaw_rad, sumo_front_to_centre
 
@@ -84,9 +84,10 @@ FLUSH_INTERACTIONS = 256
 #: ... or once the ended interactions waiting hold this many rows, so that what waits stays bounded however
 #: long they are (16 numbers a row: 2 MB).
 FLUSH_ROWS = 16384
-#: The rows of this many timesteps are kept as separate small tables before they are joined into the one
-#: table of all held rows (fewer small arrays held; one join per so many steps).
-CHUNK_STEPS = 32
+#: Rows the table of held rows has room for at first. It doubles when a timestep's rows do not fit (each
+#: timestep's rows are written into it in place, not joined to it): its size follows the most rows held
+#: at once, never the length of the file.
+HELD_ROWS_AT_FIRST = 4096
 
 #: Finds the lane and the crossing at a point: (x_m, y_m) -> (lane_id, crossing_id); "" where none.
 #: An object with a `many(x_m, y_m)` method (arrays -> a list of such pairs) is asked for all the
@@ -138,10 +139,11 @@ class InteractionTracker:
         self._next_slot = 0
         #: slot -> (vehicle id, person id, vehicle type, person type) of the interactions not yet measured
         self._meta: dict[int, tuple[str, str, str, str]] = {}
-        #: the held rows (all steps of the open interactions and of the ended ones not yet measured)
-        self._rows = np.empty((0, _ROW_WIDTH))
-        self._slots = np.empty(0, dtype=np.int64)
-        self._chunks: list[tuple[np.ndarray, np.ndarray]] = []
+        #: the held rows (all steps of the open interactions and of the ended ones not yet measured): the
+        #: first _held rows of the table, and their slots
+        self._rows = np.empty((HELD_ROWS_AT_FIRST, _ROW_WIDTH))
+        self._slots = np.empty(HELD_ROWS_AT_FIRST, dtype=np.int64)
+        self._held = 0
         #: slots of the interactions that ended and wait to be measured, in the order they ended
         self._ended: list[np.ndarray] = []
         self._ended_count = 0
@@ -173,7 +175,12 @@ class InteractionTracker:
 
     def _place_code_array(self, places: list[str]) -> np.ndarray:
         known = self._place_codes
-        return np.array([known.setdefault(name, len(known)) for name in places], dtype=float)
+        codes = list(map(known.get, places))  # most names are known: looked up at C speed
+        if None in codes:
+            for k, name in enumerate(places):
+                if codes[k] is None:
+                    codes[k] = known.setdefault(name, len(known))
+        return np.array(codes, dtype=float)
 
     def step(self, step: FcdStep) -> None:
         self.steps += 1
@@ -219,14 +226,15 @@ class InteractionTracker:
                         self._place_code_array(persons.places),
                     )
                 )
-                rows = np.empty((len(vi), _ROW_WIDTH))
+                slots, counts = self._slots_of(keys, vi, pj, vehicles, persons)
+                first, stop = self._held, self._held + len(vi)
+                self._make_room(stop)
+                rows = self._rows[first:stop]
                 rows[:, 0] = time_s
                 rows[:, _VEHICLE_ROW_COLUMNS] = vehicle_columns[vi]
                 rows[:, _PERSON_ROW_COLUMNS] = person_columns[pj]
-                slots, counts = self._slots_of(keys, vi, pj, vehicles, persons)
-                self._chunks.append((rows, slots))
-                if len(self._chunks) >= CHUNK_STEPS:
-                    self._join_chunks()
+                self._slots[first:stop] = slots
+                self._held = stop
         order = np.argsort(keys)
         sorted_keys = keys[order]
         if len(self._open_keys):
@@ -269,11 +277,16 @@ class InteractionTracker:
             self._ended_count += len(slots)
             self._ended_rows += int(steps.sum())
 
-    def _join_chunks(self) -> None:
-        if self._chunks:
-            self._rows = np.concatenate([self._rows, *(rows for rows, _ in self._chunks)])
-            self._slots = np.concatenate([self._slots, *(slots for _, slots in self._chunks)])
-            self._chunks = []
+    def _make_room(self, rows: int) -> None:
+        """The table of held rows with room for `rows` rows: doubled (or more) when it has not."""
+        if rows > len(self._rows):
+            size = max(2 * len(self._rows), rows)
+            grown, grown_slots = np.empty((size, _ROW_WIDTH)), np.empty(size, dtype=np.int64)
+            grown[: self._held], grown_slots[: self._held] = (
+                self._rows[: self._held],
+                self._slots[: self._held],
+            )
+            self._rows, self._slots = grown, grown_slots
 
     def finish(self) -> None:
         self._end(self._open_slots, self._open_steps)
@@ -287,17 +300,20 @@ class InteractionTracker:
             return
         ended = np.concatenate(self._ended)
         self._ended, self._ended_count, self._ended_rows = [], 0, 0
-        self._join_chunks()
+        held_rows, held_slots = self._rows[: self._held], self._slots[: self._held]
         # each held row's rank among the ended interactions (in the order they ended), if it is of one
         by_slot = np.argsort(ended)
         sorted_ended = ended[by_slot]
-        at = np.minimum(np.searchsorted(sorted_ended, self._slots), len(ended) - 1)
-        of_ended = sorted_ended[at] == self._slots
+        at = np.minimum(np.searchsorted(sorted_ended, held_slots), len(ended) - 1)
+        of_ended = sorted_ended[at] == held_slots
         rank = by_slot[at]
         taken = np.flatnonzero(of_ended)
         taken = taken[np.argsort(rank[taken], kind="stable")]  # stable: each one's steps stay in order
-        table = self._rows[taken]
-        self._rows, self._slots = self._rows[~of_ended], self._slots[~of_ended]
+        table = held_rows[taken]
+        # the rows kept move to the top of the table, in their order (the indexing copies them first)
+        kept = np.flatnonzero(~of_ended)
+        self._rows[: len(kept)], self._slots[: len(kept)] = held_rows[kept], held_slots[kept]
+        self._held = len(kept)
         stops = np.cumsum(np.bincount(rank[of_ended], minlength=len(ended))).tolist()
         starts = [0, *stops[:-1]]
         metas = [self._meta.pop(slot) for slot in ended.tolist()]
@@ -309,7 +325,9 @@ class InteractionTracker:
         """The rows of interactions stacked one after another (table; interaction k from starts[k] to
         stops[k]): the per-step measures (clearance, TTC, DRAC, the Amini conflict measures) of all of them
         in one call (`step_measures_of_rows`: each row stands alone), whose fixed cost (some hundred numpy
-        operations) they share; the reductions interaction by interaction; the places in one lookup."""
+        operations) they share; their first contacts, minima and maxima over the stack too, the crossing
+        of the paths and PET interaction by interaction (`measures_of_stacked_steps`); the places in one
+        lookup."""
         # one contiguous array per column: the element-wise measures run faster on it than on strides
         stacked = np.ascontiguousarray(table.T)
         columns = {name: stacked[k] for k, name in enumerate(_STEP_COLUMNS)}
@@ -321,9 +339,7 @@ class InteractionTracker:
             {name: values[start:stop] for name, values in columns.items()}
             for start, stop in zip(starts, stops)
         ]
-        measures = [
-            measures_of_steps(log, steps.part(start, stop)) for log, start, stop in zip(logs, starts, stops)
-        ]
+        measures = measures_of_stacked_steps(columns, steps, starts)
         turns_deg = turn_degrees(step_turns_rad(columns[steplog.EGO_YAW]), starts, stops)
         # the place of each interaction: where the person was at the minimum clearance
         at_min = np.array([start + m.min_clearance_step for start, m in zip(starts, measures)], dtype=np.intp)

@@ -16,9 +16,9 @@ SEARCH_RADIUS_M = 5.0
 #: Points whose lane is remembered (exact coordinates); the memory is emptied when full. Stated
 #: assumption: a few thousand waiting places cover a district, at some 200 bytes each.
 FOUND_POINTS = 4096
-#: Points looked up together by `PlaceFinder.many`: a points x segments table of a few MB at most
-#: (Xueqing: 496 segments; the course block: 699).
-POINTS_AT_ONCE = 128
+#: Points looked up together by `PlaceFinder.many`: a points x lanes table of a few MB at most (Xueqing:
+#: 135 lanes), and the distances of each point to the segments of the lanes near it only.
+POINTS_AT_ONCE = 512
 
 
 class NetError(ValueError):
@@ -80,8 +80,7 @@ class PlaceFinder:
         self._seg_start = np.array(starts, dtype=float).reshape(-1, 2)
         self._seg_end = np.array(ends, dtype=float).reshape(-1, 2)
         self._seg_lane = np.array(owner, dtype=int)
-        # where each lane's segments begin (every lane has one at least), and each lane's place in id order
-        self._lane_first_segment = np.flatnonzero(np.r_[True, self._seg_lane[1:] != self._seg_lane[:-1]])
+        # each lane's place in id order
         ids = [lane.getID() for lane, _ in self._lanes or []]
         self._id_rank = np.argsort(np.argsort(np.array(ids, dtype=object), kind="stable"), kind="stable")
 
@@ -126,9 +125,9 @@ class PlaceFinder:
         return found
 
     def many(self, x_m: np.ndarray, y_m: np.ndarray) -> list[tuple[str, str]]:
-        """`finder(x, y)` of many points: the distances of all of them to all lanes' segments in a few
-        numpy calls over a points x segments table (POINTS_AT_ONCE points at a time), element for element
-        the floats of the lookup of one point."""
+        """`finder(x, y)` of many points: the distances of all of them to the segments of the lanes near
+        them in a few numpy calls (POINTS_AT_ONCE points at a time), element for element the floats of
+        the lookup of one point."""
         xs, ys = np.asarray(x_m, dtype=float).tolist(), np.asarray(y_m, dtype=float).tolist()
         found: list[tuple[str, str] | None] = [self._found.get((x, y)) for x, y in zip(xs, ys)]
         if self._lanes is None or self._seg_lane is None:  # sumolib's own search, or a lane of one point
@@ -148,14 +147,27 @@ class PlaceFinder:
         return [known if known is not None else ("", "") for known in found]
 
     def _nearest_lanes(self, px: np.ndarray, py: np.ndarray) -> list[tuple[str, str]]:
-        """(lane, crossing) of each point from the distances to every segment (`_neighbouring_lanes` and
+        """(lane, crossing) of each point from its distances to the lanes near it (`_neighbouring_lanes` and
         `_find` for many points: a lane outside a point's widened box is left out as there)."""
         x, y = px[:, None], py[:, None]
-        distance = _point_to_segments_m(x, y, self._seg_start, self._seg_end)  # points x segments
-        lane_distance = np.minimum.reduceat(distance, self._lane_first_segment, axis=1)  # points x lanes
         b = self._boxes
-        in_box = (b[:, 0] <= x) & (x <= b[:, 2]) & (b[:, 1] <= y) & (y <= b[:, 3])
-        lane_distance = np.where(in_box & (lane_distance < SEARCH_RADIUS_M), lane_distance, np.inf)
+        in_box = (b[:, 0] <= x) & (x <= b[:, 2]) & (b[:, 1] <= y) & (y <= b[:, 3])  # points x lanes
+        # The distances of each point to the segments of the lanes whose widened box holds it, and to no
+        # others (a point has a few such lanes among a net's hundreds): (point, segment) pairs by point,
+        # then segment, so each lane's segments are one run within a point's.
+        seg_lane = self._seg_lane
+        assert seg_lane is not None  # `many` asks only a net whose every lane has segments
+        point, segment = np.nonzero(in_box[:, seg_lane])
+        lane_distance = np.full(in_box.shape, np.inf)
+        if point.size:
+            distance = _point_to_segments_m(
+                px[point], py[point], self._seg_start[segment], self._seg_end[segment]
+            )
+            lane = seg_lane[segment]
+            run = np.flatnonzero(np.r_[True, (point[1:] != point[:-1]) | (lane[1:] != lane[:-1])])
+            # a lane's distance: the least over its segments (sumolib's distancePointToPolygon)
+            lane_distance[point[run], lane[run]] = np.minimum.reduceat(distance, run)
+        lane_distance = np.where(lane_distance < SEARCH_RADIUS_M, lane_distance, np.inf)
         nearest = lane_distance.min(axis=1, keepdims=True)
         # the nearest lane, ties to the smallest id: the least id rank among the lanes at that distance
         rank = np.where(lane_distance == nearest, self._id_rank, len(self._id_rank)).argmin(axis=1)
@@ -184,7 +196,7 @@ def _point_to_segments_m(
 ) -> np.ndarray:
     """Distance from the point to each segment start[i] -> end[i], m: sumolib's
     `geomhelper.distancePointToLine` (not perpendicular) operation for operation, so the same floats. With
-    points as a column (arrays of shape (n, 1)): a points x segments table, each element the same float."""
+    arrays of points as long as the segments' (point i to segment i), each element the same float."""
     sx, sy, ex, ey = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
     length = np.sqrt((sx - ex) * (sx - ex) + (sy - ey) * (sy - ey))
     u = (x_m - sx) * (ex - sx) + (y_m - sy) * (ey - sy)

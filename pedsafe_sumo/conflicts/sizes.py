@@ -83,16 +83,16 @@ class SizeBook:
 
     def _fill(self, types, length_m, width_m, default_length_m, default_width_m):
         cache = self._resolved.setdefault((default_length_m, default_width_m), {})
-        resolved = np.empty((len(types), 2))
-        for i, type_id in enumerate(types):
-            size = cache.get(type_id)
-            if size is None:
-                known = self.types.get(type_id)
-                size = cache[type_id] = (
-                    known.length_m if known and math.isfinite(known.length_m) else default_length_m,
-                    known.width_m if known and math.isfinite(known.width_m) else default_width_m,
-                )
-            resolved[i] = size
+        sizes = list(map(cache.get, types))
+        if None in sizes:
+            for i, type_id in enumerate(types):
+                if sizes[i] is None:
+                    known = self.types.get(type_id)
+                    sizes[i] = cache[type_id] = (
+                        known.length_m if known and math.isfinite(known.length_m) else default_length_m,
+                        known.width_m if known and math.isfinite(known.width_m) else default_width_m,
+                    )
+        resolved = np.array(sizes, dtype=float).reshape(len(types), 2)
         length = np.where(np.isnan(length_m), resolved[:, 0], length_m)
         width = np.where(np.isnan(width_m), resolved[:, 1], width_m)
         return length, width

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.special import expit
 
 from pedsafe_sumo.safety import log as steplog
 from pedsafe_sumo.safety.geometry import FloatOrArray
+from pedsafe_sumo.safety.logistic import expit
 
 if TYPE_CHECKING:  # pandas only in annotations: importing it costs the conflicts tool 0.3 s
     import pandas as pd

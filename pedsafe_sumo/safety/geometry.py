@@ -6,6 +6,8 @@ from +x; lengths in metres; velocities in m/s; times in s.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 #: A number or an array of numbers (the functions here broadcast over arrays, as numpy does).
@@ -135,6 +137,11 @@ def rectangle_circle_contact_time_s(
     return np.minimum.reduce(np.broadcast_arrays(*times))
 
 
+#: Margin of the bounding-box tests of `first_polyline_crossing`, per metre of the largest coordinate (plus
+#: one): far above the rounding of its parametric test, far below any real gap.
+BOX_MARGIN_PER_M = 1e-9
+
+
 def first_polyline_crossing(
     ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray, block: int = 256
 ) -> tuple[float, float] | None:
@@ -155,8 +162,9 @@ def first_polyline_crossing(
         return None
     b_lo_x, b_hi_x = np.minimum(bx[:-1], bx[1:]), np.maximum(bx[:-1], bx[1:])
     b_lo_y, b_hi_y = np.minimum(by[:-1], by[1:]), np.maximum(by[:-1], by[1:])
-    # Box test margin: far above the rounding of the parametric test below, far below any real gap.
-    margin = 1e-9 * (1.0 + max(np.abs(ax).max(), np.abs(ay).max(), np.abs(bx).max(), np.abs(by).max()))
+    margin = BOX_MARGIN_PER_M * (
+        1.0 + max(np.abs(ax).max(), np.abs(ay).max(), np.abs(bx).max(), np.abs(by).max())
+    )
     eps = 1e-12
     for start in range(0, len(ax) - 1, block):
         stop = min(start + block + 1, len(ax))
@@ -186,3 +194,27 @@ def first_polyline_crossing(
             i, j = np.argwhere(hit)[0]
             return float(a0x[i, 0] + s[i, j] * adx[i, 0]), float(a0y[i, 0] + s[i, j] * ady[i, 0])
     return None
+
+
+def path_boxes_apart(
+    ax_m: np.ndarray, ay_m: np.ndarray, bx_m: np.ndarray, by_m: np.ndarray, starts: Sequence[int] | np.ndarray
+) -> np.ndarray:
+    """Of pairs of polylines stacked one pair after another (pair k: the points from starts[k] up to the
+    next start, or to the end, of A and of B; at least one each): True where the bounding boxes of A's
+    and B's points are further apart than the margin of `first_polyline_crossing`'s box tests, which
+    then finds no crossing (every segment's box lies inside its polyline's box; the margin here, from the
+    largest coordinate of all pairs, is at least each pair's own). False where they may cross, or where
+    a coordinate is NaN."""
+    at = np.asarray(starts, dtype=np.intp)
+    a_lo_x, a_hi_x = np.minimum.reduceat(ax_m, at), np.maximum.reduceat(ax_m, at)
+    a_lo_y, a_hi_y = np.minimum.reduceat(ay_m, at), np.maximum.reduceat(ay_m, at)
+    b_lo_x, b_hi_x = np.minimum.reduceat(bx_m, at), np.maximum.reduceat(bx_m, at)
+    b_lo_y, b_hi_y = np.minimum.reduceat(by_m, at), np.maximum.reduceat(by_m, at)
+    largest = max(float(np.abs(v).max(initial=0.0)) for v in (ax_m, ay_m, bx_m, by_m))
+    margin = BOX_MARGIN_PER_M * (1.0 + largest)
+    return (
+        (b_hi_x < a_lo_x - margin)
+        | (b_lo_x > a_hi_x + margin)
+        | (b_hi_y < a_lo_y - margin)
+        | (b_lo_y > a_hi_y + margin)
+    )

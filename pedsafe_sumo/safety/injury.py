@@ -10,10 +10,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import expit
 
 from pedsafe_sumo.safety.geometry import FloatOrArray
 from pedsafe_sumo.safety.injury_mais3 import mais3f_logit
+from pedsafe_sumo.safety.logistic import expit
 
 KMH_PER_MPS = 3.6  # [km/h per m/s]
 

@@ -14,21 +14,21 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from pedsafe_sumo.safety import log as steplog
-from pedsafe_sumo.safety.collision import clearance_m, collision_of_steps
+from pedsafe_sumo.safety.collision import STATIONARY_SPEED_MPS, clearance_m, collision_of_steps
 from pedsafe_sumo.safety.conflict import (
     AMINI_2022,
     ConflictModel,
     conflict_columns_of_rows,
     conflict_of_columns,
 )
-from pedsafe_sumo.safety.geometry import first_polyline_crossing
+from pedsafe_sumo.safety.geometry import first_polyline_crossing, path_boxes_apart
 from pedsafe_sumo.safety.proximity import (
     SCOPE_EPISODE,
     ProximityModel,
@@ -153,6 +153,119 @@ def measures_of_steps(
         drac_step=proximity.drac_step,
         path_crossing=path_crossing,
     )
+
+
+def measures_of_stacked_steps(
+    columns: Mapping[str, np.ndarray],
+    steps: StepMeasures,
+    starts: Sequence[int],
+    conflict_model: ConflictModel = AMINI_2022,
+) -> list[InteractionMeasures]:
+    """`measures_of_steps` of many logs stacked one after another (log k: the rows from starts[k] up to
+    the next start, or to the end; one row at least) from their checked columns and their stacked
+    `StepMeasures`: the first contact and the least and greatest values of each log found for all logs
+    in a few numpy calls over the stack, each the step and the float of the log's own call (its first
+    step on a tie, as argmin and argmax give); the crossing of the two paths and PET log by log, where
+    the bounding boxes of its paths meet (`path_boxes_apart`: elsewhere there is no crossing to find)."""
+    n_rows = len(columns[steplog.TIME])
+    first = np.asarray(starts, dtype=np.intp)
+    n_logs = len(first)
+    counts = np.diff(np.r_[first, n_rows])
+    owner = np.repeat(np.arange(n_logs), counts)
+    clearance, speed = steps.clearance_m, columns[steplog.EGO_SPEED]
+    # the first contact while the vehicle moves (`collision_of_steps`)
+    strike = _first_rows(np.flatnonzero((clearance <= 0.0) & (speed >= STATIONARY_SPEED_MPS)), owner, n_logs)
+    collided = strike >= 0
+    # each log's window: its steps up to and including the first contact (all without one)
+    in_window = np.arange(n_rows) < np.where(collided, strike + 1, first + counts)[owner]
+    # the minimum clearance over the steps in scope (every step with a finite clearance:
+    # `_episode_scope`), the largest DRAC and the smallest TTC, the first step on a tie
+    k_clearance = _first_least(np.where(in_window & np.isfinite(clearance), clearance, np.inf), first, owner)
+    drac, ttc = steps.drac_mps2, steps.ttc_s
+    k_drac = _first_least(np.where(in_window & ~np.isnan(drac), -drac, np.inf), first, owner)
+    k_ttc = _first_least(np.where(in_window & ~np.isnan(ttc), ttc, np.inf), first, owner)
+    # `nanargmax` / `nanargmin` are asked only where some value of the window is finite
+    drac_defined = _any_per_log(in_window & np.isfinite(drac), owner, n_logs)
+    ttc_defined = _any_per_log(in_window & np.isfinite(ttc), owner, n_logs)
+    scoped = _any_per_log(in_window & np.isfinite(clearance), owner, n_logs)
+    # the Amini conflict at the riskiest eligible step (`conflict_of_columns`)
+    c = steps.conflict
+    eligible = in_window & c["candidate"] & (c["cs_mps"] > conflict_model.min_conflicting_speed_mps)
+    probability = c["conflict_probability"]
+    if np.isnan(probability[eligible]).any():  # argmax would take the NaN: each log on its own
+        return [
+            measures_of_steps(
+                {name: values[a:b] for name, values in columns.items()},
+                steps.part(a, b),
+                conflict_model,
+            )
+            for a, b in zip(first.tolist(), (first + counts).tolist())
+        ]
+    k_conflict = _first_least(np.where(eligible, -probability, np.inf), first, owner)
+    has_eligible = _any_per_log(eligible, owner, n_logs)
+    has_conflict = _any_per_log(in_window & c["conflict"], owner, n_logs)
+    apart = path_boxes_apart(
+        columns[steplog.EGO_X], columns[steplog.EGO_Y], columns[steplog.PED_X], columns[steplog.PED_Y], first
+    ).tolist()
+    measures = []
+    for k, (a, b) in enumerate(zip(first.tolist(), (first + counts).tolist())):
+        hit = bool(collided[k])
+        path_crossing = None
+        log = None
+        if not hit and not apart[k]:
+            log = {name: values[a:b] for name, values in columns.items()}
+            path_crossing = first_polyline_crossing(
+                log[steplog.EGO_X], log[steplog.EGO_Y], log[steplog.PED_X], log[steplog.PED_Y]
+            )
+        i_clearance, i_drac, i_ttc, i_conflict = (
+            int(k_clearance[k]),
+            int(k_drac[k]),
+            int(k_ttc[k]),
+            int(k_conflict[k]),
+        )
+        eligible_k = bool(has_eligible[k])
+        measures.append(
+            InteractionMeasures(
+                collision=hit,
+                contact_step=int(strike[k]) - a if hit else None,
+                min_clearance_m=float(clearance[i_clearance]) if scoped[k] else math.nan,
+                min_clearance_step=i_clearance - a if scoped[k] else -1,
+                ttc_s=float(ttc[i_ttc]) if ttc_defined[k] else math.nan,
+                ttc_step=i_ttc - a if ttc_defined[k] else None,
+                pet_s=0.0 if hit else pet_at_crossing_s(log, path_crossing) if log is not None else math.nan,
+                drac_mps2=float(drac[i_drac]) if drac_defined[k] else math.nan,
+                conflict=bool(has_conflict[k]) if eligible_k else False,
+                md_m=float(c["md_m"][i_conflict]) if eligible_k else math.nan,
+                tmd_s=float(c["tmd_s"][i_conflict]) if eligible_k else math.nan,
+                cs_mps=float(c["cs_mps"][i_conflict]) if eligible_k else math.nan,
+                conflict_probability=float(probability[i_conflict]) if eligible_k else math.nan,
+                conflict_step=i_conflict - a if eligible_k else None,
+                drac_step=i_drac - a if drac_defined[k] else None,
+                path_crossing=path_crossing,
+            )
+        )
+    return measures
+
+
+def _first_rows(rows: np.ndarray, owner: np.ndarray, n_logs: int) -> np.ndarray:
+    """Per log, the first of `rows` (ascending row numbers) that is one of its rows; -1 where none is."""
+    found = np.full(n_logs, -1, dtype=np.intp)
+    if rows.size:
+        logs = owner[rows]
+        new = np.flatnonzero(np.r_[True, logs[1:] != logs[:-1]])
+        found[logs[new]] = rows[new]
+    return found
+
+
+def _first_least(values: np.ndarray, first: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """Per log, the row of its least value, the first on a tie (`np.argmin` of its slice); meaningful
+    only where some value of the log is below inf (no NaN among `values`)."""
+    least = np.minimum.reduceat(values, first)
+    return _first_rows(np.flatnonzero(values == least[owner]), owner, len(first))
+
+
+def _any_per_log(flags: np.ndarray, owner: np.ndarray, n_logs: int) -> np.ndarray:
+    return np.bincount(owner[flags], minlength=n_logs) > 0
 
 
 @functools.lru_cache(maxsize=1)

@@ -53,7 +53,8 @@ def test_rows_do_not_depend_on_the_batch(tmp_path, monkeypatch):
     for flush_interactions, flush_rows in ((1, 1), (3, 10**9), (10**9, 7), (10**9, 10**9)):
         monkeypatch.setattr(interactions, "FLUSH_INTERACTIONS", flush_interactions)
         monkeypatch.setattr(interactions, "FLUSH_ROWS", flush_rows)
-        monkeypatch.setattr(interactions, "CHUNK_STEPS", 1 + flush_interactions % 5)
+        # a table of held rows that starts small and grows many times, or hardly
+        monkeypatch.setattr(interactions, "HELD_ROWS_AT_FIRST", 1 + flush_interactions % 5)
         out = tmp_path / f"c{flush_interactions}_{flush_rows}.csv"
         assert main([str(fcd), "--out", str(out), "--ssm", str(out.with_suffix(".xml")), "--quiet"]) == 0
         outputs.append((out.read_bytes(), out.with_suffix(".xml").read_bytes()))

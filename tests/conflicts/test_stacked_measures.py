@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from pedsafe_sumo.safety import log as steplog
+from pedsafe_sumo.safety.geometry import path_boxes_apart
 from pedsafe_sumo.safety.interaction import (
     interaction_measures,
+    measures_of_stacked_steps,
     measures_of_steps,
     step_measures_of_rows,
 )
@@ -71,6 +73,59 @@ def test_each_interaction_measured_over_the_stack_as_over_its_own_log():
     hit = measures_of_steps({n: v[starts[3] :] for n, v in columns.items()}, steps.part(starts[3], None))
     # the car's front (x + 2) reaches the circle's edge (12 - 0.3) at x = 9.7: the step at x = 10
     assert hit.collision and hit.contact_step == 10 and hit.pet_s == 0.0
+
+
+def standing_car_log(n: int, car_x_m: float, ped_x_m: float, ped_y_m: float, speed_mps) -> dict:
+    """car_log's car standing with its centre at (car_x_m, 0) (speed_mps per step: it may pull away
+    without moving in the log), a person standing at (ped_x_m, ped_y_m)."""
+    log = car_log(0.0, n, ped_x_m, ped_y_m, 0.0)
+    log[steplog.EGO_X] = np.full(n, car_x_m)
+    log[steplog.EGO_SPEED] = np.asarray(speed_mps, dtype=float)
+    return log
+
+
+def test_the_reductions_over_the_stack_give_each_logs_own_measures():
+    logs = [
+        car_log(5.0, 30, 20.0, 2.0, 0.0),  # passes beside a standing person
+        car_log(0.0, 40, 20.0, -3.0, 1.5),  # walks into the car's path: contact
+        car_log(7.0, 1, 30.0, 5.0, 0.0),  # one step only
+        car_log(2.0, 25, 12.0, 0.0, 0.0),  # stands in the lane: hit
+        car_log(1.0, 20, 200.0, 40.0, 0.0),  # far off: the paths' boxes are apart
+        car_log(0.0, 40, 25.0, -3.0, 3.0),  # crosses the car's path at x = 25 1.5 s before the car
+        standing_car_log(12, 0.0, 20.0, 2.0, np.zeros(12)),  # nothing moves: every step ties
+        # the car's front (x = 12) overlaps the circle (12.2, r 0.3) while it stands, creeps at 0.05 m/s
+        # (below the 0.1 m/s of a collision), then moves at 1 m/s: the collision at step 8
+        standing_car_log(12, 10.0, 12.2, 0.0, [0.0] * 5 + [0.05] * 3 + [1.0] * 4),
+    ]
+    columns, starts = stack(logs)
+    stacked = measures_of_stacked_steps(columns, step_measures_of_rows(columns), starts[:-1])
+    assert len(stacked) == len(logs)
+    for log, measures in zip(logs, stacked):
+        assert same(measures, interaction_measures(log))
+    beside, walks_in, one_step, hit, far, crossing, still, creeping = stacked
+    assert beside.min_clearance_m == pytest.approx(0.7) and not beside.collision
+    assert hit.collision and hit.contact_step == 10 and hit.pet_s == 0.0
+    assert walks_in.collision and one_step.min_clearance_step == 0
+    assert far.path_crossing is None and math.isnan(far.pet_s) and not far.collision
+    assert crossing.path_crossing == pytest.approx((25.0, 0.0)) and crossing.pet_s > 0.0
+    # standing: the same clearance at every step (the first is reported), no TTC, no DRAC
+    assert still.min_clearance_step == 0 and still.min_clearance_m == pytest.approx(
+        math.hypot(18.0, 1.0) - 0.3
+    )
+    assert still.ttc_step is None and still.drac_step is None and not still.collision
+    assert creeping.collision and creeping.contact_step == 8
+    assert creeping.min_clearance_m == pytest.approx(-0.1)
+
+
+def test_path_boxes_apart_only_where_no_crossing_can_be_found():
+    # pairs of paths stacked: A then B of each pair share the rows
+    ax = np.array([0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0])
+    ay = np.zeros(8)
+    bx = np.array([1.5, 1.5, 1.0, 1.0, 0.5, 0.5, math.nan, 0.5])
+    by = np.array([-1.0, 1.0, -1.0, 1.0, 2.0, 3.0, -1.0, 1.0])
+    apart = path_boxes_apart(ax, ay, bx, by, [0, 2, 4, 6])
+    # right of A's box; touching it at A's end point; above it; a NaN (never called apart)
+    assert apart.tolist() == [True, False, True, False]
 
 
 @pytest.mark.parametrize(
