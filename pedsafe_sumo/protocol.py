@@ -155,6 +155,10 @@ VALUES_BEFORE: dict[str, dict[str, Any]] = {
         "kerb_gap_max_m": 1.0,
         # The kerb-lane queue and waiting vehicle of the approach staging: placed standing at the start.
         "queue_staging": "placed",
+        # Approach staging's oncoming vehicle (left_turn): across the line of sight when the pedestrian
+        # reaches the kerb, wherever the ego then is (paper-v8 and paper-v10, which the staging check
+        # refuses on xueqing_two_phase: docs/decisions/2026-11-28-left-turn-sight-line-staging.md).
+        "oncoming_moment": "at_kerb",
     },
     "parameters": {
         # The pedestrian's kerb wait and side strike (params/defaults.toml [pedestrians]).
@@ -186,6 +190,7 @@ SCENARIO_GROUPS_BEFORE: tuple[tuple[str, ...], ...] = (
         "walk_in_max_s", "walk_on_m", "kerb_gap_min_m", "kerb_gap_max_m",
     ),
     ("queue_staging",),
+    ("oncoming_moment",),
 )  # fmt: skip
 
 

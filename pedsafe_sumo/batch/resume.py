@@ -14,6 +14,7 @@ from typing import Any
 
 from pedsafe_sumo.batch.arguments import RUN_ARGUMENT_DEFAULTS
 from pedsafe_sumo.io.run_store import RUN_FILE, RunStoreError, holds_run, read_json
+from pedsafe_sumo.protocol import VALUES_BEFORE
 from pedsafe_sumo.settings import UsageError
 
 #: run.json keys compared on --resume: what makes two runs' episodes the same episodes.
@@ -45,6 +46,21 @@ def _first_difference(recorded: Any, current: Any, path: str) -> str | None:
                 return found
         return None
     return None if recorded == current else path
+
+
+def _with_fields_before(recorded: Any, current: Any) -> Any:
+    """The recorded scenarios' fields, each scenario field the current ones have and a recorded one lacks
+    given its VALUES_BEFORE value: a run started before the field existed ran with that behaviour, so a
+    command that gives the same value continues the same run (and one that gives another does not)."""
+    if not isinstance(recorded, dict) or not isinstance(current, dict):
+        return recorded
+    before = VALUES_BEFORE["scenarios"]
+    return {
+        name: {**{k: before[k] for k in current.get(name, {}) if k in before and k not in fields}, **fields}
+        if isinstance(fields, dict)
+        else fields
+        for name, fields in recorded.items()
+    }
 
 
 def _lookup(data: Any, dotted: str) -> Any:
@@ -134,6 +150,7 @@ def check_same_run(
     # Compare as JSON would store them (tuples as lists, the same number types).
     current = json.loads(json.dumps({key: identity[key] for key in IDENTITY_KEYS}, default=str))
     previous = {key: recorded.get(key) for key in IDENTITY_KEYS}
+    previous["scenarios"] = _with_fields_before(previous["scenarios"], current["scenarios"])
     where = _first_difference(previous, current, "")
     if where:
         where = where.lstrip(".")

@@ -40,13 +40,15 @@ from pedsafe_sumo.scenarios.signals import SIGNAL_STATES
 STRING_FIELDS = (
     "placement", "ego_speed_fit", "occluder_class", "roadside_units", "ego_signal", "ped_signal", "turn",
     "ped_start_corner", "ped_signal_hold", "waiting_vehicle_class", "approach", "staging",
-    "queue_staging",
+    "queue_staging", "oncoming_moment",
 )  # fmt: skip
 
 #: How an episode is staged (ScenarioSpec.staging).
 STAGINGS = ("fixed", "approach")
 #: How the approach staging's kerb-lane queue and waiting vehicle come to stand (ScenarioSpec.queue_staging).
 QUEUE_STAGINGS = ("formed", "placed")
+#: When approach staging's oncoming vehicle hides the pedestrian (ScenarioSpec.oncoming_moment).
+ONCOMING_MOMENTS = ("stop_line", "at_kerb")
 
 #: Upper bound of every numeric scenario field, with why: above it a value stages no meaningful scene,
 #: or makes an episode (or the drawing of one) run for ever. `--set` beyond one is refused in one line.
@@ -213,6 +215,17 @@ class ScenarioSpec:
     #: red, 1 m before the line). "placed": SUMO adds them standing where the staging puts them at the
     #: start (the head 0.5 m before the line), as protocol approach-v1 ran. (The fixed staging places.)
     queue_staging: str = "formed"
+    #: Approach staging, a turning scenario's oncoming vehicle: the moment its centre crosses the line of
+    #: sight from the ego's box centre to the pedestrian at their step-off point. "stop_line": the scene
+    #: the fixed staging starts with: the pedestrian reaches the kerb `ped_start_delay_s` before stepping
+    #: off or, when the ego's front would then be past the point 3 m before its stop line (the fixed
+    #: staging's latest start), when it is there, and waits the longer on the kerb; the oncoming vehicle
+    #: crosses the line when they reach it. "at_kerb": when they reach the kerb, `ped_start_delay_s`
+    #: before stepping off, wherever the ego then is: on xueqing_two_phase a slow ego has then crossed the
+    #: oncoming lane (no vehicle on it can stand between them: the staging refuses the draw) or is so near
+    #: it that the oncoming vehicle, at the ego's speed, drives into it (measured over paper-v10's draws:
+    #: docs/decisions/2026-11-28-left-turn-sight-line-staging.md).
+    oncoming_moment: str = "stop_line"
 
     @property
     def roadside_unit_ids(self) -> tuple[str, ...]:
@@ -237,6 +250,7 @@ class ScenarioSpec:
             (self.ego_speed_fit in ("intersection", "non_intersection"), "ego_speed_fit"),
             (self.staging in STAGINGS, f"staging in {STAGINGS}"),
             (self.queue_staging in QUEUE_STAGINGS, f"queue_staging in {QUEUE_STAGINGS}"),
+            (self.oncoming_moment in ONCOMING_MOMENTS, f"oncoming_moment in {ONCOMING_MOMENTS}"),
             (0 < self.ego_start_min_m <= self.ego_start_max_m, "0 < ego_start_min_m <= ego_start_max_m"),
             (self.ped_appear_min_s >= 0, "ped_appear_min_s >= 0"),
             (0 <= self.walk_in_min_s <= self.walk_in_max_s, "0 <= walk_in_min_s <= walk_in_max_s"),

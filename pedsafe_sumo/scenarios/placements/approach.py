@@ -8,7 +8,8 @@ The draws follow every draw of the placement, in this order: the ego's start dis
 (`ego_start_distance_m`), then the walk-in (`walk_in_s`). Timing: the ego reaches the conflict point at
 T = start distance / initial speed; the pedestrian reaches the centre of the ego's lane
 `conflict_offset_s` before it (as in the fixed staging), so they appear at
-A = T - conflict_offset_s - walk_to_conflict_s - ped_start_delay_s - walk-in time.
+A = T - conflict_offset_s - walk_to_conflict_s - the kerb wait (ped_start_delay_s, or the longer one
+the placement gives) - walk-in time.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ def stage_approach(
     walk_to_conflict_s: float,
     start_range_m: tuple[float, float],
     walkway: Walkway | None = None,
+    kerb_wait_s: float | None = None,
 ) -> ApproachTiming:
     """The approach staging of a scene whose pedestrian crosses along `crossing` (its first point the
     step-off point, its last the far end) and meets the ego at SUMO distance `conflict_pos_m` from the
@@ -73,12 +75,14 @@ def stage_approach(
     the longest start distance the road holds (the ego's front on it, its whole body behind it; the road
     may include the road before the approach lane).
     `walkway`: the sidewalk the pedestrian walks in along, its shape running towards the step-off point (None:
-    the approach's own)."""
+    the approach's own). `kerb_wait_s`: how long they wait at the step-off point (None: the spec's
+    `ped_start_delay_s`)."""
     spec, draws, approach = inputs.spec, inputs.draws, inputs.approach
     if walkway is None:
         walkway = Walkway(approach.sidewalk_lane_id, approach.sidewalk_shape, approach.sidewalk_width_m)
     ego_mps, walk_mps = inputs.ego_speed_mps, float(inputs.traits["walking_speed_mps"])
     fewest_m, most_m = start_range_m
+    wait_s = spec.ped_start_delay_s if kerb_wait_s is None else kerb_wait_s
     fallbacks: list[str] = []
     start_m = draws.uniform("ego_start_distance_m", spec.ego_start_min_m, spec.ego_start_max_m)
     walk_in_s = draws.uniform("walk_in_s", spec.walk_in_min_s, spec.walk_in_max_s)
@@ -101,7 +105,7 @@ def stage_approach(
         along_m = available_m
         fallbacks.append("sidewalk_short")
     # From the end of the walk-in to the ego's arrival at the conflict point.
-    lead_s = inputs.conflict_offset_s + walk_to_conflict_s + spec.ped_start_delay_s
+    lead_s = inputs.conflict_offset_s + walk_to_conflict_s + wait_s
 
     def appear_s() -> float:
         return start_m / ego_mps - lead_s - (along_m + leg_m) / walk_mps
@@ -140,7 +144,7 @@ def stage_approach(
         exclude=sidewalk_lane_id,
     )
     crossing_on = [step_off, *((float(x), float(y)) for x, y in crossing[1:]), *onward]
-    delay_s = spec.ped_start_delay_s
+    delay_s = wait_s
     if appear < 0:
         fallbacks.append("on_way_at_start")
         walk, delay_s, crossing_on = _on_way(walk, step_off, crossing_on, -appear, walk_mps, delay_s)

@@ -137,7 +137,9 @@ class TurnPlacement(Placement):
         drive at the ego's speed from the start, placed so that they pass where the fixed staging has
         them at the same time before the conflict: the leader's rear passes the pedestrian's path (by
         their radius) when they reach the kerb, `ped_start_delay_s` before they step off; the oncoming
-        vehicle's centre crosses the line of sight from the ego to them at that moment."""
+        vehicle's centre crosses the line of sight from the ego to them at that moment, which under
+        `oncoming_moment` "stop_line" comes no later than when the ego's front is
+        TURN_START_BEFORE_STOP_LINE_M before its stop line (`oncoming_kerb_wait_s`)."""
         spec, approach = inputs.spec, inputs.approach
         ego_size = VEHICLE_CLASSES["car"]
         ego_mps = inputs.ego_speed_mps
@@ -152,6 +154,9 @@ class TurnPlacement(Placement):
         conflict_pos = path_pos_m(turn.lanes, conflict_xy)
         walk_to_conflict_s = math.dist(path[0], conflict_xy) / inputs.traits["walking_speed_mps"]
         latest_m = turn.approach_length_m - TURN_START_BEFORE_STOP_LINE_M
+        kerb_wait_s = spec.ped_start_delay_s
+        if oncoming_colour is not None and spec.oncoming_moment == "stop_line":
+            kerb_wait_s = oncoming_kerb_wait_s(spec, inputs, conflict_pos, walk_to_conflict_s, latest_m)
         timing = stage_approach(
             inputs,
             path,
@@ -161,13 +166,14 @@ class TurnPlacement(Placement):
             # whole body on it.
             (max(conflict_pos - latest_m, 0.0), conflict_pos - ego_size.length_m),
             walkway=Walkway(walkway.lane_id, towards(walkway.shape, start), walkway.width_m),
+            kerb_wait_s=kerb_wait_s,
         )
         ego = VehicleSetup(
             "ego", approach.lane_ids[turn.lane_index], timing.front_pos_m, ego_mps, EGO_BLUE_RGB, ego_size
         )
         # When the pedestrian reaches the kerb (the scene the fixed staging starts with): the conflict
         # comes the conflict offset, the walk to it and the wait later.
-        lead_s = inputs.conflict_offset_s + walk_to_conflict_s + spec.ped_start_delay_s
+        lead_s = inputs.conflict_offset_s + walk_to_conflict_s + kerb_wait_s
         at_kerb_s = timing.start_distance_m / ego_mps - lead_s
         others: list[VehicleSetup] = []
         fallbacks = list(timing.fallbacks)
@@ -257,6 +263,25 @@ class TurnPlacement(Placement):
         if getattr(spec, "oncoming_vehicle", 0) and turn is not None:
             return oncoming_signal_problem(site, arm, approach.lane_ids[turn.lane_index], turn.route[-1])
         return None
+
+
+def oncoming_kerb_wait_s(
+    spec: ScenarioSpec,
+    inputs: StagingInputs,
+    conflict_pos_m: float,
+    walk_to_conflict_s: float,
+    latest_m: float,
+) -> float:
+    """How long the pedestrian waits at the kerb under `oncoming_moment` "stop_line": `ped_start_delay_s`,
+    or longer when the ego's front would be past `latest_m` (SUMO distance along its path, 3 m before
+    its stop line) as they reach the kerb: then they reach it when the ego's front is at `latest_m`, as
+    the fixed staging starts them. Further on, a slow ego is too near the oncoming lane, or already past
+    it, for a vehicle on it to pass between them (docs/decisions/2026-11-28-left-turn-sight-line-staging.md).
+    """
+    ego_mps = inputs.ego_speed_mps
+    lead_s = inputs.conflict_offset_s + walk_to_conflict_s + spec.ped_start_delay_s
+    front_at_kerb_m = conflict_pos_m - ego_mps * lead_s
+    return spec.ped_start_delay_s + max(front_at_kerb_m - latest_m, 0.0) / ego_mps
 
 
 def approach_kerb_end(spec: ScenarioSpec, turn: Turn, approach: Approach):
