@@ -11,8 +11,10 @@ scenarios), whether each collision interval meets the study's precision target (
 of the rate, or under 0.005), the paired SV/V2I tests, the first-detection and impact-speed figures, the
 injury curves, why each collision happened (from its case log: perceived too late to stop, perceived in
 time, never perceived), and the paper's four qualitative findings on its point estimates. For each sweep
-(python -m pedsafe_sumo.sweep's --out): the findings in each combination, so that every verdict on the
-page shows the settings under which it holds. Nothing on the page is typed by hand but the --notes file
+(python -m pedsafe_sumo.sweep's --out): per combination both collision rates and the paired test, the
+findings in each combination, and one table of each finding across every finished sweep (holds at every
+value, or the values where it fails; where V2I's fewer collisions are significant), so that every
+verdict on the page shows the settings under which it holds. Nothing on the page is typed by hand but the --notes file
 (the mechanisms behind the numbers, with their commands): rerun the tool when the runs have grown.
 """
 
