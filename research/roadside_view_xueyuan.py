@@ -73,7 +73,6 @@ from pedsafe_sumo.perception.world import (  # noqa: E402
     load_roadside_units,
 )
 from pedsafe_sumo.scenarios.hosting import hosted_count  # noqa: E402
-from pedsafe_sumo.units import sumo_angle_to_yaw_rad  # noqa: E402
 
 SCENARIO = "jaywalking"
 CONDITION = "v2i"
@@ -128,14 +127,7 @@ def corner_poles(info: dict, corner: str) -> list[tuple[dict, int]]:
 
 
 def unit_of(pole: dict) -> RoadsideUnit:
-    return RoadsideUnit(
-        id=pole["id"],
-        x_m=pole["x"],
-        y_m=pole["y"],
-        height_m=pole["height_m"],
-        yaw_rad=float(sumo_angle_to_yaw_rad(pole["yaw_deg"])),
-        pitch_down_rad=math.radians(pole["pitch_deg"]),
-    )
+    return RoadsideUnit.from_pole(pole)
 
 
 def projected_height_px(suite: SensorSuite, x_m: float, y_m: float, height_m: float) -> float:

@@ -339,6 +339,18 @@ class RoadsideUnit:
     yaw_rad: float
     pitch_down_rad: float
 
+    @classmethod
+    def from_pole(cls, pole: dict) -> RoadsideUnit:
+        """From a pole as the site build writes it (id, x, y, height_m, SUMO's yaw_deg, pitch_deg)."""
+        return cls(
+            id=pole["id"],
+            x_m=pole["x"],
+            y_m=pole["y"],
+            height_m=pole["height_m"],
+            yaw_rad=float(sumo_angle_to_yaw_rad(pole["yaw_deg"])),
+            pitch_down_rad=math.radians(pole["pitch_deg"]),
+        )
+
 
 # ---------------------------------------------------------------------------------------------- loaders
 

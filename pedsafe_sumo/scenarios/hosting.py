@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 from collections.abc import Callable
 from functools import lru_cache
 from typing import Any
@@ -41,7 +40,6 @@ from pedsafe_sumo.scenarios.placements import placement_of
 from pedsafe_sumo.scenarios.placements.base import StagingPoint
 from pedsafe_sumo.scenarios.road_users import PEDESTRIAN_RADIUS_M
 from pedsafe_sumo.scenarios.specs import SCENARIOS
-from pedsafe_sumo.units import sumo_angle_to_yaw_rad
 
 #: The shortest pedestrian the scenarios draw (road_users.pedestrian_height_m: 1.60 m, 5 cm less under
 #: 19) [m].
@@ -249,17 +247,7 @@ def hosted_count(site, poles: list[dict], poly_file: str) -> int:
     params, approach, static = _site_world(site, poly_file)
     if approach is None:
         return 0
-    units = {
-        p["id"]: RoadsideUnit(
-            id=p["id"],
-            x_m=p["x"],
-            y_m=p["y"],
-            height_m=p["height_m"],
-            yaw_rad=float(sumo_angle_to_yaw_rad(p["yaw_deg"])),
-            pitch_down_rad=math.radians(p["pitch_deg"]),
-        )
-        for p in poles
-    }
+    units = {p["id"]: RoadsideUnit.from_pole(p) for p in poles}
     # The scenarios staged on the watched approach; the turning ones are hosted where these poles
     # happen to see the crosswalk turned into, and do not move the poles the build places.
     return sum(
