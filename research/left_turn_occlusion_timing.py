@@ -59,7 +59,8 @@ def timing_table(run_dir: Path) -> pd.DataFrame:
     steps = pd.concat([pd.read_parquet(path) for path in logs], ignore_index=True)
     rows = []
     for (condition, episode), group in steps.groupby(["condition", "episode"], sort=True):
-        rows.append({"condition": condition, "episode": episode, **episode_timing(group.sort_values("time_s"))})
+        timing = episode_timing(group.sort_values("time_s"))
+        rows.append({"condition": condition, "episode": episode, **timing})
     return pd.DataFrame(rows)
 
 

@@ -14,8 +14,9 @@ time, never perceived), and the paper's four qualitative findings on its point e
 (python -m pedsafe_sumo.sweep's --out): per combination both collision rates and the paired test, the
 findings in each combination, and one table of each finding across every finished sweep (holds at every
 value, or the values where it fails; where V2I's fewer collisions are significant), so that every
-verdict on the page shows the settings under which it holds. Nothing on the page is typed by hand but the --notes file
-(the mechanisms behind the numbers, with their commands): rerun the tool when the runs have grown.
+verdict on the page shows the settings under which it holds. Nothing on the page is typed by hand but
+the --notes file (the mechanisms behind the numbers, with their commands): rerun the tool when the runs
+have grown.
 """
 
 from __future__ import annotations
