@@ -247,6 +247,11 @@ def collision_timing_markdown(run: RunDirectory, info: dict) -> str:
     return "\n".join(lines)
 
 
+def verdict_word(value: float) -> str:
+    """A finding's value (1 holds, 0 fails, NaN cannot be evaluated) as the page writes it."""
+    return "n/a" if pd.isna(value) else ("holds" if value else "fails")
+
+
 def findings_markdown(runs: dict[str, pd.DataFrame]) -> str:
     head = ["finding", *runs]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -255,7 +260,7 @@ def findings_markdown(runs: dict[str, pd.DataFrame]) -> str:
         cells = [FINDING_WORDS[finding]]
         for label in runs:
             value = verdicts[label][finding]
-            cells.append("n/a" if math.isnan(value) else ("holds" if value else "fails"))
+            cells.append(verdict_word(value))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -308,7 +313,7 @@ def sweep_markdown(sweep_dir: Path) -> str:
         cells = [str(row["run"])]
         for finding in head[1:]:
             value = row[finding]
-            cells.append("n/a" if pd.isna(value) else ("holds" if value else "fails"))
+            cells.append(verdict_word(value))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
