@@ -2,7 +2,8 @@
 estimate of a run made with --sampler is and the MC estimate of a reference run, their 95% intervals,
 whether they agree, and the efficiency (episodes MC needs for the IS interval's half-width h,
 p(1 - p)(1.96 / h)^2 with p the IS estimate, over the episodes IS ran, pilots included; and over the
-final stage's episodes alone).
+final stage's episodes alone), and `z_vs_mc`, the difference over the two estimates' combined standard
+error (|z| > 1.96: a disagreement at the 5 % level).
 
 Where the IS run's final stage drew from a joint proposal with a stored E_p[pi_hat] (--is-family joint),
 the IS estimate is Table I's: pi_hat as a control variate (docs/sampling.md, "Control variate"; the column
@@ -51,6 +52,17 @@ def _efficiency(p: float, high: float, n: int) -> float:
     half = high - p
     mc_needed = p * (1 - p) * (Z / half) ** 2 if half > 0 and 0 < p < 1 else math.nan
     return mc_needed / n if math.isfinite(mc_needed) and n > 0 else math.nan
+
+
+def _z_difference(p: float, high: float, mc: float, mc_n: int) -> float:
+    """(IS - MC) over the two estimates' combined standard error: the IS one from its interval's upper
+    half-width (symmetric before its cut at 0), MC's the binomial sqrt(p(1 - p) / n). The two runs are
+    independent, so |z| above 1.96 is a disagreement at the 5 % level; MC's point outside the IS interval
+    is not one (MC's own error is left out of that)."""
+    se_is = (high - p) / Z
+    se_mc = math.sqrt(mc * (1 - mc) / mc_n) if mc_n > 0 else math.nan
+    se = math.hypot(se_is, se_mc)
+    return (p - mc) / se if se > 0 else math.nan
 
 
 def compare(
@@ -102,6 +114,7 @@ def compare(
                     mc_n=int(m.n),
                     intervals_overlap=bool(low <= float(m[mhi]) and float(m[mlo]) <= high),
                     mc_in_is_interval=bool(low <= float(m[mest]) <= high),
+                    z_vs_mc=_z_difference(p, high, float(m[mest]), int(m.n)),
                 )
             row.update(
                 efficiency=_efficiency(p, high, int(r.n_run)),

@@ -151,7 +151,6 @@ def prepare(args: argparse.Namespace) -> Plan:
             raise UsageError(f"site {site.name} hosts none of the scenarios (see the lines above)")
         specs = {name: specs[name] for name in scenarios}
     check_hosting(site, specs, params, conditions)  # its roadside poles see each scenario's staging area
-    check_sampler_staging(arguments, specs)
     # Hosted is what can be staged for every seed the run will draw (batch/staging_check.py).
     # A protocol's scenarios, or scenarios named on an approach named (or the site's own): refused, not
     # skipped, when one cannot be staged.
@@ -390,21 +389,6 @@ def stageable_units(
     if not kept:
         raise UsageError(f"site {site.name} can stage none of these scenarios (see the lines above)")
     return kept, {u: specs[u] for u in kept}, failed
-
-
-def check_sampler_staging(arguments: dict[str, Any], specs: dict[str, Any]) -> None:
-    """--sampler is refused under approach staging: no run of it there has been validated against plain
-    Monte Carlo (on paper-v8-xueqing it gained 0.9-1.4x on the SV collision rates and its crossing V2I
-    interval excluded Monte Carlo's; docs/decisions/2026-11-27-is-refused-under-approach-staging.md and
-    2026-11-28-is-under-approach-staging-measured.md)."""
-    if arguments["sampler"] != SAMPLER_IS:
-        return
-    staged = sorted(name for name, spec in specs.items() if getattr(spec, "staging", "fixed") == "approach")
-    if staged:
-        raise UsageError(
-            f"--sampler is does not cover the approach staging of {', '.join(staged)}: it is not validated "
-            "there (docs/sampling.md); run these with plain Monte Carlo"
-        )
 
 
 def _sampler_identity(arguments: dict[str, Any], scenarios: list[str]) -> dict[str, Any] | None:
