@@ -26,7 +26,8 @@ seed is fresh in every mode but `keep_link` and `reproduce`):
 - `keep_world` (the whole world stream), `keep_traffic`, and the world's groups `keep_ped_traits` (sex,
   age within the group), `keep_clothing`, `keep_signal` (signal_cycle_u), `keep_vehicles` (the other
   world inputs: vehicle colours, queued vehicles, gaps not proposed), `keep_colours` (the vehicles'
-  colours alone), `keep_link` (the run seed: the V2I link's losses and noise): that source kept too
+  colours alone), `keep_approach` (approach staging's start distance and walk-in), `keep_link` (the run
+  seed: the V2I link's losses and noise): that source kept too
   (switched off as a source of variance): pi(x, source), whose ceiling is what a proposal over x AND that
   source could reach at best (the kept draws are the episode's, drawn from p within its stratum, as x is);
 - keep_ modes joined by "+" (`keep_clothing+colours`): those sources kept at once;
@@ -42,6 +43,11 @@ weigh most in E_p[sqrt(pi)]). The other stratum is a check (`summarise`).
     OMP_NUM_THREADS=1 nice -n 10 .venv/bin/python research/experiments/is_within_episode.py \\
         V5_FULL --scenario jaywalking --collisions 20 --others 20 --repeats 12 \\
         --set traffic.background_speed_limit_scaled=false --set pedestrians.detour_wait_s=600 --out DIR
+
+A run made with `--protocol` takes `--protocol FILE` (its values in place of `--set`):
+
+    OMP_NUM_THREADS=1 .venv/bin/python research/experiments/is_within_episode.py RUN --protocol \\
+        protocols/paper-v10-xueqing.toml --scenario jaywalking --modes fresh --collisions 20 --others 10 --out DIR
 
 Writes DIR/<scenario>[_v2i]_outcomes.csv (one row per episode, mode and repeat) and prints the summary; with
 `--summarise DIR` only reads the CSVs back.
@@ -70,6 +76,8 @@ WORLD_GROUPS = {
     "ped_traits": ("ped_female", "ped_age_in_group"),
     "clothing": ("clothing",),
     "signal": ("signal_cycle_u",),
+    # Approach staging's own draws: where the ego starts, how long the pedestrian walks in.
+    "approach": ("ego_start_distance_m", "walk_in_s"),
 }
 MODES = (
     "fresh",
@@ -80,6 +88,7 @@ MODES = (
     "keep_signal",
     "keep_vehicles",
     "keep_colours",
+    "keep_approach",
     "keep_link",
 )
 #: What each mode keeps at the MC episode's draws besides x: world groups ("all": the whole world
@@ -93,6 +102,7 @@ KEPT: dict[str, tuple[tuple[str, ...], bool]] = {
     "keep_signal": (("signal",), False),
     "keep_vehicles": (("vehicles", "colours"), False),
     "keep_colours": (("colours",), False),
+    "keep_approach": (("approach",), False),
     "keep_link": ((), False),
     "reproduce": (("all",), True),
 }
@@ -206,11 +216,12 @@ def final_stage(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def rows_and_runner(
-    mc_run: Path, scenario: str, settings: list[str], condition: str = "sv"
+    mc_run: Path, scenario: str, settings: list[str], condition: str = "sv", protocol: Path | None = None
 ) -> tuple[pd.DataFrame, Any, Any, str]:
     """The run's ok rows of `scenario` and `condition` in its final stage (final_stage, by episode), its
-    scenario spec under `settings` (--set), an EpisodeRunner on the run's site and algorithm, and the JSON
-    of the proposal that stage drew from ("" under MC)."""
+    scenario spec under `settings` (--set) or the `protocol` file's values (a run made with --protocol), an
+    EpisodeRunner on the run's site and algorithm, and the JSON of the proposal that stage drew from (""
+    under MC)."""
     from pedsafe_sumo.batch.runner import scenario_spec
     from pedsafe_sumo.control.agent import load_agent_class
     from pedsafe_sumo.network.sites import get_site
@@ -220,8 +231,14 @@ def rows_and_runner(
     rows = pd.read_parquet(mc_run / "episodes.parquet")
     rows = rows[(rows["scenario"] == scenario) & (rows["condition"] == condition) & (rows["status"] == "ok")]
     info = json.loads((mc_run / "run.json").read_text())
-    _, params = configure([scenario], None, settings)
-    spec = scenario_spec(scenario, parse_set(settings)[0])
+    if protocol is not None:
+        from pedsafe_sumo.protocol import load_protocol
+
+        fixed = load_protocol(protocol)
+        params, spec = fixed.params(), fixed.specs()[scenario]
+    else:
+        _, params = configure([scenario], None, settings)
+        spec = scenario_spec(scenario, parse_set(settings)[0])
     runner = EpisodeRunner(get_site(info["site"]), params, load_agent_class(info["algorithm"]))
     rows = final_stage(rows)
     proposals = info.get("sampler_proposals", {}).get(scenario, [])
@@ -231,7 +248,9 @@ def rows_and_runner(
 
 
 def run_scenario(args: argparse.Namespace, scenario: str) -> pd.DataFrame:
-    rows, spec, runner, proposal = rows_and_runner(args.mc_run, scenario, args.set, args.condition)
+    rows, spec, runner, proposal = rows_and_runner(
+        args.mc_run, scenario, args.set, args.condition, args.protocol
+    )
     chosen = pick_episodes(rows, args.collisions, args.others, args.seed)
     out = []
     started = time.perf_counter()
@@ -354,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--set", action="append", default=[])
+    parser.add_argument("--protocol", type=Path, help="the run's protocol file (a run made with --protocol)")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--condition", choices=CONDITIONS, default="sv", help="whose collisions (default sv)")
     parser.add_argument("--summarise", action="store_true", help="only read the CSVs in --out back")
