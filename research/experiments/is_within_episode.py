@@ -47,7 +47,8 @@ weigh most in E_p[sqrt(pi)]). The other stratum is a check (`summarise`).
 A run made with `--protocol` takes `--protocol FILE` (its values in place of `--set`):
 
     OMP_NUM_THREADS=1 .venv/bin/python research/experiments/is_within_episode.py RUN --protocol \\
-        protocols/paper-v10-xueqing.toml --scenario jaywalking --modes fresh --collisions 20 --others 10 --out DIR
+        protocols/paper-v10-xueqing.toml --scenario jaywalking --modes fresh --collisions 20 --others 10 \\
+        --out DIR
 
 Writes DIR/<scenario>[_v2i]_outcomes.csv (one row per episode, mode and repeat) and prints the summary; with
 `--summarise DIR` only reads the CSVs back.
