@@ -46,7 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     plain_inputs, _ = inputs_of(plain)
     y_plain = plain["collision"].astype(float).to_numpy()
     print(f"live final proposal: {joint_efficiency(y_plain, plain_inputs, final)[0]:.2f}x per final episode")
-    rows = sampled[(sampled.scenario == args.scenario) & (sampled.condition == "sv") & (sampled.status == "ok")]
+    sv = (sampled.scenario == args.scenario) & (sampled.condition == "sv") & (sampled.status == "ok")
+    rows = sampled[sv]
     rows = rows.sort_values(["sampler_stage", "episode"])
     inputs, _ = inputs_of(rows)
     for n in args.rows:
@@ -60,8 +61,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             efficiency = joint_efficiency(y_plain, plain_inputs, fitted)[0]
             print(
-                f"first {len(head)} rows ({int(y.sum())} collisions), ridge {ridge}: {efficiency:.2f}x per final"
-                f" episode, E_p[sqrt(pi_hat)] {fitted.norm:.4f}"
+                f"first {len(head)} rows ({int(y.sum())} collisions), ridge {ridge}: {efficiency:.2f}x"
+                f" per final episode, E_p[sqrt(pi_hat)] {fitted.norm:.4f}"
             )
     return 0
 
